@@ -1,0 +1,97 @@
+"""The ``impactpipe`` command line.
+
+Exit status: 0 success, 1 a stage failed, 2 invalid config or arguments (nothing
+written), 130 interrupted (SIGINT/SIGTERM; finished stages and checkpoints are kept).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import click
+import yaml
+
+from . import derived
+from .config import STAGES, ConfigError, load_config
+from .stages import StageInterrupted, resolved_dict, run
+
+log = logging.getLogger("impactpipe")
+
+
+def _setup_logging(verbose: int, quiet: bool) -> None:
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S"))
+    root = logging.getLogger("impactpipe")
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+
+
+def _load_or_exit(path: str):
+    try:
+        config = load_config(path)
+        values = derived.derive(config)
+    except ConfigError as exc:
+        for message in exc.messages:
+            click.echo(message, err=True)
+        sys.exit(2)
+    errors = derived.capability_errors(config, values)
+    if errors:
+        for message in errors:
+            click.echo(f"{path}: {message}", err=True)
+        sys.exit(2)
+    return config, values
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="impactpipe")
+def main() -> None:
+    """Hybrid hydrocode-to-N-body simulations of collisions between small bodies."""
+
+
+@main.command("validate")
+@click.argument("config_path", metavar="CONFIG", type=click.Path(dir_okay=False))
+def validate_cmd(config_path: str) -> None:
+    """Check CONFIG and print it fully resolved with every derived value; exit 2 on errors."""
+    config, values = _load_or_exit(config_path)
+    document = {"config": resolved_dict(config), "derived": derived.as_plain(values)}
+    click.echo(yaml.safe_dump(document, sort_keys=False), nl=False)
+
+
+@main.command("run")
+@click.argument("config_path", metavar="CONFIG", type=click.Path(dir_okay=False))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), help="Run directory (overrides `output`).")
+@click.option("--from", "from_stage", type=click.Choice(STAGES), help="Rerun from this stage on.")
+@click.option("--stage", "stages", type=click.Choice(STAGES), multiple=True, help="Run only these stages.")
+@click.option("--force", is_flag=True, help="Rerun every stage.")
+@click.option("-v", "--verbose", count=True, help="More log output.")
+@click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bars.")
+def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
+            force: bool, verbose: int, quiet: bool) -> None:
+    """Run the pipeline for CONFIG, resuming finished stages."""
+    _setup_logging(verbose, quiet)
+    config, _ = _load_or_exit(config_path)
+    run_dir = Path(out_dir or config.output or Path("runs") / config.name)
+    try:
+        summary = run(config, run_dir, stages=stages or None, from_stage=from_stage, force=force,
+                      show_progress=not quiet)
+    except StageInterrupted as exc:
+        click.echo(f"interrupted ({exc}); finished stages and checkpoints are kept in {run_dir}; "
+                   "rerun the same command to resume", err=True)
+        sys.exit(130)
+    except ValueError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+    except Exception as exc:  # a stage failed: report where, keep what was written
+        log.debug("stage failure", exc_info=True)
+        click.echo(f"error: {type(exc).__name__}: {exc}", err=True)
+        click.echo(f"the last good state and finished stages are kept in {run_dir}", err=True)
+        sys.exit(1)
+    click.echo(f"outputs in {run_dir}/:")
+    for name in sorted(p.name for p in run_dir.iterdir() if not p.name.startswith(".")):
+        click.echo(f"  {name}")
+    for key in ("M_lr_over_M_T", "Q", "N_lr"):
+        if key in summary:
+            click.echo(f"{key} = {summary[key]:.4g}")

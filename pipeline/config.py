@@ -1,0 +1,622 @@
+"""The run configuration: a YAML file in SI units, validated before any work starts.
+
+The schema is a tree of pydantic models with ``extra="forbid"``.  :func:`load_config`
+parses the YAML, checks every key (unknown keys get a did-you-mean), every type and
+every value, resolves material presets, and raises :class:`ConfigError` carrying one
+line per problem in the form ``config.yaml:12: hydro.cfl: must be <= 1 (got 1.5)``.
+Every key is documented in docs/config.md.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import types
+import typing
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from . import presets
+
+STAGES = ("hydro", "handoff", "nbody", "analysis")
+
+
+class YamlLoader(yaml.SafeLoader):
+    """SafeLoader that reads floats as YAML 1.2 does: ``1e3`` and ``10.0e3`` are numbers, not strings."""
+
+
+YamlLoader.yaml_implicit_resolvers = {
+    key: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:float"]
+    for key, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
+
+
+def load_yaml(text: str) -> Any:
+    """Parse YAML text with :class:`YamlLoader`."""
+    return yaml.load(text, Loader=YamlLoader)
+
+
+class ConfigError(ValueError):
+    """Invalid configuration; ``messages`` holds one line per problem."""
+
+    def __init__(self, messages: list[str]):
+        self.messages = messages
+        super().__init__("\n".join(messages))
+
+
+class Strict(BaseModel):
+    """Base model: unknown keys are errors, values are validated on assignment."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+# --------------------------------------------------------------------------- materials
+
+
+class IdealGasEOS(Strict):
+    model: Literal["ideal_gas"]
+    gamma: float = Field(1.4, gt=1.0, description="adiabatic index")
+    cv: float | None = Field(None, gt=0, description="specific heat at constant volume (J/kg/K)")
+
+
+class TillotsonEOS(Strict):
+    model: Literal["tillotson"]
+    preset: str | None = None
+    rho0: float | None = Field(None, gt=0)
+    A: float | None = Field(None, gt=0)
+    B: float | None = None
+    E0: float | None = Field(None, gt=0)
+    E_iv: float | None = Field(None, ge=0)
+    E_cv: float | None = Field(None, ge=0)
+    a: float | None = None
+    b: float | None = None
+    alpha: float | None = Field(None, ge=0)
+    beta: float | None = Field(None, ge=0)
+    rho_iv: float | None = Field(None, ge=0)
+    cv: float | None = Field(None, gt=0)
+
+    @model_validator(mode="after")
+    def _energies_ordered(self) -> "TillotsonEOS":
+        if self.E_iv is not None and self.E_cv is not None and self.E_cv <= self.E_iv:
+            raise ValueError(f"E_cv must be larger than E_iv (got E_iv={self.E_iv:g}, E_cv={self.E_cv:g})")
+        return self
+
+
+class MieGruneisenEOS(Strict):
+    model: Literal["mie_gruneisen"]
+    preset: str | None = None
+    rho0: float | None = Field(None, gt=0)
+    c0: float | None = Field(None, gt=0)
+    s: float | None = Field(None, ge=0)
+    gamma0: float | None = Field(None, ge=0)
+    cv: float | None = Field(None, gt=0)
+
+
+class TableEOS(Strict):
+    model: Literal["table"]
+    path: str = Field(description="SESAME-style text table; relative paths are relative to the config file")
+    cv: float | None = Field(None, gt=0)
+
+
+EOSSpec = Annotated[Union[IdealGasEOS, TillotsonEOS, MieGruneisenEOS, TableEOS], Field(discriminator="model")]
+
+
+class StrengthSpec(Strict):
+    model: Literal["none", "von_mises", "geo", "rock"] = "none"
+    preset: str | None = None
+    Y0: float | None = Field(None, ge=0, description="cohesion, yield strength at zero pressure (Pa)")
+    Y_M: float | None = Field(None, ge=0, description="von Mises limit of the intact curve (Pa)")
+    Y_T: float | None = Field(None, ge=0, description="tensile strength (Pa)")
+    Y_c: float | None = Field(None, ge=0, description="damaged cohesion (Pa)")
+    mu_i: float | None = Field(None, ge=0, description="intact coefficient of internal friction")
+    mu_d: float | None = Field(None, ge=0, description="damaged coefficient of friction")
+    poisson: float | None = Field(None, gt=-1.0, lt=0.5, description="Poisson's ratio")
+    shear_modulus: float | None = Field(None, gt=0, description="constant shear modulus (Pa)")
+    yield_strength: float | None = Field(None, ge=0, description="von Mises yield strength (Pa)")
+    T_melt: float | None = Field(None, gt=0, description="melting temperature (K)")
+    xi: float | None = Field(None, ge=0, description="thermal softening parameter")
+    P_bd: float | None = Field(None, ge=0, description="brittle-ductile transition pressure (Pa)")
+    P_bp: float | None = Field(None, ge=0, description="brittle-plastic transition pressure (Pa)")
+
+
+class Material(Strict):
+    eos: EOSSpec
+    strength: StrengthSpec = Field(default_factory=StrengthSpec)
+
+
+# --------------------------------------------------------------------------- scene
+
+
+class Body(Strict):
+    material: str
+    radius: float = Field(gt=0, description="m")
+
+
+class Impact(Strict):
+    velocity: float = Field(gt=0, description="impact speed in the target frame (m/s)")
+    angle: float = Field(90.0, gt=0, le=90, description="degrees from the tangent plane; 90 = head-on")
+
+
+class FluidState(Strict):
+    material: str
+    density: float = Field(gt=0, description="kg/m^3")
+    velocity: float = Field(0.0, description="m/s")
+    pressure: float = Field(description="Pa")
+
+
+class AmbientState(Strict):
+    material: str
+    density: float = Field(gt=0, description="kg/m^3")
+    pressure: float = Field(ge=0, description="Pa")
+
+
+class Slab(Strict):
+    material: str
+    thickness: float = Field(gt=0, description="m")
+    velocity: float = Field(0.0, description="m/s")
+
+
+Geometry = Literal["auto", "1d-planar", "2d-planar", "2d-cylindrical", "3d"]
+
+
+class ImpactScene(Strict):
+    problem: Literal["impact"] = "impact"
+    geometry: Geometry = "auto"
+    target: Body
+    projectile: Body
+    impact: Impact
+    temperature: float = Field(293.0, gt=0, description="initial temperature of both bodies (K)")
+    full_domain: bool = Field(False, description="3d only: compute both halves instead of using the y = 0 symmetry plane")
+
+
+class ShockTubeScene(Strict):
+    problem: Literal["shock_tube"]
+    geometry: Geometry = "auto"
+    length: float = Field(1.0, gt=0, description="m")
+    cells: int = Field(400, ge=8)
+    interface: float = Field(0.5, description="position of the diaphragm (m)")
+    left: FluidState
+    right: FluidState
+    end_time: float = Field(gt=0, description="s")
+
+    @model_validator(mode="after")
+    def _interface_inside(self) -> "ShockTubeScene":
+        if not 0.0 < self.interface < self.length:
+            raise ValueError(f"interface must lie inside (0, length={self.length:g}) (got {self.interface:g})")
+        return self
+
+
+class SedovScene(Strict):
+    problem: Literal["sedov"]
+    geometry: Geometry = "auto"
+    energy: float = Field(gt=0, description="blast energy (J)")
+    ambient: AmbientState
+    length: float = Field(1.0, gt=0, description="domain extent from the origin (m)")
+    cells: int = Field(64, ge=8, description="cells along each axis")
+    end_time: float = Field(gt=0, description="s")
+
+
+class PlanarImpactScene(Strict):
+    problem: Literal["planar_impact"]
+    geometry: Geometry = "auto"
+    flyer: Slab
+    target: Slab
+    cells: int = Field(400, ge=8)
+    end_time: float = Field(gt=0, description="s")
+
+
+class AdvectionScene(Strict):
+    problem: Literal["advection"]
+    geometry: Geometry = "auto"
+    cells: int = Field(128, ge=8)
+    velocity: float = Field(1.0, description="m/s")
+    end_time: float = Field(1.0, gt=0, description="s")
+
+
+class NohScene(Strict):
+    problem: Literal["noh"]
+    geometry: Geometry = "auto"
+    cells: int = Field(200, ge=8)
+    end_time: float = Field(0.6, gt=0, description="s")
+
+
+Scene = Annotated[
+    Union[ImpactScene, ShockTubeScene, SedovScene, PlanarImpactScene, AdvectionScene, NohScene],
+    Field(discriminator="problem"),
+]
+
+
+# --------------------------------------------------------------------------- stages
+
+
+class Tracers(Strict):
+    enabled: bool | Literal["auto"] = "auto"
+    count: int = Field(900, ge=0)
+    history_interval: float | None = Field(None, gt=0, description="s between recorded trajectory points")
+
+
+class Hydro(Strict):
+    cells_per_projectile_radius: float = Field(20.0, gt=0)
+    block_cells: int | None = Field(None, ge=4, le=64, description="cells per block edge; default 16 in 2D, 8 in 3D")
+    max_levels: int | Literal["auto"] = "auto"
+    cfl: float = Field(0.4, gt=0, le=1)
+    end_time: float | Literal["auto"] = "auto"
+    output_times: list[float] | None = None
+    output_interval: float | None = Field(None, gt=0)
+    checkpoint_wall_seconds: float = Field(300.0, gt=0, description="wall seconds between checkpoints")
+    tracers: Tracers = Field(default_factory=Tracers)
+    self_gravity: bool | Literal["auto"] = "auto"
+
+    @field_validator("max_levels")
+    @classmethod
+    def _levels_positive(cls, v: Any) -> Any:
+        if v != "auto" and v < 1:
+            raise ValueError(f"must be 'auto' or an integer >= 1 (got {v})")
+        return v
+
+    @field_validator("end_time")
+    @classmethod
+    def _end_time_positive(cls, v: Any) -> Any:
+        if v != "auto" and v <= 0:
+            raise ValueError(f"must be 'auto' or a time > 0 s (got {v})")
+        return v
+
+    @field_validator("output_times")
+    @classmethod
+    def _times_sorted(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and (any(t < 0 for t in v) or sorted(v) != v):
+            raise ValueError(f"must be non-negative and increasing (got {v})")
+        return v
+
+
+class Handoff(Strict):
+    min_density_fraction: float = Field(0.75, gt=0, le=1)
+    min_mass_fraction: float = Field(4.0e-7, ge=0, lt=1)
+    velocity_noise: float = Field(0.01, ge=0, description="fraction of the target's escape speed")
+    seed: int = 1
+
+
+class Restitution(Strict):
+    normal: float = Field(0.5, ge=0, le=1)
+    tangential: float = Field(1.0, ge=0, le=1)
+
+
+class Stop(Strict):
+    min_dynamical_times: float = Field(50.0, ge=0)
+    max_orbiting_fraction: float = Field(0.1, gt=0, le=1)
+    max_time: float | None = Field(None, gt=0, description="simulated-time cap (s)")
+    max_wall_seconds: float | None = Field(None, gt=0, description="wall-clock cap (s)")
+
+
+class NBody(Strict):
+    collision_model: Literal["merge", "conditional_merge", "bounce"] = "merge"
+    restitution: Restitution = Field(default_factory=Restitution)
+    opening_angle: float = Field(0.5, gt=0, le=2.0)
+    stop: Stop = Field(default_factory=Stop)
+    seed: int = 1
+
+
+class Analysis(Strict):
+    plots: bool = True
+
+
+class Config(Strict):
+    name: str = Field(min_length=1)
+    output: str | None = Field(None, description="run directory; default runs/<name>; --out overrides")
+    scene: Scene
+    materials: dict[str, Material] = Field(default_factory=dict)
+    hydro: Hydro = Field(default_factory=Hydro)
+    handoff: Handoff = Field(default_factory=Handoff)
+    nbody: NBody = Field(default_factory=NBody)
+    analysis: Analysis = Field(default_factory=Analysis)
+
+    #: Directory of the YAML file; table paths are resolved against it.
+    _source_dir: Path = Path(".")
+
+    def resolved_materials(self) -> dict[str, dict[str, Any]]:
+        """Each material's complete EOS and strength parameters (presets applied)."""
+        out = {}
+        for name, mat in self.materials.items():
+            eos = mat.eos.model_dump(exclude={"model", "preset"})
+            if mat.eos.model == "table":
+                eos["path"] = str((self._source_dir / mat.eos.path).resolve())
+            out[name] = {
+                "eos": presets.resolve_eos(mat.eos.model, getattr(mat.eos, "preset", None), eos),
+                "strength": presets.resolve_strength(
+                    mat.strength.model, mat.strength.preset, mat.strength.model_dump(exclude={"model", "preset"})
+                ),
+            }
+        return out
+
+    def scene_materials(self) -> list[str]:
+        """Names of the materials the scene uses, in order of appearance."""
+        return _scene_material_refs(self.scene.model_dump())
+
+
+def _scene_material_refs(scene: dict[str, Any]) -> list[str]:
+    names: list[str] = []
+    for value in scene.values():
+        if isinstance(value, dict) and "material" in value:
+            if value["material"] not in names:
+                names.append(value["material"])
+    return names
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
+    """Read, validate and resolve a config file.
+
+    ``overrides`` maps dotted key paths (``"hydro.cfl"``) to values applied before
+    validation (the sweep and convergence commands use this).  Raises ConfigError.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError([f"{path}: cannot read config: {exc.strerror}"]) from exc
+    return parse_config(text, source=path, overrides=overrides)
+
+
+def parse_config(text: str, source: str | Path = "<config>", overrides: dict[str, Any] | None = None) -> Config:
+    """Validate YAML text as a config; see :func:`load_config`."""
+    source = Path(source)
+    try:
+        data = load_yaml(text)
+        root = yaml.compose(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{source}:{mark.line + 1}" if mark else str(source)
+        raise ConfigError([f"{where}: not valid YAML: {getattr(exc, 'problem', exc)}"]) from exc
+    if not isinstance(data, dict):
+        raise ConfigError([f"{source}: the config must be a mapping of keys, got {type(data).__name__}"])
+    for dotted, value in (overrides or {}).items():
+        set_dotted(data, dotted, value)
+    lines = _LineFinder(source, root)
+    found = unknown_keys(data, Config) + semantic_errors(data, source.parent)
+    try:
+        config = Config.model_validate(data)
+    except ValidationError as exc:
+        for err in exc.errors():
+            if err["type"] != "extra_forbidden":
+                found.append((_error_loc(err), _describe(err)))
+    else:
+        config._source_dir = source.parent.resolve()
+    if found:
+        messages: list[str] = []
+        for loc, msg in found:
+            line = lines.format(loc, msg)
+            if line not in messages:
+                messages.append(line)
+        raise ConfigError(messages)
+    return config
+
+
+def _error_loc(err: dict[str, Any]) -> tuple:
+    loc = _clean_loc(err["loc"])
+    if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
+        loc = loc + (err["ctx"]["discriminator"].strip("'"),)
+    return loc
+
+
+def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
+    """Set ``data[a][b][c] = value`` for ``dotted = "a.b.c"``, creating mappings on the way."""
+    keys = dotted.split(".")
+    node = data
+    for key in keys[:-1]:
+        node = node.setdefault(key, {})
+        if not isinstance(node, dict):
+            raise ConfigError([f"{dotted}: cannot set a key below a non-mapping value"])
+    node[keys[-1]] = value
+
+
+def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple, str]]:
+    """Cross-field checks on the raw config mapping: materials, presets, table files, sizes.
+
+    Works on the raw data so these problems are reported together with the schema errors.
+    """
+    errors: list[tuple[tuple, str]] = []
+    materials = data.get("materials") or {}
+    materials = materials if isinstance(materials, dict) else {}
+    defined = sorted(str(k) for k in materials)
+    scene = data.get("scene") if isinstance(data.get("scene"), dict) else {}
+    for key, value in scene.items():
+        if isinstance(value, dict) and isinstance(value.get("material"), str):
+            name = value["material"]
+            if name not in materials:
+                allowed = ", ".join(defined) if defined else "none defined"
+                errors.append((("scene", key, "material"),
+                               f"'{name}' is not defined under materials (defined: {allowed}){_did_you_mean(name, defined)}"))
+    if scene.get("problem", "impact") == "impact":
+        rt = (scene.get("target") or {}).get("radius") if isinstance(scene.get("target"), dict) else None
+        rp = (scene.get("projectile") or {}).get("radius") if isinstance(scene.get("projectile"), dict) else None
+        if isinstance(rt, (int, float)) and isinstance(rp, (int, float)) and rt > 0 and rp > rt:
+            errors.append((("scene", "projectile", "radius"),
+                           f"must not exceed scene.target.radius = {rt:g} m for an impact (got {rp:g})"))
+    for name, mat in materials.items():
+        if not isinstance(mat, dict):
+            continue
+        errors.extend(_material_errors(str(name), mat, source_dir))
+    return errors
+
+
+def _material_errors(name: str, mat: dict[str, Any], source_dir: Path) -> list[tuple[tuple, str]]:
+    errors: list[tuple[tuple, str]] = []
+    eos = mat.get("eos") if isinstance(mat.get("eos"), dict) else {}
+    model = eos.get("model")
+    preset = eos.get("preset")
+    if model in ("tillotson", "mie_gruneisen"):
+        choices = presets.eos_presets(model)
+        if preset is not None and preset not in choices:
+            errors.append((("materials", name, "eos", "preset"),
+                           f"unknown {model} preset '{preset}' (allowed: {', '.join(choices)}){_did_you_mean(str(preset), choices)}"))
+        else:
+            try:
+                presets.resolve_eos(model, preset, {k: v for k, v in eos.items() if k not in ("model", "preset")})
+            except KeyError as exc:
+                errors.append((("materials", name, "eos"), f"missing parameter {exc.args[0]} (give it or name a preset)"))
+    if model == "table" and isinstance(eos.get("path"), str):
+        table = source_dir / eos["path"]
+        if not table.is_file():
+            errors.append((("materials", name, "eos", "path"), f"table file not found: {table}"))
+    strength = mat.get("strength") if isinstance(mat.get("strength"), dict) else {}
+    smodel = strength.get("model", "none")
+    spreset = strength.get("preset")
+    if smodel in ("geo", "rock", "von_mises"):
+        choices = presets.strength_presets(smodel)
+        if spreset is not None and spreset not in choices:
+            allowed = ", ".join(choices) if choices else f"no presets exist for model {smodel}"
+            errors.append((("materials", name, "strength", "preset"),
+                           f"unknown {smodel} preset '{spreset}' (allowed: {allowed}){_did_you_mean(str(spreset), choices)}"))
+        else:
+            try:
+                presets.resolve_strength(smodel, spreset,
+                                         {k: v for k, v in strength.items() if k not in ("model", "preset")})
+            except KeyError as exc:
+                errors.append((("materials", name, "strength"),
+                               f"missing parameter {exc.args[0]} for model {smodel} (give it or name a preset)"))
+    return errors
+
+
+# --------------------------------------------------------------------------- error reporting
+
+
+def unknown_keys(data: Any, model: type[BaseModel], loc: tuple = ()) -> list[tuple[tuple, str]]:
+    """Keys in ``data`` that ``model`` does not define, with did-you-mean suggestions."""
+    if not isinstance(data, dict):
+        return []
+    errors = []
+    fields = model.model_fields
+    for key, value in data.items():
+        if key not in fields:
+            allowed = sorted(fields)
+            errors.append(
+                (loc + (key,), f"unknown key{_did_you_mean(str(key), allowed)} (allowed: {', '.join(allowed)})")
+            )
+            continue
+        for sub in _submodels(fields[key].annotation, value):
+            if isinstance(value, dict) and sub[0] == "model":
+                errors.extend(unknown_keys(value, sub[1], loc + (key,)))
+            elif isinstance(value, dict) and sub[0] == "mapping":
+                for name, item in value.items():
+                    errors.extend(unknown_keys(item, sub[1], loc + (key, name)))
+    return errors
+
+
+def _submodels(annotation: Any, value: Any) -> list[tuple[str, type[BaseModel]]]:
+    """The model classes that validate ``value`` under ``annotation`` (unions resolved by tag)."""
+    origin = typing.get_origin(annotation)
+    if origin is Annotated:
+        return _submodels(typing.get_args(annotation)[0], value)
+    if origin in (Union, types.UnionType):
+        candidates = [a for a in typing.get_args(annotation) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if len(candidates) == 1:
+            return [("model", candidates[0])]
+        if isinstance(value, dict):
+            for cand in candidates:
+                for tag in ("problem", "model"):
+                    field = cand.model_fields.get(tag)
+                    if field is not None and value.get(tag, field.default) in typing.get_args(field.annotation):
+                        return [("model", cand)]
+        return []
+    if origin is dict:
+        item = typing.get_args(annotation)[1]
+        if isinstance(item, type) and issubclass(item, BaseModel):
+            return [("mapping", item)]
+        return []
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [("model", annotation)]
+    return []
+
+
+def _clean_loc(loc: tuple) -> tuple:
+    """Drop the tag pydantic inserts after a discriminated union (``scene.impact.target`` -> ``scene.target``)."""
+    out: list = []
+    skip_next = False
+    for part in loc:
+        if skip_next:
+            skip_next = False
+            continue
+        out.append(part)
+        path = tuple(out)
+        if path == ("scene",) or (len(path) == 3 and path[0] == "materials" and path[2] == "eos"):
+            skip_next = True
+    return tuple(out)
+
+
+def _describe(err: dict[str, Any]) -> str:
+    kind = err["type"]
+    ctx = err.get("ctx", {})
+    got = err.get("input")
+    got_text = f" (got {got!r})" if not isinstance(got, dict) else ""
+    if kind == "missing":
+        return "required key is missing"
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        op = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}[kind]
+        bound = list(ctx.values())[0]
+        bound_text = f"{bound:g}" if isinstance(bound, (int, float)) else str(bound)
+        return f"must be {op} {bound_text}{got_text}"
+    if kind == "literal_error":
+        return f"must be one of {ctx.get('expected')}{got_text}"
+    if kind == "union_tag_invalid":
+        tags = [t.strip(" '") for t in str(ctx.get("expected_tags", "")).split(",")]
+        return f"unknown value '{ctx.get('tag')}' (allowed: {', '.join(tags)}){_did_you_mean(str(ctx.get('tag')), tags)}"
+    if kind == "union_tag_not_found":
+        return "required key is missing (it selects the kind of this entry)"
+    if kind == "value_error":
+        return str(ctx.get("error", err["msg"]))
+    return f"{err['msg'].lower()}{got_text}"
+
+
+def _did_you_mean(word: str, choices: list[str]) -> str:
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+class _LineFinder:
+    """Maps a key path to its line in the YAML source using the composed node tree."""
+
+    def __init__(self, source: Path, root: yaml.Node | None):
+        self.source = source
+        self.root = root
+
+    def line(self, loc: tuple) -> int | None:
+        node = self.root
+        line = None
+        for part in loc:
+            if isinstance(node, yaml.MappingNode):
+                for key_node, value_node in node.value:
+                    if key_node.value == str(part):
+                        line = key_node.start_mark.line + 1
+                        node = value_node
+                        break
+                else:
+                    return line
+            elif isinstance(node, yaml.SequenceNode) and isinstance(part, int) and part < len(node.value):
+                node = node.value[part]
+                line = node.start_mark.line + 1
+            else:
+                return line
+        return line
+
+    def format(self, loc: tuple, message: str) -> str:
+        key = ".".join(str(p) for p in loc) or "<root>"
+        line = self.line(loc)
+        where = f"{self.source}:{line}" if line else f"{self.source}"
+        return f"{where}: {key}: {message}"

@@ -1,0 +1,147 @@
+"""Values the pipeline derives from a config, each with the rule that chose it.
+
+``impactpipe validate`` prints these, the stages use them, and the run store records
+them, so every automatic choice is visible and can be overridden in the config.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .config import Config
+
+G = 6.674e-11
+#: Hand-off time in target sound-crossing times (R_T / c), method.md section 3.
+CROSSING_TIMES_TO_HANDOFF = 4.0
+#: Self-gravity turns on when the target's central pressure exceeds this multiple of its strength.
+SELF_GRAVITY_STRENGTH_FACTOR = 10.0
+GEOMETRY_FOR_PROBLEM = {"shock_tube": "1d-planar", "planar_impact": "1d-planar", "advection": "1d-planar",
+                        "noh": "2d-cylindrical", "sedov": "2d-cylindrical"}
+
+
+def reference_state(material: dict[str, Any]) -> tuple[float, float]:
+    """(rho0, bulk sound speed at rho0 and zero internal energy) of a resolved material (SI)."""
+    from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
+
+    arrays = pack_eos([material["eos"]])
+    rho0 = reference_density(arrays.kind[0], arrays.params[0], arrays.table)
+    _, c2, _ = pressure_sound_speed(arrays.kind[0], arrays.params[0], arrays.table, rho0, 0.0)
+    return float(rho0), float(math.sqrt(c2))
+
+
+def geometry(config: Config) -> tuple[str, str]:
+    """(geometry, why) for the scene."""
+    scene = config.scene
+    if scene.geometry != "auto":
+        return scene.geometry, "set in the config"
+    if scene.problem == "impact":
+        if scene.impact.angle == 90.0:
+            return "2d-cylindrical", "head-on impact (angle 90) is axisymmetric"
+        return "3d", f"oblique impact (angle {scene.impact.angle:g}) needs 3d"
+    return GEOMETRY_FOR_PROBLEM[scene.problem], f"default for the {scene.problem} problem"
+
+
+def central_pressure(rho: float, radius: float) -> float:
+    """Lithostatic pressure at the centre of a uniform self-gravitating sphere (Pa).
+
+    P_c = (2 pi / 3) G rho^2 R^2.
+    """
+    return 2.0 * math.pi / 3.0 * G * rho * rho * radius * radius
+
+
+def derive(config: Config) -> dict[str, Any]:
+    """All derived values of a config, each with the rule that produced it (SI units)."""
+    geom, why = geometry(config)
+    out: dict[str, Any] = {"geometry": geom, "geometry_rule": why}
+    materials = config.resolved_materials()
+    out["strength"] = {name: strength_choice(mat["strength"]) for name, mat in materials.items()}
+    if config.scene.problem != "impact":
+        out["end_time"] = config.scene.end_time
+        return out
+    scene = config.scene
+    rho_t, c_t = reference_state(materials[scene.target.material])
+    rho_p, _ = reference_state(materials[scene.projectile.material])
+    m_t = 4.0 / 3.0 * math.pi * scene.target.radius ** 3 * rho_t
+    m_p = 4.0 / 3.0 * math.pi * scene.projectile.radius ** 3 * rho_p
+    crossing = scene.target.radius / c_t
+    out.update({
+        "target_mass": m_t,
+        "projectile_mass": m_p,
+        "target_reference_density": rho_t,
+        "target_sound_speed": c_t,
+        "sound_crossing_time": crossing,
+        "escape_speed": math.sqrt(2.0 * G * m_t / scene.target.radius),
+        "Q": 0.5 * m_p * scene.impact.velocity ** 2 / m_t,
+        "finest_cell_size": scene.projectile.radius / config.hydro.cells_per_projectile_radius,
+    })
+    if config.hydro.end_time == "auto":
+        out["end_time"] = CROSSING_TIMES_TO_HANDOFF * crossing
+        out["end_time_rule"] = f"auto: {CROSSING_TIMES_TO_HANDOFF:g} target sound-crossing times R_T / c = " \
+                               f"{CROSSING_TIMES_TO_HANDOFF:g} x {crossing:.4g} s"
+    else:
+        out["end_time"] = config.hydro.end_time
+        out["end_time_rule"] = "set in the config"
+    out["self_gravity"], out["self_gravity_rule"] = self_gravity_choice(
+        config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"])
+    return out
+
+
+def strength_choice(strength: dict[str, Any]) -> dict[str, Any]:
+    """Whether a material needs the strength kernels, and why."""
+    model = strength["model"]
+    if model == "none":
+        return {"enabled": False, "rule": "strength.model is none"}
+    if model == "von_mises":
+        enabled = strength["yield_strength"] > 0
+    else:
+        enabled = strength["Y0"] > 0 or strength["Y_M"] > 0
+    if not enabled:
+        return {"enabled": False, "rule": f"{model} yield strength is zero everywhere (hydro preset): no strength kernel"}
+    return {"enabled": True, "rule": f"{model} model with non-zero yield strength"}
+
+
+def self_gravity_choice(setting: bool | str, rho: float, radius: float, strength: dict[str, Any]) -> tuple[bool, str]:
+    """(on, rule) for self-gravity in the hydro stage.
+
+    Auto: on when the target's central pressure P_c = (2 pi / 3) G rho^2 R^2 exceeds
+    SELF_GRAVITY_STRENGTH_FACTOR times its strength max(Y0, Y_T) (method.md section 2:
+    for 2-50 km bodies it is negligible in the shock phase).
+    """
+    p_c = central_pressure(rho, radius)
+    y = max(strength.get("Y0", 0.0), strength.get("Y_T", 0.0), strength.get("yield_strength", 0.0))
+    if setting != "auto":
+        return bool(setting), f"set in the config (central pressure {p_c:.3g} Pa, strength {y:.3g} Pa)"
+    on = p_c > SELF_GRAVITY_STRENGTH_FACTOR * y
+    rule = (f"auto: central pressure {p_c:.3g} Pa {'>' if on else '<='} {SELF_GRAVITY_STRENGTH_FACTOR:g} x "
+            f"strength max(Y0, Y_T) = {SELF_GRAVITY_STRENGTH_FACTOR * y:.3g} Pa")
+    return on, rule
+
+
+def as_plain(values: dict[str, Any]) -> dict[str, Any]:
+    """``values`` with numpy scalars turned into Python numbers (for YAML/JSON output)."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        if isinstance(value, dict):
+            out[key] = as_plain(value)
+        elif isinstance(value, np.generic):
+            out[key] = value.item()
+        else:
+            out[key] = value
+    return out
+
+
+def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
+    """Requests this version cannot carry out, as ``key: message`` lines (checked before any work)."""
+    from impactpipe.hydro.problems import PROBLEMS
+
+    errors = []
+    if config.scene.problem not in PROBLEMS:
+        errors.append(f"scene.problem: '{config.scene.problem}' has no hydro setup in this version "
+                      f"(available: {', '.join(sorted(PROBLEMS))})")
+    if values.get("self_gravity"):
+        errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
+                      f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")
+    return errors

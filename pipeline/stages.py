@@ -1,0 +1,240 @@
+"""Stage orchestration: decide what runs, run it, record it, resume it.
+
+A run directory holds one file per stage (``hydro.h5``, ``handoff.h5``, ``nbody.h5``,
+``analysis.h5``), ``config.resolved.yaml``, ``summary.json`` and ``stages.json``, the
+record of each finished stage with the content hash of the config sections it depends
+on.  A stage is skipped when its file exists and its hash is unchanged; changing a
+section reruns the stage that reads it and every stage after it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import logging
+import signal
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from . import runstore
+from .config import STAGES, Config
+from .progress import StageProgress
+
+log = logging.getLogger(__name__)
+
+#: Config sections each stage reads (besides everything the stages before it read).
+STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
+    "hydro": ("scene", "materials", "hydro"),
+    "handoff": ("handoff",),
+    "nbody": ("nbody",),
+    "analysis": ("analysis",),
+}
+STAGE_FILES = {"hydro": "hydro.h5", "handoff": "handoff.h5", "nbody": "nbody.h5", "analysis": "analysis.h5"}
+STAGE_FUNCTIONS = {
+    "hydro": "impactpipe.hydro.stage:run_hydro_stage",
+    "handoff": "impactpipe.handoff.stage:run_handoff_stage",
+    "nbody": "impactpipe.nbody.stage:run_nbody_stage",
+    "analysis": "impactpipe.analysis.stage:run_analysis_stage",
+}
+RECORD_FILE = "stages.json"
+SUMMARY_FILE = "summary.json"
+RESOLVED_CONFIG_FILE = "config.resolved.yaml"
+
+
+class StageInterrupted(Exception):
+    """SIGINT or SIGTERM arrived while a stage ran; its output was not completed."""
+
+
+@dataclass
+class StageContext:
+    """What a stage function gets: the validated config, the run directory and helpers."""
+
+    config: Config
+    run_dir: Path
+    show_progress: bool = True
+    summary: dict[str, Any] = field(default_factory=dict)
+    stage_hash: str = ""
+
+    def path(self, stage: str) -> Path:
+        """The output file of ``stage`` in the run directory."""
+        return self.run_dir / STAGE_FILES[stage]
+
+    def progress(self, stage: str, total: float | None) -> StageProgress:
+        """A progress reporter for ``stage`` that will reach simulated time ``total`` (s)."""
+        return StageProgress(stage, total, bar=self.show_progress)
+
+    def provenance(self, started: str, wall_seconds: float) -> dict[str, str]:
+        """Provenance attributes for a stage's output file."""
+        return runstore.provenance(resolved_yaml(self.config), started, wall_seconds)
+
+
+def resolved_dict(config: Config) -> dict[str, Any]:
+    """The config with every default filled and material presets resolved, as plain data."""
+    data = config.model_dump(mode="json")
+    data["materials_resolved"] = config.resolved_materials()
+    return data
+
+
+def resolved_yaml(config: Config) -> str:
+    """:func:`resolved_dict` as YAML text."""
+    return yaml.safe_dump(resolved_dict(config), sort_keys=False)
+
+
+def applicable_stages(config: Config) -> tuple[str, ...]:
+    """Stages a scene needs: an impact runs all four; a verification problem runs hydro only."""
+    return STAGES if config.scene.problem == "impact" else ("hydro",)
+
+
+def stage_hashes(config: Config) -> dict[str, str]:
+    """Content hash per stage, chained so a change upstream changes every hash downstream."""
+    data = config.model_dump(mode="json")
+    data["materials"] = config.resolved_materials()
+    hashes: dict[str, str] = {}
+    previous = ""
+    for stage in STAGES:
+        sections = {key: data.get(key) for key in STAGE_SECTIONS[stage]}
+        digest = hashlib.sha256((previous + json.dumps(sections, sort_keys=True)).encode()).hexdigest()[:16]
+        hashes[stage] = digest
+        previous = digest
+    return hashes
+
+
+def read_records(run_dir: Path) -> dict[str, Any]:
+    """The stage records of a run directory (empty if none)."""
+    path = run_dir / RECORD_FILE
+    if not path.is_file():
+        return {}
+    return json.loads(path.read_text())
+
+
+def read_summary(run_dir: str | Path) -> dict[str, Any]:
+    """The ``summary.json`` of a run directory."""
+    return json.loads((Path(run_dir) / SUMMARY_FILE).read_text())
+
+
+def load_stage_function(stage: str) -> Callable[[StageContext], dict[str, Any]]:
+    """Import the stage function named in :data:`STAGE_FUNCTIONS`."""
+    module, name = STAGE_FUNCTIONS[stage].split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
+         from_stage: str | None = None, force: bool = False) -> list[tuple[str, str]]:
+    """(stage, reason) for every applicable stage: reason is 'run: ...' or 'skip: ...'."""
+    wanted = applicable_stages(config)
+    selected = tuple(stages) if stages is not None else wanted
+    for stage in selected:
+        if stage not in wanted:
+            raise ValueError(f"stage '{stage}' does not apply to scene.problem = {config.scene.problem} "
+                             f"(stages: {', '.join(wanted)})")
+    if from_stage is not None and from_stage not in wanted:
+        raise ValueError(f"--from {from_stage}: not a stage of this run (stages: {', '.join(wanted)})")
+    records = read_records(run_dir)
+    hashes = stage_hashes(config)
+    out: list[tuple[str, str]] = []
+    upstream_reran = False
+    for stage in wanted:
+        if stage not in selected:
+            continue
+        rec = records.get(stage, {})
+        output = run_dir / STAGE_FILES[stage]
+        if force:
+            reason = "run: --force"
+        elif from_stage is not None and wanted.index(stage) >= wanted.index(from_stage):
+            reason = f"run: --from {from_stage}"
+        elif upstream_reran:
+            reason = "run: an earlier stage reran"
+        elif rec.get("status") != "complete" or not output.is_file():
+            reason = "run: not finished before" if not rec else f"run: previous attempt {rec.get('status', 'incomplete')}"
+        elif rec.get("hash") != hashes[stage]:
+            reason = "run: its config sections changed"
+        else:
+            reason = "skip: up to date"
+        if reason.startswith("run"):
+            upstream_reran = True
+        out.append((stage, reason))
+    return out
+
+
+def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str] | None = None,
+        from_stage: str | None = None, force: bool = False, show_progress: bool = True) -> dict[str, Any]:
+    """Run the pipeline for ``config`` into ``out_dir`` (default: ``config.output`` or runs/<name>).
+
+    Finished stages whose config sections are unchanged are skipped; ``from_stage``
+    reruns from that stage on; ``force`` reruns everything.  Returns the summary.
+    Raises StageInterrupted on SIGINT/SIGTERM (outputs of the interrupted stage are not
+    written; its checkpoint, if it keeps one, remains for the next run).
+    """
+    run_dir = Path(out_dir or config.output or Path("runs") / config.name)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    runstore.write_text_atomic(run_dir / RESOLVED_CONFIG_FILE, resolved_yaml(config))
+    hashes = stage_hashes(config)
+    records = read_records(run_dir)
+    summary_path = run_dir / SUMMARY_FILE
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    summary.update({"name": config.name, "problem": config.scene.problem, "run_dir": str(run_dir.resolve()),
+                    "versions": runstore.package_versions(), "git_commit": runstore.git_commit()})
+    summary.setdefault("stages", {})
+    ctx = StageContext(config=config, run_dir=run_dir, show_progress=show_progress, summary=summary)
+    with _signals_raise():
+        for stage, reason in plan(config, run_dir, stages, from_stage, force):
+            if reason.startswith("skip"):
+                log.info("%s: %s", stage, reason[6:])
+                continue
+            log.info("%s: %s", stage, reason[5:])
+            _invalidate_after(stage, records)
+            records[stage] = {"status": "running", "hash": hashes[stage], "started": runstore.utc_now()}
+            runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+            ctx.stage_hash = hashes[stage]
+            t0 = time.perf_counter()
+            try:
+                result = load_stage_function(stage)(ctx)
+            except StageInterrupted:
+                records[stage]["status"] = "interrupted"
+                runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+                raise
+            except Exception as exc:
+                records[stage]["status"] = "failed"
+                records[stage]["error"] = f"{type(exc).__name__}: {exc}"
+                runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+                raise
+            wall = time.perf_counter() - t0
+            records[stage].update({"status": "complete", "wall_seconds": wall, "finished": runstore.utc_now()})
+            summary["stages"][stage] = {"wall_seconds": wall, **result.pop("stage", {})}
+            summary.update(result)
+            runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+            runstore.write_json_atomic(summary_path, summary)
+            log.info("%s: done in %.1f s -> %s", stage, wall, run_dir / STAGE_FILES[stage])
+    return summary
+
+
+def _invalidate_after(stage: str, records: dict[str, Any]) -> None:
+    for later in STAGES[STAGES.index(stage):]:
+        records.pop(later, None)
+
+
+class _signals_raise:
+    """Context manager turning SIGINT and SIGTERM into StageInterrupted for a clean stop."""
+
+    def __enter__(self) -> "_signals_raise":
+        self._old = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[sig] = signal.signal(sig, self._handler)
+            except ValueError:
+                pass
+        return self
+
+    @staticmethod
+    def _handler(signum: int, frame: Any) -> None:
+        raise StageInterrupted(f"stopped by {signal.Signals(signum).name}")
+
+    def __exit__(self, *exc: Any) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)

@@ -1,0 +1,76 @@
+"""Config validation: every broken config fails with one located line, before any output."""
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from impactpipe.pipeline.cli import main
+from impactpipe.pipeline.config import ConfigError, load_config, load_yaml, parse_config
+
+HERE = Path(__file__).parent
+BROKEN = sorted((HERE / "configs" / "broken").glob("*.yaml"))
+EXAMPLES = sorted((HERE.parent / "configs").rglob("*.yaml"))
+
+
+def _expected(path: Path) -> str:
+    first = path.read_text().splitlines()[0]
+    assert first.startswith("# expect: ")
+    return first[len("# expect: "):]
+
+
+@pytest.mark.parametrize("path", BROKEN, ids=[p.stem for p in BROKEN])
+def test_broken_config_names_key_value_and_allowed(path, tmp_path):
+    text = path.read_text().replace("OUTDIR", str(tmp_path / "run"))
+    cfg = tmp_path / path.name
+    cfg.write_text(text)
+    result = CliRunner().invoke(main, ["validate", str(cfg)])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert _expected(path) in lines[0]
+    assert lines[0].startswith(f"{cfg}:"), "message must start with file:line"
+    result = CliRunner().invoke(main, ["run", str(cfg)])
+    assert result.exit_code == 2
+    assert not (tmp_path / "run").exists(), "a rejected config must not create its run directory"
+
+
+def test_all_errors_reported_together(tmp_path):
+    text = (HERE / "configs" / "broken" / "cfl_large.yaml").read_text()
+    text = text.replace("angle: 90", "angle: 95").replace("preset: weak", "preset: weakk")
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, source=tmp_path / "c.yaml")
+    joined = "\n".join(info.value.messages)
+    assert len(info.value.messages) == 3
+    assert "hydro.cfl" in joined and "scene.impact.angle" in joined and "strength.preset" in joined
+
+
+def test_line_numbers_point_at_the_key(tmp_path):
+    text = "name: x\nscene:\n  problem: impact\n  target: {material: b, radius: 1.0}\n" \
+           "  projectile: {material: b, radius: 0.1}\n  impact: {velocity: 1.0}\n" \
+           "materials:\n  b: {eos: {model: tillotson, preset: basalt}}\nhydro:\n  cfl: 2\n"
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, source="c.yaml")
+    assert info.value.messages == ["c.yaml:10: hydro.cfl: must be <= 1 (got 2)"]
+
+
+def test_yaml_floats_without_exponent_sign_are_numbers():
+    assert load_yaml("a: 10.0e3\nb: 1e-3\nc: 4.0e-7\nd: 5") == {"a": 10000.0, "b": 0.001, "c": 4.0e-7, "d": 5}
+
+
+def test_presets_resolve_and_overrides_win(tmp_path):
+    text = "name: x\nscene:\n  problem: impact\n  target: {material: b, radius: 1.0e4}\n" \
+           "  projectile: {material: b, radius: 830}\n  impact: {velocity: 1900}\n" \
+           "materials:\n  b:\n    eos: {model: tillotson, preset: basalt, A: 30.0e9}\n" \
+           "    strength: {model: geo, preset: weak, Y0: 2.0e6}\n"
+    mats = parse_config(text, source=tmp_path / "c.yaml").resolved_materials()
+    assert mats["b"]["eos"]["A"] == 30.0e9 and mats["b"]["eos"]["B"] == 26.7e9
+    assert mats["b"]["strength"]["Y0"] == 2.0e6 and mats["b"]["strength"]["Y_M"] == 1.0e7
+    assert mats["b"]["strength"]["mu_i"] == 1.0 and mats["b"]["strength"]["T_melt"] == 1474.0
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=[str(p.relative_to(HERE.parent)) for p in EXAMPLES])
+def test_example_configs_validate(path):
+    result = CliRunner().invoke(main, ["validate", str(path)])
+    assert result.exit_code == 0, result.output
+    assert "derived:" in result.output

@@ -1,0 +1,181 @@
+"""Stage orchestration: resume, invalidation by config hash, interruption, atomic writes."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from impactpipe.pipeline import stages
+from impactpipe.pipeline.config import parse_config
+from impactpipe.pipeline.runstore import atomic_path
+
+CONFIG = """
+name: orchestration
+scene:
+  problem: impact
+  target: {material: basalt, radius: 1.0e4}
+  projectile: {material: basalt, radius: 830.0}
+  impact: {velocity: 1900.0}
+materials:
+  basalt: {eos: {model: tillotson, preset: basalt}}
+hydro: {cfl: 0.4}
+nbody: {collision_model: merge}
+"""
+
+
+def config(**overrides):
+    return parse_config(CONFIG, source="orchestration.yaml", overrides=overrides)
+
+
+@pytest.fixture
+def calls(monkeypatch):
+    """Replace the stage functions by stand-ins that record their calls and write their file."""
+    log = []
+    behaviour = {}
+
+    def make(stage):
+        def stage_function(ctx):
+            log.append(stage)
+            action = behaviour.get(stage)
+            if action == "interrupt":
+                raise stages.StageInterrupted("test interrupt")
+            if action == "fail":
+                raise RuntimeError("stage broke")
+            with atomic_path(ctx.path(stage)) as tmp:
+                tmp.write_text(stage)
+            return {f"{stage}_value": len(log)}
+        return stage_function
+
+    monkeypatch.setattr(stages, "load_stage_function", make)
+    return log, behaviour
+
+
+def test_resume_skips_finished_stages(tmp_path, calls):
+    log, _ = calls
+    stages.run(config(), tmp_path, show_progress=False)
+    assert log == ["hydro", "handoff", "nbody", "analysis"]
+    stages.run(config(), tmp_path, show_progress=False)
+    assert log == ["hydro", "handoff", "nbody", "analysis"], "a second run must do no work"
+    summary = stages.read_summary(tmp_path)
+    assert summary["analysis_value"] == 4 and set(summary["stages"]) == set(stages.STAGES)
+    assert "numpy" in summary["versions"]
+
+
+def test_changed_hydro_key_reruns_hydro_and_everything_after(tmp_path, calls):
+    log, _ = calls
+    stages.run(config(), tmp_path, show_progress=False)
+    log.clear()
+    stages.run(config(**{"hydro.cfl": 0.3}), tmp_path, show_progress=False)
+    assert log == ["hydro", "handoff", "nbody", "analysis"]
+
+
+def test_changed_nbody_key_reruns_only_nbody_and_analysis(tmp_path, calls):
+    log, _ = calls
+    stages.run(config(), tmp_path, show_progress=False)
+    log.clear()
+    stages.run(config(**{"nbody.collision_model": "bounce"}), tmp_path, show_progress=False)
+    assert log == ["nbody", "analysis"]
+
+
+def test_changed_preset_parameter_reruns_hydro(tmp_path, calls):
+    log, _ = calls
+    stages.run(config(), tmp_path, show_progress=False)
+    log.clear()
+    stages.run(config(**{"materials.basalt.eos.A": 30.0e9}), tmp_path, show_progress=False)
+    assert log[0] == "hydro"
+
+
+def test_interrupted_stage_is_rerun(tmp_path, calls):
+    log, behaviour = calls
+    behaviour["nbody"] = "interrupt"
+    with pytest.raises(stages.StageInterrupted):
+        stages.run(config(), tmp_path, show_progress=False)
+    assert not (tmp_path / "nbody.h5").exists()
+    assert stages.read_records(tmp_path)["nbody"]["status"] == "interrupted"
+    behaviour.clear()
+    log.clear()
+    stages.run(config(), tmp_path, show_progress=False)
+    assert log == ["nbody", "analysis"]
+
+
+def test_failed_stage_is_recorded_and_rerun(tmp_path, calls):
+    log, behaviour = calls
+    behaviour["handoff"] = "fail"
+    with pytest.raises(RuntimeError, match="stage broke"):
+        stages.run(config(), tmp_path, show_progress=False)
+    record = stages.read_records(tmp_path)["handoff"]
+    assert record["status"] == "failed" and "stage broke" in record["error"]
+    behaviour.clear()
+    log.clear()
+    stages.run(config(), tmp_path, show_progress=False)
+    assert log == ["handoff", "nbody", "analysis"]
+
+
+def test_from_and_force(tmp_path, calls):
+    log, _ = calls
+    stages.run(config(), tmp_path, show_progress=False)
+    log.clear()
+    stages.run(config(), tmp_path, from_stage="nbody", show_progress=False)
+    assert log == ["nbody", "analysis"]
+    log.clear()
+    stages.run(config(), tmp_path, force=True, show_progress=False)
+    assert log == ["hydro", "handoff", "nbody", "analysis"]
+
+
+def test_deleted_output_is_rerun(tmp_path, calls):
+    log, _ = calls
+    stages.run(config(), tmp_path, show_progress=False)
+    (tmp_path / "handoff.h5").unlink()
+    log.clear()
+    stages.run(config(), tmp_path, show_progress=False)
+    assert log == ["handoff", "nbody", "analysis"]
+
+
+def test_sigterm_stops_stage_cleanly(tmp_path, monkeypatch):
+    def slow_stage(ctx):
+        with atomic_path(ctx.path("hydro")) as tmp:
+            tmp.write_text("partial")
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)
+        return {}
+
+    monkeypatch.setattr(stages, "load_stage_function", lambda stage: slow_stage)
+    with pytest.raises(stages.StageInterrupted, match="SIGTERM"):
+        stages.run(config(), tmp_path, stages=["hydro"], show_progress=False)
+    assert not (tmp_path / "hydro.h5").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".tmp-")]
+    assert stages.read_records(tmp_path)["hydro"]["status"] == "interrupted"
+
+
+def test_killed_writer_leaves_no_complete_looking_file(tmp_path):
+    target = tmp_path / "out.h5"
+    script = textwrap.dedent(f"""
+        import time, h5py, numpy as np
+        from impactpipe.pipeline.runstore import atomic_path
+        with atomic_path({str(target)!r}) as tmp:
+            with h5py.File(tmp, "w") as f:
+                f["x"] = np.zeros(1000)
+                print("writing", flush=True)
+                time.sleep(30)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "writing"
+    proc.kill()
+    proc.wait()
+    assert not target.exists()
+
+
+def test_atomic_path_replaces_only_on_success(tmp_path):
+    target = tmp_path / "summary.json"
+    target.write_text(json.dumps({"old": True}))
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("writer failed")
+    assert json.loads(target.read_text()) == {"old": True}
+    assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]
