@@ -620,3 +620,27 @@ class _LineFinder:
         line = self.line(loc)
         where = f"{self.source}:{line}" if line else f"{self.source}"
         return f"{where}: {key}: {message}"
+
+
+def key_paths(model: type[BaseModel] = Config, prefix: str = "") -> list[str]:
+    """Every dotted key path the schema accepts (``materials.<name>.eos.A``, ``scene.left.density``...)."""
+    paths: list[str] = []
+    for name, field in model.model_fields.items():
+        path = f"{prefix}{name}"
+        paths.append(path)
+        annotation = field.annotation
+        mapping = typing.get_origin(annotation) is dict
+        for sub in _model_classes(annotation):
+            paths.extend(key_paths(sub, path + (".<name>." if mapping else ".")))
+    return sorted(set(paths))
+
+
+def _model_classes(annotation: Any) -> list[type[BaseModel]]:
+    origin = typing.get_origin(annotation)
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    if origin is Annotated:
+        return _model_classes(typing.get_args(annotation)[0])
+    if origin in (Union, types.UnionType, dict):
+        return [m for arg in typing.get_args(annotation) for m in _model_classes(arg)]
+    return []

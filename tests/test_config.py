@@ -74,3 +74,16 @@ def test_example_configs_validate(path):
     result = CliRunner().invoke(main, ["validate", str(path)])
     assert result.exit_code == 0, result.output
     assert "derived:" in result.output
+
+
+def test_every_config_key_is_documented():
+    import re
+
+    from impactpipe.pipeline.config import key_paths
+
+    doc = re.sub(r"```.*?```", "", (HERE.parent / "docs" / "config.md").read_text(), flags=re.S)
+    tokens = set(re.findall(r"`([^`]+)`", doc))
+    words = {w for t in tokens for w in re.split(r"[,\s{}:]+", t)}
+    missing = [p for p in key_paths()
+               if p not in doc and p.split(".")[-1] not in words and not any(t.startswith(p + ".") for t in tokens)]
+    assert not missing, f"undocumented config keys: {missing}"
