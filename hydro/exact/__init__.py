@@ -1,0 +1,24 @@
+"""Exact and reference solutions for verifying the hydro stage.
+
+- ``riemann``: exact Riemann solver for the ideal gas (shocks, rarefactions, vacuum);
+- ``sedov``: Sedov-Taylor point blast (planar, cylindrical, spherical);
+- ``noh``: Noh implosion (planar, cylindrical, spherical);
+- ``impedance``: Hugoniots of any dispatcher EOS and planar impedance matching.
+"""
+
+from impactpipe.hydro.exact.impedance import (
+    HugoniotState,
+    ImpactState,
+    hugoniot_from_particle_velocity,
+    hugoniot_state,
+    planar_impact_state,
+)
+from impactpipe.hydro.exact.noh import noh_shock_speed, noh_solution
+from impactpipe.hydro.exact.riemann import exact_riemann, riemann_star_state
+from impactpipe.hydro.exact.sedov import SedovSolution, sedov_solution
+
+__all__ = [
+    "HugoniotState", "ImpactState", "hugoniot_from_particle_velocity", "hugoniot_state",
+    "planar_impact_state", "noh_shock_speed", "noh_solution", "exact_riemann",
+    "riemann_star_state", "SedovSolution", "sedov_solution",
+]
