@@ -95,3 +95,60 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
     for key in ("M_lr_over_M_T", "Q", "N_lr"):
         if key in summary:
             click.echo(f"{key} = {summary[key]:.4g}")
+
+
+@main.command("sweep")
+@click.argument("sweep_path", metavar="SWEEP", type=click.Path(dir_okay=False))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), help="Sweep directory (overrides `output`).")
+@click.option("--backend", type=click.Choice(["local", "dask"]), help="Execution backend (overrides the file).")
+@click.option("--scheduler", help="Dask scheduler address (implies --backend dask).")
+@click.option("--workers", type=int, help="Parallel runs (default: cores / threads_per_run).")
+@click.option("-v", "--verbose", count=True, help="More log output.")
+@click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
+def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, scheduler: str | None,
+              workers: int | None, verbose: int, quiet: bool) -> None:
+    """Run every point of the sweep file SWEEP (a grid or a Q*_D search); resumes where it stopped."""
+    from .sweep import SweepError, load_sweep, run_sweep, sweep_status
+
+    _setup_logging(verbose, quiet)
+    try:
+        sweep = load_sweep(sweep_path, out_dir)
+    except SweepError as exc:
+        for message in exc.messages:
+            click.echo(message, err=True)
+        sys.exit(2)
+    execution = sweep.spec.execution
+    if scheduler:
+        execution.backend, execution.scheduler = "dask", scheduler
+    elif backend:
+        execution.backend = backend
+    if workers:
+        execution.workers = workers
+    result = run_sweep(sweep, show_progress=not quiet)
+    status = sweep_status(sweep.directory)
+    click.echo(f"sweep {sweep.spec.name}: {status['total']} points, "
+               + ", ".join(f"{n} {s}" for s, n in sorted(status["counts"].items())))
+    for record in result["qstar"]:
+        click.echo(f"  Q*_D = {record.get('Qstar_D', float('nan')):.4g} J/kg ({record['status']}) for "
+                   + ", ".join(f"{k}={record[k]}" for k in sweep.spec.axis_values() if k in record))
+    click.echo(f"tables in {sweep.directory}/: results.csv, results.h5" + (", qstar.csv" if result["qstar"] else ""))
+    if status["failed"]:
+        sys.exit(1)
+
+
+@main.command("sweep-status")
+@click.argument("sweep_dir", metavar="SWEEP_DIR", type=click.Path(file_okay=False, exists=True))
+def sweep_status_cmd(sweep_dir: str) -> None:
+    """Show how far the sweep in SWEEP_DIR has got and why points failed."""
+    from .sweep import sweep_status
+
+    try:
+        status = sweep_status(sweep_dir)
+    except FileNotFoundError as exc:
+        click.echo(str(exc), err=True)
+        sys.exit(2)
+    done = status["counts"].get("complete", 0)
+    click.echo(f"{done}/{status['total']} points complete; "
+               + ", ".join(f"{n} {s}" for s, n in sorted(status["counts"].items())))
+    for name, error in status["failed"].items():
+        click.echo(f"failed {name}: {error}")

@@ -13,6 +13,8 @@ import hashlib
 import importlib
 import json
 import logging
+import os
+import shutil
 import signal
 import time
 from collections.abc import Callable, Iterable
@@ -118,10 +120,52 @@ def read_summary(run_dir: str | Path) -> dict[str, Any]:
     return json.loads((Path(run_dir) / SUMMARY_FILE).read_text())
 
 
-def load_stage_function(stage: str) -> Callable[[StageContext], dict[str, Any]]:
-    """Import the stage function named in :data:`STAGE_FUNCTIONS`."""
-    module, name = STAGE_FUNCTIONS[stage].split(":")
+def load_stage_function(stage: str, overrides: dict[str, str] | None = None) -> Callable[[StageContext], dict[str, Any]]:
+    """Import the stage function for ``stage``: ``overrides[stage]`` or :data:`STAGE_FUNCTIONS`.
+
+    Both name functions as ``"package.module:function"``.
+    """
+    module, name = ((overrides or {}).get(stage) or STAGE_FUNCTIONS[stage]).split(":")
     return getattr(importlib.import_module(module), name)
+
+
+def adopt_stages(run_dir: Path, source_dir: Path, config: Config) -> list[str]:
+    """Reuse the finished stages of ``source_dir`` whose hashes match ``config`` (shared work).
+
+    The outputs are hard-linked (copied where links are impossible) into ``run_dir``
+    and their records copied, marked ``reused_from``.  Stops at the first stage that
+    does not match, since every later hash depends on it.  Returns the adopted stages.
+    """
+    hashes = stage_hashes(config)
+    source_records = read_records(source_dir)
+    records = read_records(run_dir)
+    adopted = []
+    for stage in applicable_stages(config):
+        rec = source_records.get(stage, {})
+        source_file = source_dir / STAGE_FILES[stage]
+        if rec.get("status") != "complete" or rec.get("hash") != hashes[stage] or not source_file.is_file():
+            break
+        if records.get(stage, {}).get("hash") == hashes[stage] and (run_dir / STAGE_FILES[stage]).is_file():
+            continue
+        target = run_dir / STAGE_FILES[stage]
+        with runstore.atomic_path(target) as tmp:
+            tmp.unlink()
+            try:
+                os.link(source_file, tmp)
+            except OSError:
+                shutil.copyfile(source_file, tmp)
+        records[stage] = {**rec, "reused_from": str(source_dir.resolve())}
+        adopted.append(stage)
+    if adopted:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+        summary_path = run_dir / SUMMARY_FILE
+        source_summary = source_dir / SUMMARY_FILE
+        if source_summary.is_file() and not summary_path.is_file():
+            summary = json.loads(source_summary.read_text())
+            summary["stages"] = {k: v for k, v in summary.get("stages", {}).items() if k in adopted}
+            runstore.write_json_atomic(summary_path, summary)
+    return adopted
 
 
 def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
@@ -163,11 +207,13 @@ def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
 
 
 def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str] | None = None,
-        from_stage: str | None = None, force: bool = False, show_progress: bool = True) -> dict[str, Any]:
+        from_stage: str | None = None, force: bool = False, show_progress: bool = True,
+        stage_functions: dict[str, str] | None = None) -> dict[str, Any]:
     """Run the pipeline for ``config`` into ``out_dir`` (default: ``config.output`` or runs/<name>).
 
     Finished stages whose config sections are unchanged are skipped; ``from_stage``
     reruns from that stage on; ``force`` reruns everything.  Returns the summary.
+    ``stage_functions`` replaces stage functions by others (``{"nbody": "pkg.mod:func"}``).
     Raises StageInterrupted on SIGINT/SIGTERM (outputs of the interrupted stage are not
     written; its checkpoint, if it keeps one, remains for the next run).
     """
@@ -194,7 +240,7 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
             ctx.stage_hash = hashes[stage]
             t0 = time.perf_counter()
             try:
-                result = load_stage_function(stage)(ctx)
+                result = load_stage_function(stage, stage_functions)(ctx)
             except StageInterrupted:
                 records[stage]["status"] = "interrupted"
                 runstore.write_json_atomic(run_dir / RECORD_FILE, records)

@@ -38,7 +38,7 @@ def calls(monkeypatch):
     log = []
     behaviour = {}
 
-    def make(stage):
+    def make(stage, overrides=None):
         def stage_function(ctx):
             log.append(stage)
             action = behaviour.get(stage)
@@ -144,7 +144,7 @@ def test_sigterm_stops_stage_cleanly(tmp_path, monkeypatch):
             time.sleep(5)
         return {}
 
-    monkeypatch.setattr(stages, "load_stage_function", lambda stage: slow_stage)
+    monkeypatch.setattr(stages, "load_stage_function", lambda stage, overrides=None: slow_stage)
     with pytest.raises(stages.StageInterrupted, match="SIGTERM"):
         stages.run(config(), tmp_path, stages=["hydro"], show_progress=False)
     assert not (tmp_path / "hydro.h5").exists()

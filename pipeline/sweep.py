@@ -1,0 +1,650 @@
+"""Batch sweeps: grids of runs and Q*_D searches, on a local process pool or a Dask cluster.
+
+A sweep file names a base config and axes (any config key, as lists or ranges).  Each
+point gets its own run directory under ``<sweep>/runs``, named by its parameters and a
+content hash of its config, so rerunning a sweep does only the work that is missing.
+Points that differ only in the N-body or analysis sections share one hydro and
+hand-off result: the first point of such a group runs them, the others adopt its files
+(:func:`impactpipe.pipeline.stages.adopt_stages`).
+
+Execution goes through a ``concurrent.futures`` executor: a process pool sized to the
+cores (``backend: local``) or a Dask client (``backend: dask``, a scheduler address or a
+LocalCluster).  A failed point is recorded with its error and log and retried up to
+``execution.retries`` times; it never stops the other points.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import itertools
+import json
+import logging
+import math
+import multiprocessing
+import os
+import re
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import h5py
+import numpy as np
+import yaml
+from pydantic import Field, ValidationError, model_validator
+
+from . import runstore
+from .config import Config, ConfigError, Strict, _LineFinder, key_paths, load_yaml, parse_config, unknown_keys
+from .stages import STAGES, adopt_stages, plan, read_summary, stage_hashes
+
+log = logging.getLogger(__name__)
+
+POINTS_FILE = "points.json"
+RESULTS_CSV = "results.csv"
+RESULTS_H5 = "results.h5"
+QSTAR_CSV = "qstar.csv"
+RESULT_KEYS = ("Q", "Q_R", "gamma", "M_lr_over_M_T", "M_slr_over_M_T", "N_lr", "N_init")
+
+
+# --------------------------------------------------------------------------- sweep file
+
+
+class Range(Strict):
+    """Evenly spaced values: ``{start, stop, num}`` (stop included) or ``{start, stop, step}``."""
+
+    start: float
+    stop: float
+    num: int | None = Field(None, ge=1)
+    step: float | None = Field(None, gt=0)
+    spacing: Literal["linear", "log"] = "linear"
+
+    @model_validator(mode="after")
+    def _one_of_num_step(self) -> "Range":
+        if (self.num is None) == (self.step is None):
+            raise ValueError("give exactly one of num or step")
+        if self.spacing == "log" and (self.start <= 0 or self.stop <= 0 or self.step is not None):
+            raise ValueError("log spacing needs positive start and stop and num (not step)")
+        return self
+
+    def values(self) -> list[float]:
+        """The values of the range."""
+        if self.spacing == "log":
+            return [float(v) for v in np.geomspace(self.start, self.stop, self.num)]
+        if self.num is not None:
+            return [float(v) for v in np.linspace(self.start, self.stop, self.num)]
+        n = int(math.floor((self.stop - self.start) / self.step + 1e-9)) + 1
+        return [float(self.start + i * self.step) for i in range(n)]
+
+
+class QStarSearch(Strict):
+    """Bisection on M_lr/M_T = target in velocity or projectile radius, per group."""
+
+    variable: Literal["scene.impact.velocity", "scene.projectile.radius"] = "scene.impact.velocity"
+    bracket: tuple[float, float] | None = Field(None, description="initial (low, high); default from published laws")
+    tolerance: float = Field(0.02, gt=0, lt=1, description="stop when (high - low) / mid is below this")
+    max_rounds: int = Field(12, ge=1)
+    max_expansions: int = Field(4, ge=0, description="times a bracket that does not bracket may be widened by 2x")
+    target: float = Field(0.5, gt=0, lt=1)
+
+    @model_validator(mode="after")
+    def _bracket_ordered(self) -> "QStarSearch":
+        if self.bracket is not None and not 0 < self.bracket[0] < self.bracket[1]:
+            raise ValueError(f"bracket must be (low, high) with 0 < low < high (got {self.bracket})")
+        return self
+
+
+class Execution(Strict):
+    backend: Literal["local", "dask"] = "local"
+    scheduler: str | None = Field(None, description="Dask scheduler address; none starts a LocalCluster")
+    workers: int | None = Field(None, ge=1, description="parallel runs; default cores // threads_per_run")
+    threads_per_run: int = Field(1, ge=1, description="numba threads of each run")
+    retries: int = Field(1, ge=0, description="times a failed point is run again")
+
+
+class SweepSpec(Strict):
+    name: str = Field(min_length=1)
+    base: str = Field(description="base config file, relative to the sweep file")
+    output: str | None = Field(None, description="sweep directory; default sweeps/<name>")
+    overrides: dict[str, Any] = Field(default_factory=dict, description="config keys set for every point")
+    axes: dict[str, list[Any] | Range] = Field(default_factory=dict)
+    mode: Literal["grid", "qstar"] = "grid"
+    qstar: QStarSearch = Field(default_factory=QStarSearch)
+    execution: Execution = Field(default_factory=Execution)
+    stage_functions: dict[str, str] = Field(default_factory=dict,
+                                            description="replace stages by 'package.module:function'")
+
+    def axis_values(self) -> dict[str, list[Any]]:
+        """Each axis as a list of values."""
+        return {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.axes.items()}
+
+
+class SweepError(ValueError):
+    """Invalid sweep file or point configs; ``messages`` holds one line per problem."""
+
+    def __init__(self, messages: list[str]):
+        self.messages = messages
+        super().__init__("\n".join(messages))
+
+
+@dataclass
+class Sweep:
+    """A validated sweep: its spec, base config text and directory."""
+
+    spec: SweepSpec
+    base_text: str
+    base_path: Path
+    directory: Path
+    source: Path
+
+    def config_for(self, params: dict[str, Any]) -> Config:
+        """The validated config of one point (raises ConfigError)."""
+        overrides = {**self.spec.overrides, **params}
+        return parse_config(self.base_text, source=self.base_path, overrides=overrides)
+
+
+def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
+    """Read and validate a sweep file and the base config of every grid point (raises SweepError)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+        data = load_yaml(text)
+    except OSError as exc:
+        raise SweepError([f"{path}: cannot read sweep file: {exc.strerror}"]) from exc
+    except yaml.YAMLError as exc:
+        raise SweepError([f"{path}: not valid YAML: {exc}"]) from exc
+    if not isinstance(data, dict):
+        raise SweepError([f"{path}: a sweep file must be a mapping of keys"])
+    lines = _LineFinder(path, yaml.compose(text))
+    found = [lines.format(loc, msg) for loc, msg in unknown_keys(data, SweepSpec)]
+    try:
+        spec = SweepSpec.model_validate(data)
+    except ValidationError as exc:
+        found += [lines.format(tuple(e["loc"]), e["msg"]) for e in exc.errors() if e["type"] != "extra_forbidden"]
+        raise SweepError(found) from None
+    if found:
+        raise SweepError(found)
+    known = key_paths()
+    for key in list(spec.axes) + list(spec.overrides):
+        pattern = re.sub(r"^materials\.[^.]+\.", "materials.<name>.", key)
+        if key not in known and pattern not in known:
+            where = "axes" if key in spec.axes else "overrides"
+            raise SweepError([lines.format((where, key), "not a config key (see docs/config.md)")])
+    base_path = (path.parent / spec.base).resolve()
+    try:
+        base_text = base_path.read_text()
+    except OSError as exc:
+        raise SweepError([lines.format(("base",), f"cannot read base config {base_path}: {exc.strerror}")]) from exc
+    directory = Path(output or spec.output or Path("sweeps") / spec.name)
+    sweep = Sweep(spec=spec, base_text=base_text, base_path=base_path, directory=directory, source=path)
+    messages = []
+    for params in grid_points(sweep):
+        try:
+            sweep.config_for(params)
+        except ConfigError as exc:
+            label = ", ".join(f"{k}={v}" for k, v in params.items())
+            messages += [f"point {label}: {m}" for m in exc.messages]
+    if messages:
+        raise SweepError(messages)
+    return sweep
+
+
+def grid_points(sweep: Sweep) -> list[dict[str, Any]]:
+    """Parameter dicts of the grid (in qstar mode: one per group, with the bracket's low end)."""
+    axes = sweep.spec.axis_values()
+    if sweep.spec.mode == "qstar":
+        axes.pop(sweep.spec.qstar.variable, None)
+    keys = list(axes)
+    points = [dict(zip(keys, combo)) for combo in itertools.product(*(axes[k] for k in keys))]
+    if sweep.spec.mode == "qstar" and sweep.spec.qstar.bracket is not None:
+        points = [{**p, sweep.spec.qstar.variable: sweep.spec.qstar.bracket[0]} for p in points]
+    return points
+
+
+def point_name(params: dict[str, Any], config: Config) -> str:
+    """Run-directory name: the parameters, then a content hash of the whole config."""
+    digest = stage_hashes(config)[STAGES[-1]][:10]
+    parts = []
+    for key, value in params.items():
+        text = f"{value:.6g}" if isinstance(value, float) else str(value)
+        parts.append(f"{key.split('.')[-1]}={text}")
+    label = re.sub(r"[^A-Za-z0-9_.=+-]", "-", "_".join(parts))[:120]
+    return f"{label}-{digest}" if label else digest
+
+
+# --------------------------------------------------------------------------- one point
+
+
+@dataclass
+class PointJob:
+    """Everything a worker needs to run one point (picklable)."""
+
+    name: str
+    params: dict[str, Any]
+    config: Config
+    run_dir: str
+    reuse_dir: str | None
+    threads: int
+    stage_functions: dict[str, str]
+
+
+@dataclass
+class PointResult:
+    name: str
+    status: str
+    summary: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+    wall_seconds: float = 0.0
+
+
+class PointFailed(RuntimeError):
+    """A point's run raised; the message names the point, the error and its log file."""
+
+
+def run_point(job: PointJob) -> PointResult:
+    """Run one point in a worker: adopt shared stages, run the pipeline, log to run.log."""
+    from . import stages
+
+    _set_threads(job.threads)
+    run_dir = Path(job.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(run_dir / "run.log")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    package_log = logging.getLogger("impactpipe")
+    package_log.addHandler(handler)
+    if package_log.level == logging.NOTSET or package_log.level > logging.INFO:
+        package_log.setLevel(logging.INFO)
+    t0 = time.perf_counter()
+    try:
+        if job.reuse_dir:
+            adopted = adopt_stages(run_dir, Path(job.reuse_dir), job.config)
+            if adopted:
+                logging.getLogger(__name__).info("%s: reused %s from %s", job.name, ", ".join(adopted), job.reuse_dir)
+        summary = stages.run(job.config, run_dir, show_progress=False, stage_functions=job.stage_functions or None)
+    except Exception as exc:
+        (run_dir / "error.log").write_text(traceback.format_exc())
+        raise PointFailed(f"{job.name}: {type(exc).__name__}: {exc} (log: {run_dir / 'error.log'})") from None
+    finally:
+        package_log.removeHandler(handler)
+        handler.close()
+    return PointResult(job.name, "complete", summary, None, time.perf_counter() - t0)
+
+
+def _set_threads(threads: int) -> None:
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
+def _init_worker(threads: int) -> None:
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)
+
+
+# --------------------------------------------------------------------------- coordinator
+
+
+class SweepRunner:
+    """Runs the points of a sweep on an executor, with shared work, retries and resume."""
+
+    def __init__(self, sweep: Sweep, executor: cf.Executor, progress: Any = None):
+        self.sweep = sweep
+        self.executor = executor
+        self.progress = progress
+        self.points: dict[str, dict[str, Any]] = {}
+        self._configs: dict[str, Config] = {}
+        self.runs_dir = sweep.directory / "runs"
+
+    # -- bookkeeping
+
+    def _record(self, name: str, **fields_: Any) -> None:
+        self.points.setdefault(name, {}).update(fields_)
+        runstore.write_json_atomic(self.sweep.directory / POINTS_FILE, self.points)
+
+    def add_point(self, params: dict[str, Any], group: str = "") -> str:
+        """Register a point; returns its name."""
+        config = self.sweep.config_for(params)
+        name = point_name(params, config)
+        if name not in self.points:
+            self.points[name] = {"params": params, "group": group, "run_dir": str(self.runs_dir / name),
+                                 "handoff_hash": stage_hashes(config)["handoff"], "status": "pending",
+                                 "attempts": 0}
+            self._configs[name] = config
+        return name
+
+    def _is_done(self, name: str) -> bool:
+        run_dir = Path(self.points[name]["run_dir"])
+        if not run_dir.is_dir():
+            return False
+        return all(reason.startswith("skip") for _, reason in plan(self._configs[name], run_dir))
+
+    # -- execution
+
+    def run_points(self, names: list[str]) -> dict[str, PointResult]:
+        """Run the named points (skipping finished ones), sharing hydro + hand-off within groups."""
+        results: dict[str, PointResult] = {}
+        todo = []
+        for name in names:
+            if self._is_done(name):
+                results[name] = PointResult(name, "complete", read_summary(self.points[name]["run_dir"]))
+                self._record(name, status="complete", summary=_results_of(results[name].summary))
+            else:
+                todo.append(name)
+        if self.progress is not None:
+            self.progress.total = (self.progress.total or 0) + len(todo)
+            self.progress.refresh()
+        source_of = self._shared_sources(names)
+        waiting = {n for n in todo if source_of.get(n) and source_of[n] in todo and source_of[n] != n}
+        running: dict[cf.Future, str] = {}
+        for name in todo:
+            if name not in waiting:
+                running[self._submit(name, source_of.get(name))] = name
+        while running:
+            done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            for future in done:
+                name = running.pop(future)
+                result = self._collect(name, future)
+                if result is None:
+                    running[self._submit(name, source_of.get(name))] = name
+                    continue
+                results[name] = result
+                if self.progress is not None:
+                    self.progress.update(1)
+                for other in sorted(waiting):
+                    if source_of[other] == name:
+                        waiting.discard(other)
+                        reuse = name if result.status == "complete" or self._has_shared(name) else None
+                        running[self._submit(other, reuse)] = other
+        return results
+
+    def _shared_sources(self, names: list[str]) -> dict[str, str]:
+        """For each point, the point whose hydro + hand-off it reuses (the first of its group)."""
+        first: dict[str, str] = {}
+        for name in names:
+            first.setdefault(self.points[name]["handoff_hash"], name)
+        for name in names:
+            if self._has_shared(name):
+                first[self.points[name]["handoff_hash"]] = name
+        return {name: first[self.points[name]["handoff_hash"]] for name in names}
+
+    def _has_shared(self, name: str) -> bool:
+        records_path = Path(self.points[name]["run_dir"]) / "stages.json"
+        if not records_path.is_file():
+            return False
+        records = json.loads(records_path.read_text())
+        return records.get("handoff", {}).get("status") == "complete"
+
+    def _submit(self, name: str, reuse: str | None) -> cf.Future:
+        point = self.points[name]
+        reuse_dir = self.points[reuse]["run_dir"] if reuse and reuse != name else None
+        job = PointJob(name, point["params"], self._configs[name], point["run_dir"], reuse_dir,
+                       self.sweep.spec.execution.threads_per_run, self.sweep.spec.stage_functions)
+        self._record(name, status="running", attempts=point["attempts"] + 1, error=None)
+        return self.executor.submit(run_point, job)
+
+    def _collect(self, name: str, future: cf.Future) -> PointResult | None:
+        """The point's result, or None when it failed and will be retried."""
+        try:
+            result = future.result()
+        except Exception as exc:
+            attempts = self.points[name]["attempts"]
+            message = str(exc) if isinstance(exc, PointFailed) else f"{type(exc).__name__}: {exc}"
+            if attempts <= self.sweep.spec.execution.retries:
+                log.warning("point %s failed (attempt %d), retrying: %s", name, attempts, message)
+                self._record(name, status="retrying", error=message)
+                return None
+            log.error("point %s failed after %d attempts: %s", name, attempts, message)
+            self._record(name, status="failed", error=message)
+            return PointResult(name, "failed", {}, message)
+        self._record(name, status="complete", error=None, wall_seconds=result.wall_seconds,
+                     summary=_results_of(result.summary))
+        return result
+
+    # -- modes
+
+    def run_grid(self) -> None:
+        names = [self.add_point(p) for p in grid_points(self.sweep)]
+        self.run_points(names)
+
+    def run_qstar(self) -> list[dict[str, Any]]:
+        """Bisection per group; returns one Q*_D record per group."""
+        spec = self.sweep.spec.qstar
+        axes = self.sweep.spec.axis_values()
+        axes.pop(spec.variable, None)
+        keys = list(axes)
+        groups = [dict(zip(keys, combo)) for combo in itertools.product(*(axes[k] for k in keys))]
+        state = []
+        for group in groups:
+            low, high = spec.bracket or initial_bracket(self.sweep.config_for(group), spec.variable)
+            state.append({"group": group, "label": _label(group), "low": low, "high": high, "f": {},
+                          "rounds": 0, "expansions": 0, "status": "searching"})
+        pending = {i: [s["low"], s["high"]] for i, s in enumerate(state)}
+        for _ in range(spec.max_rounds + spec.max_expansions + 1):
+            if not pending:
+                break
+            self._evaluate(state, pending)
+            pending = {}
+            for i, s in enumerate(state):
+                if s["status"] != "searching":
+                    continue
+                s["rounds"] += 1
+                nxt = bisection_step(s, spec)
+                if nxt is not None:
+                    pending[i] = nxt
+        return [self._group_record(s) for s in state]
+
+    def _evaluate(self, state: list[dict[str, Any]], pending: dict[int, list[float]]) -> None:
+        variable = self.sweep.spec.qstar.variable
+        names = {}
+        for i, values in pending.items():
+            for value in values:
+                if value not in state[i]["f"]:
+                    names[self.add_point({**state[i]["group"], variable: value}, state[i]["label"])] = (i, value)
+        results = self.run_points(list(names))
+        for name, (i, value) in names.items():
+            summary = results[name].summary if results[name].status == "complete" else {}
+            state[i]["f"][value] = summary.get("M_lr_over_M_T", float("nan"))
+
+    def _group_record(self, s: dict[str, Any]) -> dict[str, Any]:
+        from impactpipe.analysis.qstar import fit_qstar
+
+        runs = [p for p in self.points.values() if p["group"] == s["label"] and p["status"] == "complete"]
+        record = {**s["group"], "low": s["low"], "high": s["high"], "rounds": s["rounds"], "status": s["status"],
+                  "runs": len(runs), "bisection_estimate": _interpolate(s, self.sweep.spec.qstar.target)}
+        q = np.array([p["summary"].get("Q", np.nan) for p in runs], dtype=float)
+        mlr = np.array([p["summary"].get("M_lr_over_M_T", np.nan) for p in runs], dtype=float)
+        n_lr = np.array([p["summary"].get("N_lr", 10 ** 6) for p in runs], dtype=float)
+        ok = np.isfinite(q) & np.isfinite(mlr)
+        try:
+            fit = fit_qstar(q[ok], mlr[ok], n_lr[ok])
+            record.update({"Qstar_D": fit.qstar, "Qstar_D_uncertainty": fit.qstar_err,
+                           "slope_vs_Q_over_Qstar": fit.normalized_slope, "brackets": fit.brackets})
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            record.update({"Qstar_D": float("nan"), "fit_error": str(exc)})
+        return record
+
+
+def initial_bracket(config: Config, variable: str) -> tuple[float, float]:
+    """(low, high) around the published Q*_D of the target (Benz & Asphaug 1999 basalt law).
+
+    The law's Q*_D gives the critical velocity v = sqrt(2 Q*_D M_T / m_p) or projectile
+    radius r = R_T (2 Q*_D rho_T / (rho_p v^2))^(1/3); the bracket spans a factor 2 each side.
+    """
+    from impactpipe.analysis.energies import benz_asphaug_1999
+
+    from . import derived
+
+    values = derived.derive(config)
+    scene = config.scene
+    qstar = float(benz_asphaug_1999(scene.target.radius, values["target_reference_density"]))
+    if variable == "scene.impact.velocity":
+        centre = math.sqrt(2.0 * qstar * values["target_mass"] / values["projectile_mass"])
+    else:
+        rho_p = values["projectile_mass"] / (4.0 / 3.0 * math.pi * scene.projectile.radius ** 3)
+        centre = (2.0 * qstar * values["target_mass"] / (4.0 / 3.0 * math.pi * rho_p * scene.impact.velocity ** 2)) ** (1 / 3)
+        centre = min(centre, scene.target.radius / 2.0)
+    return centre / 2.0, centre * 2.0
+
+
+def bisection_step(s: dict[str, Any], spec: QStarSearch) -> list[float] | None:
+    """Update a group's bracket from its evaluations; return the next values to run, or None when done.
+
+    M_lr/M_T falls as velocity or projectile radius grows, so the bracket holds
+    f(low) > target > f(high).  A bracket that does not bracket is widened by 2x.
+    """
+    f_low, f_high = s["f"].get(s["low"], np.nan), s["f"].get(s["high"], np.nan)
+    if not (np.isfinite(f_low) and np.isfinite(f_high)):
+        s["status"] = "failed: a bracket point did not finish"
+        return None
+    if f_low < spec.target or f_high > spec.target:
+        if s["expansions"] >= spec.max_expansions:
+            s["status"] = "not bracketed"
+            return None
+        s["expansions"] += 1
+        if f_low < spec.target:
+            s["low"], s["high"] = s["low"] / 2.0, s["low"]
+        else:
+            s["low"], s["high"] = s["high"], s["high"] * 2.0
+        return [s["low"], s["high"]]
+    mids = [v for v in s["f"] if s["low"] < v < s["high"] and np.isfinite(s["f"][v])]
+    for v in sorted(mids):
+        if s["f"][v] >= spec.target:
+            s["low"] = max(s["low"], v)
+        else:
+            s["high"] = min(s["high"], v)
+    width = (s["high"] - s["low"]) / (0.5 * (s["high"] + s["low"]))
+    if width <= spec.tolerance:
+        s["status"] = "converged"
+        return None
+    if s["rounds"] >= spec.max_rounds:
+        s["status"] = "max_rounds"
+        return None
+    return [0.5 * (s["low"] + s["high"])]
+
+
+def _interpolate(s: dict[str, Any], target: float) -> float:
+    """Linear interpolation of the bracket ends to M_lr/M_T = target (in the swept variable)."""
+    f_low, f_high = s["f"].get(s["low"], np.nan), s["f"].get(s["high"], np.nan)
+    if not (np.isfinite(f_low) and np.isfinite(f_high)) or f_low == f_high:
+        return float("nan")
+    return float(s["low"] + (f_low - target) * (s["high"] - s["low"]) / (f_low - f_high))
+
+
+def _label(params: dict[str, Any]) -> str:
+    return ",".join(f"{k}={v}" for k, v in params.items()) or "all"
+
+
+def _results_of(summary: dict[str, Any]) -> dict[str, Any]:
+    out = {k: summary[k] for k in RESULT_KEYS if k in summary}
+    out["wall_seconds"] = {k: v.get("wall_seconds") for k, v in summary.get("stages", {}).items()}
+    return out
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def write_results(sweep: Sweep, points: dict[str, dict[str, Any]]) -> None:
+    """results.csv and results.h5: one row per point (parameters, results, status, wall time per stage)."""
+    param_keys = sorted({k for p in points.values() for k in p["params"]})
+    columns = ["name", *param_keys, "group", "status", *RESULT_KEYS, *(f"wall_{s}" for s in STAGES), "attempts", "error"]
+    rows = []
+    for name, p in sorted(points.items()):
+        summary = p.get("summary", {})
+        row = {"name": name, "group": p.get("group", ""), "status": p["status"], "attempts": p.get("attempts", 0),
+               "error": p.get("error") or ""}
+        row.update({k: p["params"].get(k, "") for k in param_keys})
+        row.update({k: summary.get(k, "") for k in RESULT_KEYS})
+        row.update({f"wall_{s}": summary.get("wall_seconds", {}).get(s, "") for s in STAGES})
+        rows.append(row)
+    _write_csv(sweep.directory / RESULTS_CSV, columns, rows)
+    with runstore.atomic_path(sweep.directory / RESULTS_H5) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["sweep"] = str(sweep.source)
+            for col in columns:
+                values = [r[col] for r in rows]
+                numeric = all(isinstance(v, (int, float)) or v == "" for v in values) and col not in ("name", "group")
+                data = np.array([np.nan if v == "" else v for v in values], dtype=float) if numeric \
+                    else np.array([str(v) for v in values], dtype=h5py.string_dtype())
+                units = {"Q": "J/kg", "Q_R": "J/kg"}.get(col, "s" if col.startswith("wall_") else "dimensionless")
+                runstore.write_dataset(f, col, data, units)
+
+
+def write_qstar_table(sweep: Sweep, records: list[dict[str, Any]]) -> None:
+    """qstar.csv: one row per group with Q*_D, its uncertainty and the bisection state."""
+    columns = sorted({k for r in records for k in r}, key=lambda k: (k not in records[0], k)) if records else []
+    _write_csv(sweep.directory / QSTAR_CSV, columns, records)
+
+
+def _write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
+    import csv
+    import io
+
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+    runstore.write_text_atomic(path, buffer.getvalue())
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def make_executor(execution: Execution) -> tuple[cf.Executor, Any]:
+    """(executor, closer): a spawn process pool, or a Dask client's executor."""
+    workers = execution.workers or max(1, (os.cpu_count() or 1) // execution.threads_per_run)
+    if execution.backend == "local":
+        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                      initializer=_init_worker, initargs=(execution.threads_per_run,))
+        return pool, pool.shutdown
+    from distributed import Client, LocalCluster
+
+    if execution.scheduler:
+        client = Client(execution.scheduler)
+        return client.get_executor(pure=False), client.close
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           env={"NUMBA_NUM_THREADS": str(execution.threads_per_run)})
+    client = Client(cluster)
+
+    def close() -> None:
+        client.close()
+        cluster.close()
+
+    return client.get_executor(pure=False), close
+
+
+def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: bool = True) -> dict[str, Any]:
+    """Run a sweep to the end; returns {"points": ..., "qstar": [...]}; writes the tables."""
+    sweep.directory.mkdir(parents=True, exist_ok=True)
+    runstore.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
+    close = None
+    if executor is None:
+        executor, close = make_executor(sweep.spec.execution)
+    from tqdm import tqdm
+
+    bar = tqdm(total=0, desc=f"sweep {sweep.spec.name}", unit="run", disable=None if show_progress else True)
+    runner = SweepRunner(sweep, executor, bar)
+    try:
+        qstar = []
+        if sweep.spec.mode == "grid":
+            runner.run_grid()
+        else:
+            qstar = runner.run_qstar()
+            write_qstar_table(sweep, qstar)
+    finally:
+        bar.close()
+        write_results(sweep, runner.points)
+        if close is not None:
+            close()
+    return {"points": runner.points, "qstar": qstar}
+
+
+def sweep_status(directory: str | Path) -> dict[str, Any]:
+    """Counts of points by status and the failed points' errors, from ``points.json``."""
+    path = Path(directory) / POINTS_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{directory}: no {POINTS_FILE}; is this a sweep directory?")
+    points = json.loads(path.read_text())
+    counts: dict[str, int] = {}
+    for p in points.values():
+        counts[p["status"]] = counts.get(p["status"], 0) + 1
+    failed = {name: p.get("error") for name, p in points.items() if p["status"] == "failed"}
+    return {"total": len(points), "counts": counts, "failed": failed}

@@ -1,0 +1,61 @@
+"""Stand-in stages for sweep tests: instant, with a synthetic M_lr/M_T(Q) law and a call log.
+
+Each stage writes its output file and then appends "<run name> <stage>" to
+``<runs dir>/calls.log``, so a test can count how often each stage of each point finished.
+"""
+
+import math
+import time
+
+from impactpipe.pipeline.runstore import atomic_path
+
+#: Q*_D of the synthetic law (J/kg): M_lr/M_T = 1 - 0.5 Q / QSTAR.
+QSTAR = 1790.0
+#: A hydro stand-in fails for this impact speed (m/s), to test failure isolation.
+FAILING_VELOCITY = 666.0
+
+
+def _finish(ctx, stage):
+    with atomic_path(ctx.path(stage)) as tmp:
+        tmp.write_text(stage)
+    with open(ctx.run_dir.parent / "calls.log", "a") as log:
+        log.write(f"{ctx.run_dir.name} {stage}\n")
+
+
+def hydro(ctx):
+    if ctx.config.scene.impact.velocity == FAILING_VELOCITY:
+        raise RuntimeError(f"synthetic failure at {FAILING_VELOCITY} m/s")
+    _finish(ctx, "hydro")
+    return {}
+
+
+def handoff(ctx):
+    _finish(ctx, "handoff")
+    return {}
+
+
+def nbody(ctx):
+    _finish(ctx, "nbody")
+    return {}
+
+
+def analysis(ctx):
+    scene = ctx.config.scene
+    q = 0.5 * (scene.projectile.radius / scene.target.radius) ** 3 * scene.impact.velocity ** 2
+    _finish(ctx, "analysis")
+    return {"Q": q, "M_lr_over_M_T": max(0.0, 1.0 - 0.5 * q / QSTAR), "N_lr": 5000}
+
+
+def slow_analysis(ctx):
+    time.sleep(0.3)
+    return analysis(ctx)
+
+
+STAGES = {s: f"sweep_stand_ins:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
+#: Stages whose analysis takes 0.3 s, so a sweep can be killed while points are still running.
+SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
+
+
+def critical_velocity(target_radius, projectile_radius):
+    """Speed at which the synthetic law gives M_lr/M_T = 0.5 (m/s)."""
+    return math.sqrt(2.0 * QSTAR / (projectile_radius / target_radius) ** 3)

@@ -1,0 +1,150 @@
+"""Sweeps: grids on Dask, resume after a kill, failure isolation, shared hydro work, Q*_D bisection.
+
+The stages are replaced by the instant stand-ins of tests/sweep_stand_ins.py, which log
+every stage they finish, so the tests count work exactly.
+"""
+
+import collections
+import concurrent.futures as cf
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+import sweep_stand_ins
+from impactpipe.pipeline.sweep import SweepError, load_sweep, run_sweep, sweep_status
+
+HERE = Path(__file__).parent
+BASE = HERE / "configs" / "sweep_base.yaml"
+
+
+def write_sweep(tmp_path, **fields):
+    spec = {"name": "test", "base": str(BASE), "output": str(tmp_path / "sweep"),
+            "stage_functions": sweep_stand_ins.STAGES, **fields}
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def calls(tmp_path):
+    log = tmp_path / "sweep" / "runs" / "calls.log"
+    lines = log.read_text().split("\n") if log.is_file() else []
+    return collections.Counter(tuple(line.split()) for line in lines if line)
+
+
+def test_grid_on_dask_local_cluster_then_rerun_does_nothing(tmp_path):
+    from distributed import Client, LocalCluster
+
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": [1500.0, 2500.0],
+                                       "scene.projectile.radius": [700.0, 900.0]})
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        result = run_sweep(load_sweep(path), executor=client.get_executor(pure=False), show_progress=False)
+        assert len(result["points"]) == 4
+        assert all(p["status"] == "complete" for p in result["points"].values())
+        first = calls(tmp_path)
+        assert sum(first.values()) == 16 and set(first.values()) == {1}
+        run_sweep(load_sweep(path), executor=client.get_executor(pure=False), show_progress=False)
+    assert calls(tmp_path) == first, "a second run of a finished sweep must do no work"
+    rows = (tmp_path / "sweep" / "results.csv").read_text().strip().splitlines()
+    assert len(rows) == 5 and "M_lr_over_M_T" in rows[0]
+    q = 0.5 * (700.0 / 1.0e4) ** 3 * 1500.0 ** 2
+    assert any(f"{1 - 0.5 * q / sweep_stand_ins.QSTAR:.6g}"[:6] in row for row in rows[1:])
+    assert (tmp_path / "sweep" / "results.h5").is_file()
+
+
+def test_failed_point_is_isolated_retried_and_reported(tmp_path):
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": [1500.0, sweep_stand_ins.FAILING_VELOCITY, 2500.0]},
+                       execution={"retries": 2})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    status = {p["params"]["scene.impact.velocity"]: p for p in result["points"].values()}
+    assert status[1500.0]["status"] == status[2500.0]["status"] == "complete"
+    failed = status[sweep_stand_ins.FAILING_VELOCITY]
+    assert failed["status"] == "failed" and failed["attempts"] == 3
+    assert "synthetic failure at 666" in failed["error"]
+    assert Path(failed["run_dir"], "error.log").is_file()
+    report = sweep_status(tmp_path / "sweep")
+    assert report["counts"] == {"complete": 2, "failed": 1}
+
+
+def test_merge_and_bounce_share_one_hydro_run(tmp_path):
+    path = write_sweep(tmp_path, axes={"nbody.collision_model": ["merge", "conditional_merge", "bounce"]})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert all(p["status"] == "complete" for p in result["points"].values())
+    done = calls(tmp_path)
+    assert sum(n for (run, stage), n in done.items() if stage == "hydro") == 1
+    assert sum(n for (run, stage), n in done.items() if stage == "handoff") == 1
+    assert sum(n for (run, stage), n in done.items() if stage == "nbody") == 3
+    for p in result["points"].values():
+        assert Path(p["run_dir"], "hydro.h5").is_file()
+
+
+def test_killed_sweep_resumes_and_runs_each_point_once(tmp_path):
+    velocities = [1000.0 + 100.0 * i for i in range(8)]
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": velocities},
+                       execution={"backend": "local", "workers": 2}, stage_functions=sweep_stand_ins.SLOW_STAGES)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", "from impactpipe.pipeline.cli import main; main()", "sweep", str(path), "-q"],
+                            env=env, start_new_session=True)
+    deadline = time.time() + 90
+    while time.time() < deadline:
+        if sum(1 for (_, stage) in calls(tmp_path) if stage == "analysis") >= 2:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    finished_before = sum(1 for (_, stage) in calls(tmp_path) if stage == "analysis")
+    assert 2 <= finished_before < len(velocities), "the kill must land mid-sweep"
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert all(p["status"] == "complete" for p in result["points"].values())
+    done = calls(tmp_path)
+    assert len(done) == 4 * len(velocities) and set(done.values()) == {1}, done
+
+
+def test_bisection_converges_on_synthetic_model(tmp_path):
+    tolerance = 0.02
+    low, high = 1000.0, 8000.0
+    path = write_sweep(tmp_path, mode="qstar",
+                       qstar={"variable": "scene.impact.velocity", "bracket": [low, high], "tolerance": tolerance})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    (record,) = result["qstar"]
+    v_crit = sweep_stand_ins.critical_velocity(1.0e4, 830.0)
+    assert record["status"] == "converged"
+    assert record["low"] <= v_crit <= record["high"]
+    assert abs(record["bisection_estimate"] - v_crit) / v_crit < tolerance
+    # each round halves the bracket: rounds until (high - low) / mid <= tolerance, plus the bracket round
+    width, expected = high - low, 1
+    while width / v_crit > tolerance:
+        width /= 2.0
+        expected += 1
+    assert abs(record["rounds"] - expected) <= 1
+    assert math.isclose(record["Qstar_D"], sweep_stand_ins.QSTAR, rel_tol=0.02)
+    assert (tmp_path / "sweep" / "qstar.csv").is_file()
+
+
+def test_bisection_widens_a_bracket_that_does_not_bracket(tmp_path):
+    v_crit = sweep_stand_ins.critical_velocity(1.0e4, 830.0)
+    path = write_sweep(tmp_path, mode="qstar", qstar={"bracket": [v_crit * 1.2, v_crit * 1.5], "tolerance": 0.05})
+    with cf.ThreadPoolExecutor(2) as pool:
+        (record,) = run_sweep(load_sweep(path), executor=pool, show_progress=False)["qstar"]
+    assert record["status"] == "converged" and record["low"] <= v_crit <= record["high"]
+
+
+def test_sweep_with_bad_axis_is_rejected_before_work(tmp_path):
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": [1000.0, -5.0]})
+    with pytest.raises(SweepError, match="scene.impact.velocity: must be > 0"):
+        load_sweep(path)
+    path = write_sweep(tmp_path, axes={"scene.impact.speed": [1000.0]})
+    with pytest.raises(SweepError, match="not a config key"):
+        load_sweep(path)
+    assert not (tmp_path / "sweep").exists()
