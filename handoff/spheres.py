@@ -1,0 +1,402 @@
+"""Leaf blocks to N-body spheres: the hand-off rules of the hybrid method.
+
+Each leaf block of the final hydro snapshot becomes spheres of the N-body stage
+(docs/handoff.md states every rule with its default and the reference for it):
+
+3d: one sphere per block,
+
+    m = sum_cells sum_k alpha_k rho_k V_c,   x = sum_cells m_c x_c / m,   v = sum_cells m_c v_c / m,
+
+with the radius of the sphere inscribed in the cube of the block's smallest edge,
+a = min(dx, dy, dz) / 2.
+
+2d-cylindrical (r, z): the block is the annulus r_lo..r_hi x z_lo..z_hi, rotated about the
+axis z of the output frame.  With the cell masses m_c (full annuli) and the mass-weighted
+cell radii r_c = (2/3)(r_hi^3 - r_lo^3)/(r_hi^2 - r_lo^2) (the radial centroid of a
+uniform annular cell):
+
+    m = sum m_c,  rbar = sum m_c r_c / m,  zbar = sum m_c z_c / m,
+    P_r = sum m_c v_r,c,  P_z = sum m_c v_z,c,
+    a = min(dr, dz) / 2,
+    n = floor(pi / arcsin(a / rbar))  if rbar > a   (>= 2),   n = 2  if rbar <= a,
+
+the largest number of spheres of radius a whose centres on the ring of radius rbar do not
+overlap (chord 2 rbar sin(pi/n) >= 2a; equal to circumference / diameter, 2 pi rbar / 2a, up
+to one for rings much wider than a sphere), and 2 overlapping spheres on a ring narrower
+than a sphere radius.  Sphere j of the ring sits at
+(rbar cos phi_j, rbar sin phi_j, zbar), phi_j = phi_0 + 2 pi j / n with a random phase
+phi_0 ~ U[0, 2 pi / n) per ring, has mass m / n and velocity
+(P_r/m cos phi_j, P_r/m sin phi_j, P_z/m).  So the ring carries the block's mass, axial
+momentum P_z and radial momentum P_r exactly; its radial momenta cancel as vectors (n >= 2,
+which also keeps every sphere off the axis: rbar > 0 for any block with mass).
+
+Both geometries, then:
+
+- density floor: the radius is min(a, (3 m / (4 pi rho_min))^(1/3)), rho_min =
+  min_density_fraction x target_bulk_density, so no sphere is lighter than rho_min; masses
+  are never changed;
+- mass floor: blocks with 0 < m < min_mass_fraction x total_mass make no particle; their
+  mass, momentum, kinetic energy and count go to the budget;
+- velocity noise: each particle gets a velocity increment of fixed magnitude
+  velocity_noise x escape_speed in a direction uniform on the unit sphere (normalised
+  standard-normal 3-vectors);
+- random numbers: one ``numpy.random.default_rng(seed)``; the ring phases are drawn first
+  (block order), then the noise directions (particle order).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from scipy.spatial import cKDTree
+
+from impactpipe.handoff.budget import HandoffBudget
+from impactpipe.handoff.particles import ParticleSet
+from impactpipe.handoff.tracers import block_tracer_records, fill_from_nearest
+from impactpipe.hydro.snapshot import Snapshot, TracerSet
+
+log = logging.getLogger(__name__)
+
+SUPPORTED_GEOMETRIES = ("3d", "2d-cylindrical")
+
+# Slack on pi / arcsin(a / rbar) before the floor, so that a ring on which n spheres touch
+# exactly (rbar sin(pi/n) = a) gets n spheres despite round-off.
+_RING_COUNT_SLACK = 1e-12
+
+# Relative depth below which touching spheres (inscribed spheres of adjacent full blocks)
+# do not count as overlapping.
+_OVERLAP_TOLERANCE = 1e-9
+
+
+@dataclass
+class _BlockMoments:
+    """Per-block sums over cells (NB blocks, M materials), in mesh components.
+
+    material_mass: (NB, M) kg.  mass: (NB,) kg.
+    centre: (NB, 3) centre of mass (m): (x, y, z) in 3d, (rbar, zbar, 0) in 2d-cylindrical.
+    momentum: (NB, 3) kg m/s: (px, py, pz) in 3d, (P_r, P_z, 0) in 2d-cylindrical.
+    kinetic_energy: (NB,) sum_cells m_c |v_c|^2 / 2 (J).
+    min_edge: (NB,) smallest block edge on the axes in use (m).
+    """
+
+    material_mass: np.ndarray
+    mass: np.ndarray
+    centre: np.ndarray
+    momentum: np.ndarray
+    kinetic_energy: np.ndarray
+    min_edge: np.ndarray
+
+
+def block_moments(snapshot: Snapshot, chunk: int = 2048) -> _BlockMoments:
+    """Mass, centre of mass, momentum and kinetic energy of every leaf block.
+
+    Blocks are processed ``chunk`` at a time so that the cell-sized temporaries stay small.
+    """
+    parts = [_chunk_moments(_block_range(snapshot, start, start + chunk))
+             for start in range(0, snapshot.block_lo.shape[0], chunk)]
+    if not parts:
+        n_materials = snapshot.partial_density.shape[1]
+        return _BlockMoments(np.zeros((0, n_materials)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
+                             np.zeros(0), np.zeros(0))
+    return _BlockMoments(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_BlockMoments)))
+
+
+def _block_range(snapshot: Snapshot, start: int, stop: int) -> Snapshot:
+    """The blocks start:stop of a snapshot (views of its arrays, no copies)."""
+    block = slice(start, stop)
+    return replace(
+        snapshot,
+        block_lo=snapshot.block_lo[block], block_hi=snapshot.block_hi[block],
+        block_level=snapshot.block_level[block], block_id=snapshot.block_id[block],
+        partial_density=snapshot.partial_density[block], volume_fraction=snapshot.volume_fraction[block],
+        velocity=snapshot.velocity[block], specific_internal_energy=snapshot.specific_internal_energy[block],
+        pressure=snapshot.pressure[block], temperature=snapshot.temperature[block],
+        sound_speed=snapshot.sound_speed[block], extra={name: arr[block] for name, arr in snapshot.extra.items()},
+    )
+
+
+def _chunk_moments(snapshot: Snapshot) -> _BlockMoments:
+    """:func:`block_moments` for all blocks of ``snapshot`` at once."""
+    ndim = snapshot.ndim
+    volume = snapshot.block_cell_volumes()
+    material_cell_mass = snapshot.partial_density * volume[:, None]
+    material_mass = material_cell_mass.sum(axis=(2, 3, 4))
+    cell_mass = material_cell_mass.sum(axis=1)
+    mass = material_mass.sum(axis=1)
+
+    # Velocities of empty cells do not enter (void may carry any value).
+    velocity = np.where(cell_mass[:, None] > 0.0, snapshot.velocity[:, :ndim], 0.0)
+    if not np.all(np.isfinite(velocity)):
+        raise ValueError("snapshot velocity is not finite in cells that hold mass")
+
+    coords = snapshot.block_cell_centers()[:, :ndim]
+    if snapshot.geometry == "2d-cylindrical":
+        edges = snapshot.cell_edges(0)
+        r_lo, r_hi = edges[:, :-1], edges[:, 1:]
+        centroid = (2.0 / 3.0) * (r_hi**3 - r_lo**3) / (r_hi**2 - r_lo**2)
+        coords[:, 0] = centroid[:, :, None, None]
+
+    weighted = (cell_mass[:, None] * coords).sum(axis=(2, 3, 4))
+    centre = np.zeros((mass.shape[0], 3))
+    np.divide(weighted, mass[:, None], out=centre[:, :ndim], where=mass[:, None] > 0.0)
+    momentum = np.zeros((mass.shape[0], 3))
+    momentum[:, :ndim] = (cell_mass[:, None] * velocity).sum(axis=(2, 3, 4))
+    kinetic_energy = 0.5 * (cell_mass * (velocity**2).sum(axis=1)).sum(axis=(1, 2, 3))
+    extent = (snapshot.block_hi - snapshot.block_lo)[:, :ndim]
+    return _BlockMoments(material_mass, mass, centre, momentum, kinetic_energy, extent.min(axis=1))
+
+
+def ring_sphere_count(ring_radius: np.ndarray, sphere_radius: np.ndarray) -> np.ndarray:
+    """Number of spheres on a ring: n = floor(pi / arcsin(a / rbar)) if rbar > a, else 2.
+
+    For rbar > a, the largest n for which spheres of radius a centred on the ring of radius
+    rbar do not overlap (2 rbar sin(pi / n) >= 2 a); it is >= 2 since arcsin <= pi / 2.
+    Narrower rings get 2 (overlapping) spheres so that the ring's radial momenta cancel.
+
+    Args:
+        ring_radius: rbar (m), > 0.
+        sphere_radius: a (m), > 0.
+
+    Returns:
+        int64 array of n.
+    """
+    ratio = np.asarray(sphere_radius, dtype=float) / np.asarray(ring_radius, dtype=float)
+    count = np.full(ratio.shape, 2, dtype=np.int64)
+    wide = ratio < 1.0
+    count[wide] = np.floor(np.pi / np.arcsin(ratio[wide]) * (1.0 + _RING_COUNT_SLACK)).astype(np.int64)
+    return count
+
+
+def sphere_overlaps(position: np.ndarray, radius: np.ndarray, radius_bound: np.ndarray) -> tuple[int, float]:
+    """Pairs of spheres that overlap, |x_i - x_j| < (r_i + r_j)(1 - 1e-9), and the deepest overlap.
+
+    Spheres are grouped by ``radius_bound`` (an upper bound on each radius with few distinct
+    values, here the inscribed radius of the source block), and each pair of groups is
+    searched with k-d trees out to the sum of their bounds, so the work stays proportional
+    to the number of close pairs.
+
+    Args:
+        position: (N, 3) centres (m).
+        radius: (N,) radii (m).
+        radius_bound: (N,) radius_bound >= radius (m).
+
+    Returns:
+        (number of overlapping pairs, largest overlap 1 - |x_i - x_j| / (r_i + r_j), 0 if none).
+    """
+    bounds, group = np.unique(radius_bound, return_inverse=True)
+    members = [np.flatnonzero(group == g) for g in range(bounds.size)]
+    trees = [cKDTree(position[m]) for m in members]
+    count, deepest = 0, 0.0
+    for g in range(bounds.size):
+        for h in range(g, bounds.size):
+            reach = bounds[g] + bounds[h]
+            if g == h:
+                pairs = trees[g].query_pairs(reach, output_type="ndarray")
+                i, j = members[g][pairs[:, 0]], members[g][pairs[:, 1]]
+            else:
+                near = trees[g].sparse_distance_matrix(trees[h], reach, output_type="ndarray")
+                i, j = members[g][near["i"]], members[h][near["j"]]
+            depth = 1.0 - np.linalg.norm(position[i] - position[j], axis=1) / (radius[i] + radius[j])
+            overlapping = depth > _OVERLAP_TOLERANCE
+            count += int(np.count_nonzero(overlapping))
+            if overlapping.any():
+                deepest = max(deepest, float(depth[overlapping].max()))
+    return count, deepest
+
+
+def blocks_to_spheres(
+    snapshot: Snapshot,
+    tracers: TracerSet | None = None,
+    *,
+    target_bulk_density: float,
+    total_mass: float,
+    escape_speed: float,
+    projectile_material_index: int | None = None,
+    min_density_fraction: float = 0.75,
+    min_mass_fraction: float = 4e-7,
+    velocity_noise: float = 0.01,
+    seed: int = 1,
+    mass_left_mesh: float | None = None,
+) -> tuple[ParticleSet, HandoffBudget]:
+    """Translate the leaf blocks of a hydro snapshot into N-body spheres.
+
+    The rules are in the module docstring and docs/handoff.md.
+
+    Args:
+        snapshot: the hand-off snapshot, geometry "3d" or "2d-cylindrical".
+        tracers: the tracer set at the same time, or None.
+        target_bulk_density: the target's original bulk density rho_T (kg/m^3).
+        total_mass: M_tot, the mass the mass floor refers to (kg), normally target plus
+            projectile.
+        escape_speed: the escape speed the velocity noise refers to (m/s).
+        projectile_material_index: index of the projectile material in
+            ``snapshot.material_names``; None gives projectile_fraction NaN (unknown).
+        min_density_fraction: density floor rho_min = min_density_fraction x rho_T.
+        min_mass_fraction: blocks below min_mass_fraction x total_mass make no particle.
+        velocity_noise: noise speed as a fraction of ``escape_speed``.
+        seed: seed of ``numpy.random.default_rng`` (ring phases, then noise).
+        mass_left_mesh: mass that left the mesh before hand-off (kg), carried in the budget.
+
+    Returns:
+        The particles (ids 1..N in block order) and the hand-off budget.
+    """
+    _check_arguments(snapshot, target_bulk_density, total_mass, escape_speed, projectile_material_index,
+                     min_density_fraction, min_mass_fraction, velocity_noise, mass_left_mesh)
+    cylindrical = snapshot.geometry == "2d-cylindrical"
+    moments = block_moments(snapshot)
+    mass_floor = min_mass_fraction * total_mass
+    density_floor = min_density_fraction * target_bulk_density
+    noise_speed = velocity_noise * escape_speed
+    rng = np.random.default_rng(seed)
+
+    nonempty = moments.mass > 0.0
+    kept = np.flatnonzero(nonempty & (moments.mass >= mass_floor))
+    dropped = np.flatnonzero(nonempty & (moments.mass < mass_floor))
+    block_mass = moments.mass[kept]
+    block_velocity = moments.momentum[kept] / block_mass[:, None]
+    sphere_radius = 0.5 * moments.min_edge[kept]
+
+    if cylindrical:
+        ring_radius = moments.centre[kept, 0]
+        per_ring = ring_sphere_count(ring_radius, sphere_radius)
+        phase0 = rng.uniform(0.0, 2.0 * np.pi / per_ring)
+        source = np.repeat(np.arange(kept.size), per_ring)
+        first = np.cumsum(per_ring) - per_ring
+        index_in_ring = np.arange(source.size) - first[source]
+        phi = phase0[source] + 2.0 * np.pi * index_in_ring / per_ring[source]
+        cos_phi, sin_phi = np.cos(phi), np.sin(phi)
+        mass = block_mass[source] / per_ring[source]
+        position = np.column_stack([ring_radius[source] * cos_phi, ring_radius[source] * sin_phi,
+                                    moments.centre[kept, 1][source]])
+        v_r = block_velocity[source, 0]
+        velocity = np.column_stack([v_r * cos_phi, v_r * sin_phi, block_velocity[source, 1]])
+    else:
+        source = np.arange(kept.size)
+        mass = block_mass
+        position = moments.centre[kept].copy()
+        velocity = block_velocity
+    block = kept[source]
+    n_particles = block.size
+
+    radius_cap = np.cbrt(3.0 * mass / (4.0 * np.pi * density_floor)) if density_floor > 0.0 else np.inf
+    radius = np.minimum(sphere_radius[source], radius_cap)
+    shrunk = int(np.count_nonzero(radius < sphere_radius[source]))
+    overlapping_pairs, deepest_overlap = sphere_overlaps(position, radius, sphere_radius[source])
+
+    direction = rng.standard_normal((n_particles, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    velocity_with_noise = velocity + noise_speed * direction
+
+    records = block_tracer_records(tracers, snapshot.block_lo, snapshot.block_hi, snapshot.ndim,
+                                   moments.material_mass)
+    tracer_count = records.count[block]
+    peak_pressure_mean = fill_from_nearest(position, records.peak_pressure_mean[block], tracer_count > 0)
+    if projectile_material_index is None:
+        projectile_fraction = np.full(n_particles, np.nan)
+    else:
+        projectile_fraction = moments.material_mass[block, projectile_material_index] / moments.mass[block]
+
+    particles = ParticleSet(
+        id=np.arange(1, n_particles + 1, dtype=np.int64),
+        mass=mass,
+        radius=radius,
+        position=position,
+        velocity=velocity_with_noise,
+        tracer_count=tracer_count.astype(np.int64),
+        peak_pressure_mean=peak_pressure_mean,
+        peak_pressure_max=records.peak_pressure_max[block],
+        origin_position=records.origin_position[block],
+        projectile_fraction=projectile_fraction,
+        source_level=np.asarray(snapshot.block_level, dtype=np.int64)[block],
+        source_block=np.asarray(snapshot.block_id, dtype=np.int64)[block],
+    )
+
+    def frame_momentum(idx: np.ndarray) -> np.ndarray:
+        """Momentum of blocks ``idx`` in the output frame: (0, 0, P_z) for 2d-cylindrical."""
+        p = moments.momentum[idx].sum(axis=0)
+        return np.array([0.0, 0.0, p[1]]) if cylindrical else p
+
+    def radial_momentum(idx: np.ndarray) -> float | None:
+        """Scalar radial momentum sum m_c v_r,c of blocks ``idx`` (2d-cylindrical), else None."""
+        return float(moments.momentum[idx, 0].sum()) if cylindrical else None
+
+    if cylindrical:
+        unit_r = position[:, :2] / np.hypot(position[:, 0], position[:, 1])[:, None]
+        particle_radial = float((mass * (velocity[:, :2] * unit_r).sum(axis=1)).sum())
+    else:
+        particle_radial = None
+    n_tracers = 0 if tracers is None else len(tracers)
+    tracers_used = int(records.count[kept].sum())
+    all_blocks = np.arange(moments.mass.size)
+    budget = HandoffBudget(
+        geometry=snapshot.geometry,
+        n_blocks=int(moments.mass.size),
+        n_particles=int(n_particles),
+        total_mass=float(total_mass),
+        mesh_mass=float(moments.mass.sum()),
+        mesh_momentum=frame_momentum(all_blocks),
+        mesh_kinetic_energy=float(moments.kinetic_energy.sum()),
+        mesh_radial_momentum=radial_momentum(all_blocks),
+        particle_mass=float(mass.sum()),
+        particle_momentum=(mass[:, None] * velocity).sum(axis=0),
+        particle_momentum_with_noise=(mass[:, None] * velocity_with_noise).sum(axis=0),
+        particle_kinetic_energy=float(0.5 * (mass * (velocity**2).sum(axis=1)).sum()),
+        particle_kinetic_energy_with_noise=float(0.5 * (mass * (velocity_with_noise**2).sum(axis=1)).sum()),
+        particle_radial_momentum=particle_radial,
+        dropped_mass=float(moments.mass[dropped].sum()),
+        dropped_momentum=frame_momentum(dropped),
+        dropped_kinetic_energy=float(moments.kinetic_energy[dropped].sum()),
+        dropped_radial_momentum=radial_momentum(dropped),
+        dropped_count=int(dropped.size),
+        radius_shrunk_count=shrunk,
+        overlapping_pairs=overlapping_pairs,
+        deepest_overlap=deepest_overlap,
+        tracers_total=n_tracers,
+        tracers_used=tracers_used,
+        tracers_exited=records.exited,
+        tracers_outside=records.outside,
+        tracers_in_dropped=int(records.count.sum()) - tracers_used,
+        mass_left_mesh=None if mass_left_mesh is None else float(mass_left_mesh),
+        density_floor=float(density_floor),
+        mass_floor=float(mass_floor),
+        noise_speed=float(noise_speed),
+        seed=int(seed),
+    )
+    # A meshed body's mass differs from the analytic one by its surface discretisation
+    # (~1e-4 at 10 cells per radius); more than 1 % above M_tot means a wrong total_mass.
+    if budget.mesh_mass > total_mass * 1.01:
+        log.warning("mesh mass %.6e kg exceeds total_mass %.6e kg by more than 1 %%", budget.mesh_mass, total_mass)
+    if records.outside:
+        log.warning("%d tracers not flagged exited lie in no leaf block", records.outside)
+    log.info("hand-off: %d blocks -> %d particles; %d blocks dropped (%.3e kg); %d radii shrunk; "
+             "%d overlapping pairs (deepest %.2f); %d tracers used", budget.n_blocks, n_particles,
+             budget.dropped_count, budget.dropped_mass, shrunk, overlapping_pairs, deepest_overlap, tracers_used)
+    return particles, budget
+
+
+def _check_arguments(snapshot, target_bulk_density, total_mass, escape_speed, projectile_material_index,
+                     min_density_fraction, min_mass_fraction, velocity_noise, mass_left_mesh) -> None:
+    """Raise ValueError for a geometry, snapshot field or parameter the hand-off cannot use."""
+    if snapshot.geometry not in SUPPORTED_GEOMETRIES:
+        raise ValueError(f"hand-off needs geometry in {SUPPORTED_GEOMETRIES}, got {snapshot.geometry!r}")
+    positive = {"target_bulk_density": target_bulk_density, "total_mass": total_mass}
+    for name, value in positive.items():
+        if not (np.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be positive and finite (got {value})")
+    non_negative = {"escape_speed": escape_speed, "min_density_fraction": min_density_fraction,
+                    "min_mass_fraction": min_mass_fraction, "velocity_noise": velocity_noise}
+    if mass_left_mesh is not None:
+        non_negative["mass_left_mesh"] = mass_left_mesh
+    for name, value in non_negative.items():
+        if not (np.isfinite(value) and value >= 0.0):
+            raise ValueError(f"{name} must be >= 0 and finite (got {value})")
+    n_materials = snapshot.partial_density.shape[1]
+    if projectile_material_index is not None and not 0 <= projectile_material_index < n_materials:
+        raise ValueError(f"projectile_material_index must lie in [0, {n_materials - 1}] "
+                         f"(got {projectile_material_index})")
+    density = snapshot.partial_density
+    if not np.all(np.isfinite(density)) or np.any(density < 0.0):
+        raise ValueError("snapshot partial_density must be finite and >= 0")

@@ -1,0 +1,64 @@
+"""The hand-off stage of the pipeline: the last hydro snapshot becomes N-body particles in handoff.h5."""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import h5py
+
+from impactpipe.hydro.io import read_snapshot, read_tracers
+from impactpipe.pipeline import derived, runstore
+from impactpipe.pipeline.stages import StageContext
+
+from .spheres import blocks_to_spheres
+from .store import write_particles
+
+log = logging.getLogger(__name__)
+
+#: Name of the projectile's material slot in an impact scene's hydro run.
+PROJECTILE_SLOT = "projectile"
+
+
+def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
+    """Hand off the final hydro snapshot of ``ctx.run_dir``; returns the summary entries."""
+    started = runstore.utc_now()
+    t0 = time.perf_counter()
+    config = ctx.config
+    values = derived.derive(config)
+    hydro_path = ctx.path("hydro")
+    snapshot = read_snapshot(hydro_path, index=-1)
+    tracers = read_tracers(hydro_path)
+    with h5py.File(hydro_path, "r") as f:
+        mass_left = float(f["budget"].attrs["mass_left_mesh"])
+    projectile_index = _projectile_index(snapshot.material_names)
+    particles, budget = blocks_to_spheres(
+        snapshot,
+        tracers,
+        target_bulk_density=values["target_reference_density"],
+        total_mass=values["target_mass"] + values["projectile_mass"],
+        escape_speed=values["escape_speed"],
+        projectile_material_index=projectile_index,
+        min_density_fraction=config.handoff.min_density_fraction,
+        min_mass_fraction=config.handoff.min_mass_fraction,
+        velocity_noise=config.handoff.velocity_noise,
+        seed=config.handoff.seed,
+        mass_left_mesh=mass_left,
+    )
+    if len(particles) == 0:
+        raise RuntimeError(f"hand-off at t = {snapshot.time:.6g} s produced no particle "
+                           f"(mesh mass {budget.mesh_mass:.4g} kg, all blocks below the mass floor)")
+    attrs = ctx.provenance(started, time.perf_counter() - t0)
+    attrs["handoff_time"] = str(snapshot.time)
+    write_particles(ctx.path("handoff"), particles, budget, attrs)
+    log.info("handoff: %d particles from %d blocks at t = %.4g s; %.3g kg dropped", len(particles),
+             budget.n_blocks, snapshot.time, budget.dropped_mass)
+    return {"N_init": len(particles), "handoff_time": float(snapshot.time), "handoff_budget": budget.to_summary()}
+
+
+def _projectile_index(material_names: list[str]) -> int | None:
+    for index, name in enumerate(material_names):
+        if name == PROJECTILE_SLOT or name.startswith(PROJECTILE_SLOT + ":"):
+            return index
+    return None

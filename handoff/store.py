@@ -1,0 +1,77 @@
+"""handoff.h5: the particle table and the hand-off budget on disk.
+
+Layout (every dataset carries a ``units`` attribute):
+
+    /            attributes: the caller's ``attrs`` (provenance)
+    /particles/  one dataset per ParticleSet field, units from PARTICLE_UNITS
+    /budget/     one dataset per HandoffBudget number, units from BUDGET_UNITS;
+                 attribute ``geometry``; fields that are None are not written
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import fields
+from typing import Any
+
+import h5py
+import numpy as np
+
+from impactpipe.handoff.budget import BUDGET_UNITS, HandoffBudget
+from impactpipe.handoff.particles import PARTICLE_UNITS, ParticleSet
+from impactpipe.pipeline.runstore import atomic_path, write_dataset, write_provenance
+
+def write_particles(path: str | os.PathLike, particles: ParticleSet, budget: HandoffBudget,
+                    attrs: Mapping[str, Any]) -> None:
+    """Write the particles and the budget to ``path`` atomically (see the module docstring)."""
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h5:
+            write_provenance(h5, attrs)
+            group = h5.create_group("particles")
+            for f in fields(ParticleSet):
+                write_dataset(group, f.name, getattr(particles, f.name), PARTICLE_UNITS[f.name])
+            group = h5.create_group("budget")
+            group.attrs["geometry"] = budget.geometry
+            for f in fields(HandoffBudget):
+                value = getattr(budget, f.name)
+                if f.name != "geometry" and value is not None:
+                    write_dataset(group, f.name, value, BUDGET_UNITS[f.name])
+
+
+def read_particles(path: str | os.PathLike) -> ParticleSet:
+    """The ParticleSet stored in a handoff.h5 file (units checked against PARTICLE_UNITS)."""
+    with h5py.File(path, "r") as h5:
+        group = h5["particles"]
+        return ParticleSet(**{f.name: _read(group, f.name, PARTICLE_UNITS[f.name]) for f in fields(ParticleSet)})
+
+
+def read_budget(path: str | os.PathLike) -> HandoffBudget:
+    """The HandoffBudget stored in a handoff.h5 file (units checked against BUDGET_UNITS)."""
+    values: dict[str, Any] = {}
+    with h5py.File(path, "r") as h5:
+        group = h5["budget"]
+        values["geometry"] = str(group.attrs["geometry"])
+        for f in fields(HandoffBudget):
+            if f.name == "geometry":
+                continue
+            if f.name not in group:
+                values[f.name] = None
+                continue
+            value = _read(group, f.name, BUDGET_UNITS[f.name])
+            if np.ndim(value) > 0:
+                values[f.name] = value
+            elif np.issubdtype(np.asarray(value).dtype, np.integer):
+                values[f.name] = int(value)
+            else:
+                values[f.name] = float(value)
+    return HandoffBudget(**values)
+
+
+def _read(group: h5py.Group, name: str, units: str) -> np.ndarray:
+    """Dataset ``name`` of ``group`` as an array, after checking its ``units`` attribute."""
+    dset = group[name]
+    found = dset.attrs.get("units")
+    if found != units:
+        raise ValueError(f"{dset.name}: units {found!r}, expected {units!r}")
+    return dset[()]
