@@ -32,12 +32,13 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     tracers = read_tracers(hydro_path)
     with h5py.File(hydro_path, "r") as f:
         mass_left = float(f["budget"].attrs["mass_left_mesh"])
+        mesh_mass_initial = float(f["budget"].attrs["mass_initial"])
     projectile_index = _projectile_index(snapshot.material_names)
     particles, budget = blocks_to_spheres(
         snapshot,
         tracers,
         target_bulk_density=values["target_reference_density"],
-        total_mass=values["target_mass"] + values["projectile_mass"],
+        total_mass=mesh_mass_initial,
         escape_speed=values["escape_speed"],
         projectile_material_index=projectile_index,
         min_density_fraction=config.handoff.min_density_fraction,

@@ -152,3 +152,78 @@ def sweep_status_cmd(sweep_dir: str) -> None:
                + ", ".join(f"{n} {s}" for s, n in sorted(status["counts"].items())))
     for name, error in status["failed"].items():
         click.echo(f"failed {name}: {error}")
+
+
+def _load_run_config(run_dir: str):
+    from .stages import RESOLVED_CONFIG_FILE
+
+    path = Path(run_dir) / RESOLVED_CONFIG_FILE
+    if not path.is_file():
+        click.echo(f"{run_dir}: no {RESOLVED_CONFIG_FILE}; is this a run directory?", err=True)
+        sys.exit(2)
+    return _load_or_exit(str(path))[0]
+
+
+@main.command("analyze")
+@click.argument("run_dir", metavar="RUN_DIR", type=click.Path(file_okay=False, exists=True))
+@click.option("-v", "--verbose", count=True, help="More log output.")
+@click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only.")
+def analyze_cmd(run_dir: str, verbose: int, quiet: bool) -> None:
+    """Rerun the analysis of RUN_DIR: analysis.h5 and the figures in RUN_DIR/plots."""
+    _setup_logging(verbose, quiet)
+    config = _load_run_config(run_dir)
+    summary = run(config, run_dir, stages=["analysis"], from_stage="analysis", show_progress=not quiet)
+    click.echo(f"analysis written to {Path(run_dir) / 'analysis.h5'} and {Path(run_dir) / 'plots'}/")
+    for key in ("Q", "M_lr_over_M_T", "M_slr_over_M_T", "N_lr"):
+        if key in summary:
+            click.echo(f"{key} = {summary[key]:.4g}")
+
+
+@main.command("qstar")
+@click.argument("run_dirs", metavar="RUN_DIR...", nargs=-1, required=True,
+                type=click.Path(file_okay=False, exists=True))
+@click.option("--by", "by", type=click.Choice(["velocity", "projectile_radius"]), default="velocity",
+              show_default=True, help="The variable the runs differ in (gives the critical value).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=".", show_default=True,
+              help="Directory for qstar.csv and qstar.png.")
+def qstar_cmd(run_dirs: tuple[str, ...], by: str, out_dir: str) -> None:
+    """Fit Q*_D over finished runs: weighted line of M_lr/M_T against Q, crossing 0.5."""
+    import numpy as np
+
+    from impactpipe.analysis.plots import plot_qstar
+    from impactpipe.analysis.qstar import fit_qstar, write_qstar_table
+
+    from .stages import read_summary
+
+    q, mlr, n_lr, swept, labels = [], [], [], [], []
+    for run_dir in run_dirs:
+        summary = read_summary(run_dir)
+        missing = [k for k in ("Q", "M_lr_over_M_T", "N_lr") if k not in summary]
+        if missing:
+            click.echo(f"{run_dir}: summary.json lacks {', '.join(missing)} (has the analysis stage run?)", err=True)
+            sys.exit(2)
+        config = _load_run_config(run_dir)
+        q.append(summary["Q"])
+        mlr.append(summary["M_lr_over_M_T"])
+        n_lr.append(summary["N_lr"])
+        swept.append(config.scene.impact.velocity if by == "velocity" else config.scene.projectile.radius)
+        labels.append(Path(run_dir).name)
+    kwargs = {by: np.array(swept)}
+    try:
+        fit = fit_qstar(np.array(q), np.array(mlr), np.array(n_lr), **kwargs)
+    except ValueError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(1)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_qstar_table(out / "qstar.csv", np.array(q), np.array(mlr), np.array(n_lr), fit, labels=labels, **kwargs)
+    plot_qstar(out / "qstar.png", np.array(q), np.array(mlr), np.array(n_lr), fit)
+    click.echo(f"Q*_D = {fit.qstar:.4g} +- {fit.qstar_err:.2g} J/kg from {int(np.sum(fit.used))} of {len(q)} runs")
+    critical = fit.critical_velocity if by == "velocity" else fit.critical_radius
+    critical_err = fit.critical_velocity_err if by == "velocity" else fit.critical_radius_err
+    unit = "m/s" if by == "velocity" else "m"
+    click.echo(f"critical {by.replace('_', ' ')} = {critical:.4g} +- {critical_err:.2g} {unit}")
+    click.echo(f"slope of M_lr/M_T against Q/Q*_D = {fit.normalized_slope:.3f} +- {fit.normalized_slope_err:.2g}")
+    if not fit.brackets:
+        click.echo("warning: the runs do not bracket M_lr/M_T = 0.5; Q*_D is an extrapolation", err=True)
+    click.echo(f"wrote {out / 'qstar.csv'} and {out / 'qstar.png'}")

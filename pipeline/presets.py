@@ -19,7 +19,7 @@ TILLOTSON_OPTIONAL = ("rho_iv",)
 MIE_GRUNEISEN_KEYS = ("rho0", "c0", "s", "gamma0")
 IDEAL_GAS_KEYS = ("gamma",)
 
-#: Specific heat at constant volume (J/kg/K) used for temperatures when a material gives none.
+#: Specific heat at constant volume (J/kg/K) when neither the material nor its preset gives one.
 DEFAULT_CV = {"ideal_gas": 718.0, "tillotson": 840.0, "mie_gruneisen": 900.0}
 
 GEO_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi")
@@ -65,7 +65,9 @@ def resolve_eos(model: str, preset: str | None, overrides: dict[str, Any]) -> di
             raise KeyError(key)
     keep = set(required[model]) | set(TILLOTSON_OPTIONAL if model == "tillotson" else ()) | {"cv", "T_ref"}
     resolved = {k: float(v) for k, v in params.items() if k in keep}
-    resolved.setdefault("cv", DEFAULT_CV[model])
+    from impactpipe.hydro.eos import SPECIFIC_HEAT_DEFAULTS
+
+    resolved.setdefault("cv", SPECIFIC_HEAT_DEFAULTS.get(preset or "", DEFAULT_CV[model]))
     return {"model": model, **resolved}
 
 

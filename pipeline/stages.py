@@ -77,9 +77,14 @@ class StageContext:
 
 
 def resolved_dict(config: Config) -> dict[str, Any]:
-    """The config with every default filled and material presets resolved, as plain data."""
-    data = config.model_dump(mode="json")
-    data["materials_resolved"] = config.resolved_materials()
+    """The config with every default filled and every preset parameter written out, as plain data.
+
+    The result is itself a valid config that describes the same run (same stage hashes).
+    """
+    data = config.model_dump(mode="json", exclude_none=True)
+    for name, resolved in config.resolved_materials().items():
+        for part in ("eos", "strength"):
+            data["materials"][name][part].update(resolved[part])
     return data
 
 

@@ -1,0 +1,75 @@
+"""The N-body stage of the pipeline: reaccumulate the hand-off particles, write nbody.h5.
+
+The REBOUND Simulationarchive ``nbody.bin`` is the checkpoint: an interrupted stage
+resumes from its last snapshot when the particles and settings are unchanged.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import numpy as np
+
+from impactpipe.handoff.store import read_particles
+from impactpipe.pipeline import derived, runstore
+from impactpipe.pipeline.stages import StageContext
+
+from .reaccumulate import reaccumulate
+from .result import write_result
+
+log = logging.getLogger(__name__)
+
+ARCHIVE_FILE = "nbody.bin"
+
+
+def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
+    """Reaccumulate the particles of ``handoff.h5``; returns the summary entries."""
+    started = runstore.utc_now()
+    t0 = time.perf_counter()
+    config = ctx.config
+    values = derived.derive(config)
+    particles = read_particles(ctx.path("handoff"))
+    nbody = config.nbody
+    progress = ctx.progress("nbody", nbody.stop.max_time)
+    try:
+        result = reaccumulate(
+            particles,
+            bulk_density=values["target_reference_density"],
+            collision_model=nbody.collision_model,
+            restitution_normal=nbody.restitution.normal,
+            restitution_tangential=nbody.restitution.tangential,
+            opening_angle=nbody.opening_angle,
+            min_dynamical_times=nbody.stop.min_dynamical_times,
+            max_orbiting_fraction=nbody.stop.max_orbiting_fraction,
+            max_sim_time=nbody.stop.max_time,
+            max_wall_seconds=nbody.stop.max_wall_seconds,
+            archive_path=ctx.run_dir / ARCHIVE_FILE,
+            seed=nbody.seed,
+            progress=progress,
+        )
+    finally:
+        progress.close()
+    wall = time.perf_counter() - t0
+    write_result(ctx.path("nbody"), result, ctx.provenance(started, wall))
+    escaped_mass = float(result.escaped_mass.sum())
+    final_mass = float(result.mass.sum())
+    initial_mass = float(particles.mass.sum())
+    log.info("nbody: %s after %.4g s simulated (%.3g t_dyn); %d particles left, %d escaped",
+             result.status, result.time, result.time / result.dynamical_time, len(result),
+             len(result.escaped_id))
+    if result.status != "equilibrium":
+        log.warning("nbody: stopped by %s before dynamical equilibrium", result.status)
+    return {
+        "nbody_status": result.status,
+        "nbody_budget": {
+            "mass_initial": initial_mass,
+            "mass_final": final_mass,
+            "mass_escaped": escaped_mass,
+            "mass_error": (final_mass + escaped_mass - initial_mass) / initial_mass,
+            "momentum_escaped": np.asarray(result.escaped_momentum).sum(axis=0).tolist(),
+        },
+        "stage": {"simulated_time": result.time, "dynamical_times": result.time / result.dynamical_time,
+                  "particles_final": len(result), "particles_escaped": int(len(result.escaped_id))},
+    }
