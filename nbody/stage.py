@@ -16,7 +16,7 @@ from impactpipe.handoff.store import read_particles
 from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
-from .reaccumulate import reaccumulate
+from .driver import reaccumulate
 from .result import write_result
 
 log = logging.getLogger(__name__)

@@ -1,0 +1,159 @@
+"""Conserved quantities, the largest remnant and escape tests on particle arrays (SI units).
+
+Largest remnant and orbiting mass (the equilibrium criterion of ``reaccumulate``):
+
+* contact graph: particles i, j are linked if |x_i - x_j| <= (1 + CONTACT_TOLERANCE)(r_i + r_j);
+* largest remnant C: the connected component of the contact graph that holds the most
+  massive particle (with merging, the largest particle and whatever touches it), mass
+  M_lr, centre of mass X_C, velocity V_C;
+* orbiting (or still accreting) mass: particles outside C bound to it as a point mass,
+  e_j = |v_j - V_C|^2 / 2 - G M_lr / |x_j - X_C| < 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from .simulation import G, weighted_mean
+
+CONTACT_TOLERANCE = 0.05
+SPIN_INERTIA_FACTOR = 0.4  # I = 0.4 m r^2 (uniform sphere)
+
+
+@njit(cache=True)
+def potential_energy(position, mass, g):
+    """U = -sum_{i<j} g m_i m_j / |x_i - x_j| (J), direct sum, O(N^2)."""
+    n = mass.shape[0]
+    u = 0.0
+    for i in range(n):
+        xi = position[i, 0]
+        yi = position[i, 1]
+        zi = position[i, 2]
+        acc = 0.0
+        for j in range(i + 1, n):
+            dx = xi - position[j, 0]
+            dy = yi - position[j, 1]
+            dz = zi - position[j, 2]
+            acc += mass[j] / math.sqrt(dx * dx + dy * dy + dz * dz)
+        u -= g * mass[i] * acc
+    return u
+
+
+def conserved_quantities(position, velocity, mass, radius, spin) -> dict[str, np.ndarray | float]:
+    """Energies (J), momentum (kg m/s) and angular momentum about the origin (kg m^2/s).
+
+    Returns energy_kinetic = sum m v^2 / 2, energy_potential (direct sum),
+    energy_spin = sum |S|^2 / (2 * 0.4 m r^2), energy (their sum), momentum = sum m v,
+    angular_momentum = sum m x cross v + sum S, spin_angular_momentum = sum S.
+    """
+    ek = float(0.5 * np.sum(mass * np.sum(velocity * velocity, axis=1)))
+    ep = float(potential_energy(np.ascontiguousarray(position), np.ascontiguousarray(mass), G))
+    es = float(np.sum(np.sum(spin * spin, axis=1) / (2.0 * SPIN_INERTIA_FACTOR * mass * radius**2)))
+    s_tot = spin.sum(axis=0)
+    return {
+        "energy_kinetic": ek,
+        "energy_potential": ep,
+        "energy_spin": es,
+        "energy": ek + ep + es,
+        "momentum": (mass[:, None] * velocity).sum(axis=0),
+        "angular_momentum": (mass[:, None] * np.cross(position, velocity)).sum(axis=0) + s_tot,
+        "spin_angular_momentum": s_tot,
+    }
+
+
+def contact_groups(position: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Component label per particle of the contact graph (see module doc)."""
+    n = radius.shape[0]
+    if n == 1:
+        return np.zeros(1, dtype=np.int64)
+    tree = cKDTree(position)
+    pairs = tree.query_pairs(r=2.0 * (1.0 + CONTACT_TOLERANCE) * float(radius.max()), output_type="ndarray")
+    if pairs.size:
+        d = np.linalg.norm(position[pairs[:, 0]] - position[pairs[:, 1]], axis=1)
+        pairs = pairs[d <= (1.0 + CONTACT_TOLERANCE) * (radius[pairs[:, 0]] + radius[pairs[:, 1]])]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def remnant_and_orbiting(position, velocity, mass, radius) -> tuple[float, float, np.ndarray]:
+    """(M_lr, orbiting mass, boolean mask of C) for the largest remnant C (see module doc)."""
+    labels = contact_groups(position, radius)
+    in_c = labels == labels[int(np.argmax(mass))]
+    m_c = float(mass[in_c].sum())
+    x_c = (mass[in_c, None] * position[in_c]).sum(axis=0) / m_c
+    v_c = (mass[in_c, None] * velocity[in_c]).sum(axis=0) / m_c
+    out = ~in_c
+    dist = np.linalg.norm(position[out] - x_c, axis=1)
+    e = 0.5 * np.sum((velocity[out] - v_c) ** 2, axis=1) - G * m_c / dist
+    return m_c, float(mass[out][e < 0].sum()), in_c
+
+
+def bound_mask(position, velocity, mass, max_iterations: int = 100) -> np.ndarray:
+    """Particles of the self-bound set by iterative removal of unbound ones.
+
+    Starting from all particles, repeatedly drop every particle whose energy relative to
+    the centre of mass of the others still in the set, e = |v - V|^2 / 2 + phi, with phi
+    the exact potential of those others, is >= 0; stop when nothing is dropped.
+    """
+    keep = np.ones(mass.shape[0], dtype=bool)
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(keep)
+        m = mass[idx]
+        x = position[idx]
+        v = velocity[idx]
+        v_c = (m[:, None] * v).sum(axis=0) / m.sum()
+        phi = _potential_at_members(x, m, G)
+        e = 0.5 * np.sum((v - v_c) ** 2, axis=1) + phi
+        drop = e >= 0
+        if not drop.any():
+            return keep
+        keep[idx[drop]] = False
+        if not keep.any():
+            return keep
+    raise RuntimeError("bound_mask did not converge")
+
+
+@njit(cache=True)
+def _potential_at_members(position, mass, g):
+    """phi_i = -sum_{j != i} g m_j / |x_i - x_j| (J/kg)."""
+    n = mass.shape[0]
+    phi = np.zeros(n)
+    for i in range(n):
+        for j in range(i + 1, n):
+            dx = position[i, 0] - position[j, 0]
+            dy = position[i, 1] - position[j, 1]
+            dz = position[i, 2] - position[j, 2]
+            inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+            phi[i] -= g * mass[j] * inv
+            phi[j] -= g * mass[i] * inv
+    return phi
+
+
+def escaping(position, velocity, mass, r_check: float) -> np.ndarray:
+    """Particles beyond r_check (m) from the origin on escape orbits, moving away.
+
+    For particle i with the others' mass M_i and centre of mass X_i, V_i:
+    e_i = |v_i - V_i|^2 / 2 - G M_i / |x_i - X_i| > 0 and (x_i - X_i) . (v_i - V_i) > 0.
+    Point-mass two-body energy: valid for r_check well outside the bulk of the mass.
+    """
+    m_tot = float(math.fsum(mass))
+    mx = weighted_mean(mass, position) * m_tot
+    mv = weighted_mean(mass, velocity) * m_tot
+    far = np.flatnonzero(np.linalg.norm(position, axis=1) > r_check)
+    out = np.zeros(mass.shape[0], dtype=bool)
+    if far.size == 0 or mass.shape[0] == 1:
+        return out
+    m_rest = m_tot - mass[far]
+    x_rest = (mx - mass[far, None] * position[far]) / m_rest[:, None]
+    v_rest = (mv - mass[far, None] * velocity[far]) / m_rest[:, None]
+    dx = position[far] - x_rest
+    dv = velocity[far] - v_rest
+    e = 0.5 * np.sum(dv * dv, axis=1) - G * m_rest / np.linalg.norm(dx, axis=1)
+    out[far] = (e > 0) & (np.sum(dx * dv, axis=1) > 0)
+    return out

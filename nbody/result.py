@@ -1,0 +1,172 @@
+"""The N-body stage's result, ``nbody.h5``: final particles, provenance, escapes, diagnostics."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, fields
+
+import h5py
+import numpy as np
+
+from impactpipe.pipeline.runstore import atomic_path, write_dataset
+
+STATUSES = ("equilibrium", "time_cap", "wall_cap")
+# escaped_reason codes
+ESCAPE_ORBIT = 1   # beyond half the box half-width on an escape orbit, moving away
+LEFT_BOX = 2       # still bound but about to leave the box (beyond 0.9 of its half-width)
+LOST = 3           # removed by REBOUND's open boundary inside a chunk (state from the chunk start)
+ESCAPE_REASONS = {ESCAPE_ORBIT: "escape_orbit", LEFT_BOX: "left_box", LOST: "lost"}
+
+PARTICLE_FIELD_UNITS = {
+    "id": "dimensionless",
+    "mass": "kg",
+    "radius": "m",
+    "position": "m",
+    "velocity": "m/s",
+    "spin": "kg*m**2/s",
+    "members_offset": "dimensionless",
+    "members": "dimensionless",
+    "escaped_id": "dimensionless",
+    "escaped_mass": "kg",
+    "escaped_momentum": "kg*m/s",
+    "escaped_position": "m",
+    "escaped_velocity": "m/s",
+    "escaped_spin": "kg*m**2/s",
+    "escaped_time": "s",
+    "escaped_reason": "dimensionless",
+    "escaped_members_offset": "dimensionless",
+    "escaped_members": "dimensionless",
+    "merge_time": "s",
+    "merge_survivor": "dimensionless",
+    "merge_absorbed": "dimensionless",
+}
+
+DIAGNOSTIC_UNITS = {
+    "time": "s",
+    "n_particles": "dimensionless",
+    "energy_kinetic": "J",
+    "energy_potential": "J",
+    "energy_spin": "J",
+    "energy": "J",
+    "momentum": "kg*m/s",
+    "angular_momentum": "kg*m**2/s",
+    "spin_angular_momentum": "kg*m**2/s",
+    "escaped_mass": "kg",
+    "escaped_momentum": "kg*m/s",
+    "escaped_angular_momentum": "kg*m**2/s",
+    "n_merge": "dimensionless",
+    "n_bounce": "dimensionless",
+    "largest_mass": "kg",
+    "remnant_mass": "kg",
+    "orbiting_mass": "kg",
+    "time_step": "s",
+    "contact_energy_added": "J",
+}
+
+DIAGNOSTIC_DESCRIPTIONS = {
+    "energy": "kinetic + potential (direct sum) + spin energy of the particles in the simulation",
+    "momentum": "total momentum of the particles in the simulation",
+    "angular_momentum": "orbital (about the origin) + spin angular momentum of the particles in the simulation",
+    "escaped_mass": "cumulative mass removed (escaped, left the box or lost)",
+    "escaped_momentum": "cumulative momentum carried by removed particles; momentum + escaped_momentum is conserved",
+    "escaped_angular_momentum": "cumulative angular momentum (about the origin, incl. spin) of removed particles",
+    "n_merge": "cumulative mergers",
+    "n_bounce": "cumulative bounces",
+    "largest_mass": "mass of the most massive particle",
+    "remnant_mass": "mass of the contact group of the most massive particle (M_lr)",
+    "orbiting_mass": "mass outside the largest remnant bound to it",
+    "contact_energy_added": "cumulative energy added by pushing overlapping bouncing pairs to contact "
+                            "beyond what their normal kinetic energy paid for",
+}
+
+
+@dataclass
+class NBodyResult:
+    """Final state of a reaccumulation run (SI units; frame of the hand-off particles).
+
+    Attributes:
+        id: (N,) hand-off id of each final particle's surviving representative.
+        mass, radius: (N,) kg, m.  position, velocity: (N, 3) m, m/s.
+        spin: (N, 3) spin angular momentum (kg m^2/s), including the orbital angular
+            momentum of every pair merged into the particle about their centre of mass.
+        members_offset, members: CSR provenance: the hand-off ids contained in final
+            particle k are ``members[members_offset[k]:members_offset[k + 1]]``.
+        escaped_*: particles removed from the simulation (id, mass, momentum, position,
+            velocity, spin at removal, time, reason code in ``ESCAPE_REASONS``) and their
+            members (CSR).  Final and escaped members together partition the hand-off ids.
+        merge_time, merge_survivor, merge_absorbed: every merger (s, surviving id, absorbed id).
+        diagnostics: time series, keys and units in ``DIAGNOSTIC_UNITS``.
+        status: 'equilibrium', 'time_cap' or 'wall_cap'.
+        time: simulated time reached (s).
+        dynamical_time: 1 / sqrt(G rho_bulk) (s).  time_step: final leapfrog step (s).
+        collision_model: 'merge', 'conditional_merge' or 'bounce'.
+    """
+
+    id: np.ndarray
+    mass: np.ndarray
+    radius: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    spin: np.ndarray
+    members_offset: np.ndarray
+    members: np.ndarray
+    escaped_id: np.ndarray
+    escaped_mass: np.ndarray
+    escaped_momentum: np.ndarray
+    escaped_position: np.ndarray
+    escaped_velocity: np.ndarray
+    escaped_spin: np.ndarray
+    escaped_time: np.ndarray
+    escaped_reason: np.ndarray
+    escaped_members_offset: np.ndarray
+    escaped_members: np.ndarray
+    merge_time: np.ndarray
+    merge_survivor: np.ndarray
+    merge_absorbed: np.ndarray
+    diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+    status: str = "time_cap"
+    time: float = 0.0
+    dynamical_time: float = 0.0
+    time_step: float = 0.0
+    collision_model: str = "merge"
+
+    def __len__(self) -> int:
+        return int(self.id.shape[0])
+
+    def members_of(self, k: int) -> np.ndarray:
+        """Hand-off ids contained in final particle k."""
+        return self.members[self.members_offset[k]:self.members_offset[k + 1]]
+
+
+_SCALARS = ("status", "time", "dynamical_time", "time_step", "collision_model")
+
+
+def write_result(path: str | os.PathLike, result: NBodyResult, attrs: dict) -> None:
+    """Write ``result`` to HDF5 at ``path`` atomically; ``attrs`` become root attributes."""
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            for key, value in attrs.items():
+                f.attrs[key] = value
+            for name in _SCALARS:
+                f.attrs[name] = getattr(result, name)
+            for fl in fields(result):
+                if fl.name in PARTICLE_FIELD_UNITS:
+                    desc = "1 escape_orbit, 2 left_box, 3 lost" if fl.name == "escaped_reason" else None
+                    write_dataset(f, fl.name, getattr(result, fl.name), PARTICLE_FIELD_UNITS[fl.name], desc)
+            grp = f.create_group("diagnostics")
+            for name, values in result.diagnostics.items():
+                write_dataset(grp, name, values, DIAGNOSTIC_UNITS[name], DIAGNOSTIC_DESCRIPTIONS.get(name))
+
+
+def read_result(path: str | os.PathLike) -> NBodyResult:
+    """Read an ``NBodyResult`` written by :func:`write_result`."""
+    with h5py.File(path, "r") as f:
+        arrays = {name: f[name][()] for name in PARTICLE_FIELD_UNITS}
+        diagnostics = {name: f["diagnostics"][name][()] for name in f["diagnostics"]}
+        scalars = {name: f.attrs[name] for name in _SCALARS}
+    for name in ("status", "collision_model"):
+        value = scalars[name]
+        scalars[name] = value.decode() if isinstance(value, bytes) else str(value)
+    for name in ("time", "dynamical_time", "time_step"):
+        scalars[name] = float(scalars[name])
+    return NBodyResult(**arrays, diagnostics=diagnostics, **scalars)
