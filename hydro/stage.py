@@ -10,9 +10,11 @@ time-step collapse) writes its last good state to the checkpoint and raises.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import time
+from pathlib import Path
 from typing import Any
 
 import h5py
@@ -21,11 +23,15 @@ import numpy as np
 from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
-from .io import write_snapshot
+from .io import append_snapshot
 from .problems import PROBLEMS
 from .solver import HydroFailure, Simulation
 
 log = logging.getLogger(__name__)
+
+
+class HydroStageFailure(RuntimeError):
+    """The hydro run failed; the message says where and when and where the last good state is."""
 
 WORK_FILE = ".hydro.work.h5"
 CHECKPOINT_FILE = "hydro.checkpoint.h5"
@@ -45,21 +51,36 @@ def output_times(config, end_time: float) -> list[float]:
     return sorted(set(times) | {end_time})
 
 
+def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
+    """The scene as the keyword parameters of its problem module's ``setup``."""
+    scene = config.scene
+    if scene.problem == "impact":
+        return {
+            "target": {"material": scene.target.material, "radius": scene.target.radius},
+            "projectile": {"material": scene.projectile.material, "radius": scene.projectile.radius,
+                           "velocity": scene.impact.velocity},
+            "cells_per_projectile_radius": config.hydro.cells_per_projectile_radius,
+            "margin": scene.domain_margin,
+            "end_time": values["end_time"],
+        }
+    params = scene.model_dump(exclude={"problem", "geometry"})
+    if scene.problem == "interface_advection" and params["outer"] is None:
+        params["outer"] = {"material": "", "density": 0.0}
+    known = PROBLEMS[scene.problem].DEFAULTS
+    return {key: value for key, value in params.items() if key in known}
+
+
 def build_simulation(config, values: dict[str, Any]) -> Simulation:
     """The Simulation of the config's scene, at t = 0."""
-    scene = config.scene
     materials = config.resolved_materials()
-    if scene.problem == "impact":
+    if config.scene.problem == "impact":
         for mat in materials.values():
-            mat["eos"].setdefault("T_ref", scene.temperature)
-    params = scene.model_dump(exclude={"problem", "geometry"})
+            if mat["eos"]["model"] != "table":
+                mat["eos"]["T_ref"] = config.scene.temperature
     options: dict[str, Any] = {"cfl": config.hydro.cfl, "geometry": values["geometry"]}
     if config.hydro.block_cells is not None:
         options["block_cells"] = config.hydro.block_cells
-    if scene.problem == "impact":
-        options["cells_per_projectile_radius"] = config.hydro.cells_per_projectile_radius
-        options["end_time"] = values["end_time"]
-    return PROBLEMS[scene.problem].setup(params, materials, **options)
+    return PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
 
 
 def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
@@ -71,105 +92,106 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     end_time = float(values["end_time"])
     work = ctx.run_dir / WORK_FILE
     checkpoint = ctx.run_dir / CHECKPOINT_FILE
-    sim, written = _resume_or_start(config, values, work, checkpoint, ctx.stage_hash)
-    initial = sim.initial_totals
-    times = [t for t in output_times(config, end_time) if t > sim.time or (t == 0.0 and 0.0 not in written)]
+    sim, initial = _resume_or_start(config, values, work, checkpoint, ctx.stage_hash)
+    times = [t for t in output_times(config, end_time) if t > sim.time]
+    if sim.time == 0.0 and sim.step_count == 0:
+        _append(work, sim.snapshot())
     progress = ctx.progress("hydro", end_time)
     last_checkpoint = [time.perf_counter()]
-
-    def on_output(snapshot) -> None:
-        with h5py.File(work, "a") as f:
-            write_snapshot(f.require_group("snapshots"), snapshot)
-            f.flush()
 
     def on_progress(t: float) -> None:
         progress(t)
         if time.perf_counter() - last_checkpoint[0] >= config.hydro.checkpoint_wall_seconds:
-            _write_checkpoint(sim, checkpoint, ctx.stage_hash)
+            sim.save_checkpoint(checkpoint)
             last_checkpoint[0] = time.perf_counter()
 
     try:
-        sim.run(end_time, output_times=times, on_output=on_output, progress=on_progress)
-    except HydroFailure:
+        sim.run(end_time, output_times=times, on_output=lambda snap: _append(work, snap), progress=on_progress)
+    except HydroFailure as exc:
         sim.restore_last_good()
-        _write_checkpoint(sim, checkpoint, ctx.stage_hash)
-        log.error("hydro failed; last good state (t = %.6g s) written to %s", sim.time, checkpoint)
-        raise
+        sim.save_checkpoint(checkpoint)
+        log.error("hydro failure: %s; cell state: %s", exc, exc.state)
+        raise HydroStageFailure(f"{exc}; the last good state (t = {sim.time:.6g} s) is kept in {checkpoint}") from exc
     except BaseException:
-        _write_checkpoint(sim, checkpoint, ctx.stage_hash)
+        sim.save_checkpoint(checkpoint)
         raise
     finally:
         progress.close()
     wall = time.perf_counter() - t_wall
-    final = sim.totals()
-    budget = conservation_budget(initial, final)
+    budget = conservation_budget(initial, sim.totals(), sim.floor_amounts)
     with h5py.File(work, "a") as f:
         runstore.write_provenance(f, ctx.provenance(started, wall))
-        f.attrs["stage_hash"] = ctx.stage_hash
         group = f.require_group("budget")
         for key, value in budget.items():
             group.attrs[key] = value
         f.attrs["cell_updates"] = sim.cell_updates
         f.attrs["steps"] = sim.step_count
+        f.attrs["floor_counts"] = json.dumps(sim.floor_counts)
     os.replace(work, ctx.path("hydro"))
     checkpoint.unlink(missing_ok=True)
     log.info("hydro: %d steps, %.3g cell-updates, %.3g cell-updates/s", sim.step_count, sim.cell_updates,
              sim.cell_updates / max(wall, 1e-9))
     return {
-        "handoff_time": end_time if config.scene.problem == "impact" else None,
         "hydro_budget": budget,
-        "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts()},
+        "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts},
     }
 
 
-def conservation_budget(initial: dict[str, Any], final: dict[str, Any]) -> dict[str, float]:
-    """Mass, momentum and energy: at the start, on the mesh at the end, and what left it (SI).
+def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: dict[str, float]) -> dict[str, float]:
+    """Mass, momentum and energy: at the start, on the mesh at the end, what left it, what floors changed (SI).
 
-    ``*_error`` is (mesh + left) - initial relative to the initial value (energy: relative
-    to the initial total energy), the round-off the scheme must keep.
+    ``*_error`` is (mesh + left - initial) relative to the initial value: what the
+    scheme failed to conserve, floors included.
     """
     out: dict[str, float] = {}
     for key in ("mass", "energy"):
         out[f"{key}_initial"] = float(initial[key])
         out[f"{key}_on_mesh"] = float(final[key])
-        out[f"{key}_left_mesh"] = float(final[f"{key}_outflow"])
-        scale = abs(initial[key]) or 1.0
-        out[f"{key}_error"] = float((final[key] + final[f"{key}_outflow"] - initial[key]) / scale)
+        out[f"{key}_left_mesh"] = float(final[f"outflow_{key}"])
+        scale = abs(float(initial[key])) or 1.0
+        out[f"{key}_error"] = float((final[key] + final[f"outflow_{key}"] - initial[key]) / scale)
     for axis, name in enumerate("xyz"):
         out[f"momentum_{name}_initial"] = float(initial["momentum"][axis])
         out[f"momentum_{name}_on_mesh"] = float(final["momentum"][axis])
-        out[f"momentum_{name}_left_mesh"] = float(final["momentum_outflow"][axis])
+        out[f"momentum_{name}_left_mesh"] = float(final["outflow_momentum"][axis])
+    out.update({f"floor_{key}": float(value) for key, value in floors.items()})
     return out
 
 
-def _write_checkpoint(sim: Simulation, path, stage_hash: str) -> None:
-    sim.save_checkpoint(path, attrs={"stage_hash": stage_hash})
+def _append(work: Path, snapshot) -> None:
+    with h5py.File(work, "a") as f:
+        append_snapshot(f, snapshot)
 
 
-def _resume_or_start(config, values, work, checkpoint, stage_hash: str) -> tuple[Simulation, set[float]]:
-    """Resume from a checkpoint of the same config, or start at t = 0 with a fresh working file."""
+INITIAL_KEYS = ("mass", "energy", "momentum")
+
+
+def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: str):
+    """(simulation, initial totals): resumed from a checkpoint of the same config, or new at t = 0."""
     if checkpoint.is_file() and work.is_file():
-        with h5py.File(checkpoint, "r") as f:
+        with h5py.File(work, "r") as f:
             same = f.attrs.get("stage_hash") == stage_hash
+            initial = {key: f.attrs[f"initial_{key}"] for key in INITIAL_KEYS} if same else None
         if same:
             sim = Simulation.from_checkpoint(checkpoint)
-            written = _trim_snapshots(work, sim.time)
+            _trim_snapshots(work, sim.time)
             log.info("hydro: resuming from checkpoint at t = %.6g s (step %d)", sim.time, sim.step_count)
-            return sim, written
+            return sim, initial
     checkpoint.unlink(missing_ok=True)
     work.unlink(missing_ok=True)
-    return build_simulation(config, values), set()
+    sim = build_simulation(config, values)
+    initial = sim.totals()
+    with h5py.File(work, "w") as f:
+        f.attrs["stage_hash"] = stage_hash
+        for key in INITIAL_KEYS:
+            f.attrs[f"initial_{key}"] = initial[key]
+    return sim, initial
 
 
-def _trim_snapshots(work, t_resume: float) -> set[float]:
-    """Drop working-file snapshots later than the checkpoint; return the times kept."""
-    kept = set()
+def _trim_snapshots(work: Path, t_resume: float) -> None:
+    """Drop working-file snapshots later than the checkpoint (they are recomputed)."""
     with h5py.File(work, "a") as f:
         group = f.require_group("snapshots")
         for name in list(group):
-            t = float(group[name].attrs["time"])
-            if t > t_resume:
+            if float(group[name].attrs["time"]) > t_resume:
                 del group[name]
-            else:
-                kept.add(t)
-    return kept

@@ -19,6 +19,8 @@ from typing import Annotated, Any, Literal, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from impactpipe.hydro.problems import advection, impact, interface_advection, noh, planar_impact, sedov, shock_tube
+
 from . import presets
 
 STAGES = ("hydro", "handoff", "nbody", "analysis")
@@ -171,7 +173,17 @@ class Slab(Strict):
     velocity: float = Field(0.0, description="m/s")
 
 
+class Region(Strict):
+    material: str
+    density: float = Field(gt=0, description="kg/m^3")
+
+
 Geometry = Literal["auto", "1d-planar", "2d-planar", "2d-cylindrical", "3d"]
+
+
+def _default(problem: Any, key: str) -> Any:
+    """A verification problem's default for ``key``, from its module's DEFAULTS (one source)."""
+    return problem.DEFAULTS[key]
 
 
 class ImpactScene(Strict):
@@ -181,15 +193,17 @@ class ImpactScene(Strict):
     projectile: Body
     impact: Impact
     temperature: float = Field(293.0, gt=0, description="initial temperature of both bodies (K)")
+    domain_margin: float = Field(_default(impact, "margin"), ge=0,
+                                 description="mesh extends this many target radii beyond the target")
     full_domain: bool = Field(False, description="3d only: compute both halves instead of using the y = 0 symmetry plane")
 
 
 class ShockTubeScene(Strict):
     problem: Literal["shock_tube"]
     geometry: Geometry = "auto"
-    length: float = Field(1.0, gt=0, description="m")
-    cells: int = Field(400, ge=8)
-    interface: float = Field(0.5, description="position of the diaphragm (m)")
+    length: float = Field(_default(shock_tube, "length"), gt=0, description="m")
+    cells: int = Field(_default(shock_tube, "cells"), ge=8)
+    interface: float = Field(_default(shock_tube, "interface"), description="diaphragm position (m)")
     left: FluidState
     right: FluidState
     end_time: float = Field(gt=0, description="s")
@@ -204,11 +218,13 @@ class ShockTubeScene(Strict):
 class SedovScene(Strict):
     problem: Literal["sedov"]
     geometry: Geometry = "auto"
-    energy: float = Field(gt=0, description="blast energy (J)")
+    energy: float = Field(gt=0, description="blast energy of the whole sphere (J)")
     ambient: AmbientState
-    length: float = Field(1.0, gt=0, description="domain extent from the origin (m)")
-    cells: int = Field(64, ge=8, description="cells along each axis")
-    end_time: float = Field(gt=0, description="s")
+    extent: float = Field(_default(sedov, "extent"), gt=0, description="domain extent from the origin (m)")
+    cells: int = Field(_default(sedov, "cells"), ge=8, description="cells along each axis")
+    deposit_cells: float = Field(_default(sedov, "deposit_cells"), gt=0,
+                                 description="radius of the energy deposit in cells")
+    end_time: float = Field(_default(sedov, "end_time"), gt=0, description="s")
 
 
 class PlanarImpactScene(Strict):
@@ -216,27 +232,55 @@ class PlanarImpactScene(Strict):
     geometry: Geometry = "auto"
     flyer: Slab
     target: Slab
-    cells: int = Field(400, ge=8)
-    end_time: float = Field(gt=0, description="s")
+    margin: float = Field(_default(planar_impact, "margin"), ge=0,
+                          description="void on each side, as a fraction of the plates' total thickness")
+    cells: int = Field(_default(planar_impact, "cells"), ge=8)
+    end_time: float = Field(_default(planar_impact, "end_time"), gt=0, description="s")
 
 
 class AdvectionScene(Strict):
     problem: Literal["advection"]
     geometry: Geometry = "auto"
-    cells: int = Field(128, ge=8)
-    velocity: float = Field(1.0, description="m/s")
-    end_time: float = Field(1.0, gt=0, description="s")
+    material: str
+    length: float = Field(_default(advection, "length"), gt=0, description="m")
+    cells: int = Field(_default(advection, "cells"), ge=8)
+    density: float = Field(_default(advection, "density"), gt=0, description="mean density (kg/m^3)")
+    amplitude: float = Field(_default(advection, "amplitude"), ge=0, lt=1,
+                             description="relative amplitude of the density wave")
+    velocity: float = Field(_default(advection, "velocity"), description="m/s")
+    pressure: float = Field(_default(advection, "pressure"), gt=0, description="Pa")
+    end_time: float = Field(_default(advection, "end_time"), gt=0, description="s")
 
 
 class NohScene(Strict):
     problem: Literal["noh"]
     geometry: Geometry = "auto"
-    cells: int = Field(200, ge=8)
-    end_time: float = Field(0.6, gt=0, description="s")
+    material: str
+    density: float = Field(_default(noh, "density"), gt=0, description="kg/m^3")
+    velocity: float = Field(_default(noh, "velocity"), gt=0, description="inflow speed (m/s)")
+    pressure: float = Field(_default(noh, "pressure"), ge=0, description="Pa")
+    cells: int = Field(_default(noh, "cells"), ge=8)
+    extent: float = Field(_default(noh, "extent"), gt=0, description="m")
+    end_time: float = Field(_default(noh, "end_time"), gt=0, description="s")
+
+
+class InterfaceAdvectionScene(Strict):
+    problem: Literal["interface_advection"]
+    geometry: Geometry = "auto"
+    length: float = Field(_default(interface_advection, "length"), gt=0, description="m")
+    cells: int = Field(_default(interface_advection, "cells"), ge=8)
+    slab_lo: float = Field(_default(interface_advection, "slab_lo"), description="m")
+    slab_hi: float = Field(_default(interface_advection, "slab_hi"), description="m")
+    inner: Region
+    outer: Region | None = Field(None, description="material around the slab; none leaves void")
+    velocity: float = Field(_default(interface_advection, "velocity"), description="m/s")
+    pressure: float = Field(_default(interface_advection, "pressure"), ge=0, description="Pa")
+    end_time: float = Field(_default(interface_advection, "end_time"), gt=0, description="s")
 
 
 Scene = Annotated[
-    Union[ImpactScene, ShockTubeScene, SedovScene, PlanarImpactScene, AdvectionScene, NohScene],
+    Union[ImpactScene, ShockTubeScene, SedovScene, PlanarImpactScene, AdvectionScene, NohScene,
+          InterfaceAdvectionScene],
     Field(discriminator="problem"),
 ]
 

@@ -6,6 +6,7 @@ them, so every automatic choice is visible and can be overridden in the config.
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any
 
@@ -16,10 +17,10 @@ from .config import Config
 G = 6.674e-11
 #: Hand-off time in target sound-crossing times (R_T / c), method.md section 3.
 CROSSING_TIMES_TO_HANDOFF = 4.0
-#: Self-gravity turns on when the target's central pressure exceeds this multiple of its strength.
+#: Self-gravity (auto) needs the target's central pressure above this multiple of its tensile strength...
 SELF_GRAVITY_STRENGTH_FACTOR = 10.0
-GEOMETRY_FOR_PROBLEM = {"shock_tube": "1d-planar", "planar_impact": "1d-planar", "advection": "1d-planar",
-                        "noh": "2d-cylindrical", "sedov": "2d-cylindrical"}
+#: ...and gravity to add more than this fraction of the escape speed during the hydro stage.
+SELF_GRAVITY_VELOCITY_FRACTION = 0.05
 
 
 def reference_state(material: dict[str, Any]) -> tuple[float, float]:
@@ -41,7 +42,10 @@ def geometry(config: Config) -> tuple[str, str]:
         if scene.impact.angle == 90.0:
             return "2d-cylindrical", "head-on impact (angle 90) is axisymmetric"
         return "3d", f"oblique impact (angle {scene.impact.angle:g}) needs 3d"
-    return GEOMETRY_FOR_PROBLEM[scene.problem], f"default for the {scene.problem} problem"
+    from impactpipe.hydro.problems import PROBLEMS
+
+    default = inspect.signature(PROBLEMS[scene.problem].setup).parameters["geometry"].default
+    return default, f"default of the {scene.problem} problem"
 
 
 def central_pressure(rho: float, radius: float) -> float:
@@ -85,7 +89,8 @@ def derive(config: Config) -> dict[str, Any]:
         out["end_time"] = config.hydro.end_time
         out["end_time_rule"] = "set in the config"
     out["self_gravity"], out["self_gravity_rule"] = self_gravity_choice(
-        config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"])
+        config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
+        c_t, out["end_time"])
     return out
 
 
@@ -103,21 +108,30 @@ def strength_choice(strength: dict[str, Any]) -> dict[str, Any]:
     return {"enabled": True, "rule": f"{model} model with non-zero yield strength"}
 
 
-def self_gravity_choice(setting: bool | str, rho: float, radius: float, strength: dict[str, Any]) -> tuple[bool, str]:
+def self_gravity_choice(setting: bool | str, rho: float, radius: float, strength: dict[str, Any],
+                        sound_speed: float, end_time: float) -> tuple[bool, str]:
     """(on, rule) for self-gravity in the hydro stage.
 
-    Auto: on when the target's central pressure P_c = (2 pi / 3) G rho^2 R^2 exceeds
-    SELF_GRAVITY_STRENGTH_FACTOR times its strength max(Y0, Y_T) (method.md section 2:
-    for 2-50 km bodies it is negligible in the shock phase).
+    Auto turns it on only when both hold (method.md section 2: for 2-50 km bodies it is
+    negligible in the shock phase):
+    (a) the central pressure P_c = (2 pi / 3) G rho^2 R^2 exceeds SELF_GRAVITY_STRENGTH_FACTOR
+        times the tensile strength Y_T (0 without a strength model), so gravity, not
+        strength, holds the fractured body together;
+    (b) the velocity surface gravity adds over the hydro stage, g t_end with
+        g = (4 pi / 3) G rho R, exceeds SELF_GRAVITY_VELOCITY_FRACTION of the escape speed.
     """
     p_c = central_pressure(rho, radius)
-    y = max(strength.get("Y0", 0.0), strength.get("Y_T", 0.0), strength.get("yield_strength", 0.0))
+    y_t = float(strength.get("Y_T", 0.0))
+    g = 4.0 * math.pi / 3.0 * G * rho * radius
+    v_esc = math.sqrt(2.0 * g * radius)
+    dv = g * end_time
+    numbers = (f"central pressure {p_c:.3g} Pa vs {SELF_GRAVITY_STRENGTH_FACTOR:g} Y_T = "
+               f"{SELF_GRAVITY_STRENGTH_FACTOR * y_t:.3g} Pa; gravity adds g t_end = {dv:.3g} m/s vs "
+               f"{SELF_GRAVITY_VELOCITY_FRACTION:g} v_esc = {SELF_GRAVITY_VELOCITY_FRACTION * v_esc:.3g} m/s")
     if setting != "auto":
-        return bool(setting), f"set in the config (central pressure {p_c:.3g} Pa, strength {y:.3g} Pa)"
-    on = p_c > SELF_GRAVITY_STRENGTH_FACTOR * y
-    rule = (f"auto: central pressure {p_c:.3g} Pa {'>' if on else '<='} {SELF_GRAVITY_STRENGTH_FACTOR:g} x "
-            f"strength max(Y0, Y_T) = {SELF_GRAVITY_STRENGTH_FACTOR * y:.3g} Pa")
-    return on, rule
+        return bool(setting), f"set in the config ({numbers})"
+    on = p_c > SELF_GRAVITY_STRENGTH_FACTOR * y_t and dv > SELF_GRAVITY_VELOCITY_FRACTION * v_esc
+    return on, f"auto: {'on' if on else 'off'} ({numbers})"
 
 
 def as_plain(values: dict[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,127 @@
+"""Hydro throughput: cell-updates per second (one cell advanced one full step) and memory.
+
+Cases:
+  2d-ideal-gas       2d-planar periodic box, one ideal gas, smooth flow (512^2; --quick 256^2)
+  2d-cyl-tillotson   2d-cylindrical two-material Tillotson scene with void: the `impact`
+                     problem's bodies (basalt projectile touching a basalt target), at rest
+                     because moving 2d impacts are not yet stable (docs/hydro.md); the
+                     kernels do the same work per cell (~544 x 784 cells; --quick ~144 x 208)
+  3d-two-material    3d periodic box, two ideal gases (a dense sphere), 128^3 (--quick 48^3)
+
+Each case runs with 1 and 2 numba threads after a warm-up step (kernels come from the
+numba cache).  Memory: peak bytes of traced allocations (tracemalloc, numpy arrays of the
+state, its last-good copy, scratch and snapshots) per interior cell.
+
+    python benchmarks/hydro_throughput.py --json [--quick] [--steps N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+import tracemalloc
+
+import numba
+import numpy as np
+
+from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
+from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.problems.common import preset_material
+
+GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
+HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
+
+
+def _smooth_box(geometry, cells, block_cells, nmat):
+    ndim = len(cells)
+    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [1.0] * ndim, cells, [("periodic", "periodic")] * ndim,
+                             block_cells)
+    specs = [GAS, HEAVY][:nmat]
+    eos = pack_eos(specs)
+    c = mesh.cell_centers()
+    x, y = c[:, 0], c[:, 1]
+    state = HydroState.empty(mesh, nmat)
+    rho = 1.0 + 0.3 * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y)
+    vel = np.stack([0.3 + 0.2 * np.sin(2 * np.pi * y), -0.1 + 0.2 * np.cos(2 * np.pi * x), np.zeros_like(x)], axis=1)
+    state.set_material(mesh, 1.0, 0, eos, rho, vel, pressure=1.0)
+    if nmat == 2:
+        sphere = ((c - 0.5) ** 2).sum(axis=1) < 0.06
+        state.set_material(mesh, sphere.astype(float), 1, eos, 20.0 * rho, vel, pressure=1.0)
+    return Simulation(mesh, ["gas", "heavy"][:nmat], specs, state)
+
+
+def build(case: str, quick: bool) -> Simulation:
+    """The Simulation of a benchmark case."""
+    if case == "2d-ideal-gas":
+        n = 256 if quick else 512
+        return _smooth_box("2d-planar", [n, n], 16, 1)
+    if case == "2d-cyl-tillotson":
+        materials = {"basalt": preset_material("basalt")}
+        params = {"target": {"material": "basalt", "radius": 1000.0},
+                  "projectile": {"material": "basalt", "radius": 250.0, "velocity": 0.0},
+                  "cells_per_projectile_radius": 25 if quick else 100}
+        return PROBLEMS["impact"].setup(params, materials)
+    if case == "3d-two-material":
+        n = 48 if quick else 128
+        return _smooth_box("3d", [n, n, n], 8, 2)
+    raise ValueError(f"unknown case {case!r}")
+
+
+def measure(case: str, quick: bool, steps: int, threads: int) -> dict:
+    """Cell-updates per second of ``steps`` steps with ``threads`` numba threads."""
+    numba.set_num_threads(threads)
+    tracemalloc.start()
+    sim = build(case, quick)
+    sim.step()
+    start_updates = sim.cell_updates
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        sim.step()
+    wall = time.perf_counter() - t0
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return {
+        "case": case,
+        "threads": threads,
+        "cells": sim.mesh.ncells,
+        "blocks": sim.mesh.nblocks,
+        "steps": steps,
+        "wall_s": wall,
+        "cell_updates_per_s": (sim.cell_updates - start_updates) / wall,
+        "peak_bytes_per_cell": peak / sim.mesh.ncells,
+        "floors": sim.floor_counts,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--json", action="store_true", help="print one JSON document")
+    parser.add_argument("--quick", action="store_true", help="smaller meshes")
+    parser.add_argument("--steps", type=int, default=10, help="timed steps per case (default 10)")
+    parser.add_argument("--cases", nargs="*", default=["2d-ideal-gas", "2d-cyl-tillotson", "3d-two-material"])
+    args = parser.parse_args()
+    results = []
+    for case in args.cases:
+        for threads in (1, 2):
+            if threads > numba.config.NUMBA_NUM_THREADS:
+                continue
+            results.append(measure(case, args.quick, args.steps, threads))
+    for case in args.cases:
+        rates = {r["threads"]: r["cell_updates_per_s"] for r in results if r["case"] == case}
+        if 1 in rates and 2 in rates:
+            for r in results:
+                if r["case"] == case and r["threads"] == 2:
+                    r["speedup_2_threads"] = rates[2] / rates[1]
+    report = {"load_average": os.getloadavg(), "cpu_count": os.cpu_count(), "results": results}
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        for r in results:
+            print(f"{r['case']:18s} threads={r['threads']} cells={r['cells']:9d} "
+                  f"{r['cell_updates_per_s']:.3e} cell-updates/s  {r['peak_bytes_per_cell']:.0f} B/cell")
+
+
+if __name__ == "__main__":
+    main()

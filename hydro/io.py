@@ -1,0 +1,90 @@
+"""Snapshot I/O: ``hydro.h5`` holds snapshots under ``/snapshots/<index:04d>``.
+
+Each snapshot group carries the attributes ``time`` (s), ``geometry`` and
+``material_names`` (JSON list) and one dataset per :class:`~impactpipe.hydro.snapshot.Snapshot`
+array, each with a ``units`` attribute (:func:`impactpipe.pipeline.runstore.write_dataset`).
+Extra fields go to ``extra/<name>``; the snapshot contract gives them no units, so they
+are stored with ``units = "unspecified"``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.pipeline.runstore import write_dataset
+
+SNAPSHOT_GROUP = "snapshots"
+
+#: Snapshot array fields with their units and descriptions.
+FIELD_UNITS = {
+    "block_lo": ("m", "lower corner of each block"),
+    "block_hi": ("m", "upper corner of each block"),
+    "block_level": ("dimensionless", "refinement level of each block"),
+    "block_id": ("dimensionless", "stable block id"),
+    "partial_density": ("kg/m**3", "alpha_k rho_k per material"),
+    "volume_fraction": ("dimensionless", "alpha_k per material"),
+    "velocity": ("m/s", "cell velocity, 3 components"),
+    "specific_internal_energy": ("J/kg", "mass-weighted mean over materials"),
+    "pressure": ("Pa", "volume-fraction-weighted mean pressure"),
+    "temperature": ("K", "mass-weighted mean temperature"),
+    "sound_speed": ("m/s", "cell signal speed used for the time step"),
+}
+
+
+def snapshot_name(index: int) -> str:
+    """Group path of snapshot ``index``."""
+    return f"{SNAPSHOT_GROUP}/{index:04d}"
+
+
+def write_snapshot(group: h5py.Group, snapshot: Snapshot) -> None:
+    """Write ``snapshot`` into an (empty) h5py group."""
+    group.attrs["time"] = float(snapshot.time)
+    group.attrs["geometry"] = snapshot.geometry
+    group.attrs["material_names"] = json.dumps(list(snapshot.material_names))
+    for name, (units, description) in FIELD_UNITS.items():
+        write_dataset(group, name, getattr(snapshot, name), units, description)
+    if snapshot.extra:
+        extra = group.create_group("extra")
+        for name, arr in snapshot.extra.items():
+            write_dataset(extra, name, arr, "unspecified")
+
+
+def append_snapshot(h5file: h5py.File, snapshot: Snapshot) -> int:
+    """Write ``snapshot`` as the next ``/snapshots/<index>`` of an open file; returns the index."""
+    root = h5file.require_group(SNAPSHOT_GROUP)
+    index = len(root)
+    write_snapshot(h5file.create_group(snapshot_name(index)), snapshot)
+    return index
+
+
+def snapshot_count(path: str | Path) -> int:
+    """Number of snapshots in ``path``."""
+    with h5py.File(path, "r") as fh:
+        return len(fh[SNAPSHOT_GROUP]) if SNAPSHOT_GROUP in fh else 0
+
+
+def read_snapshot(path: str | Path, index: int = -1) -> Snapshot:
+    """Read snapshot ``index`` (negative counts from the last) from a ``hydro.h5`` file."""
+    with h5py.File(path, "r") as fh:
+        if SNAPSHOT_GROUP not in fh or len(fh[SNAPSHOT_GROUP]) == 0:
+            raise KeyError(f"{path}: no snapshots")
+        names = sorted(fh[SNAPSHOT_GROUP].keys())
+        try:
+            grp = fh[SNAPSHOT_GROUP][names[index]]
+        except IndexError:
+            raise IndexError(f"{path}: snapshot index {index} out of range ({len(names)} snapshots)") from None
+        fields = {name: np.asarray(grp[name][()]) for name in FIELD_UNITS}
+        extra = {name: np.asarray(ds[()]) for name, ds in grp["extra"].items()} if "extra" in grp else {}
+        geometry = grp.attrs["geometry"]
+        return Snapshot(
+            time=float(grp.attrs["time"]),
+            geometry=geometry.decode() if isinstance(geometry, bytes) else str(geometry),
+            material_names=json.loads(grp.attrs["material_names"]),
+            extra=extra,
+            **fields,
+        )

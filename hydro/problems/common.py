@@ -1,0 +1,57 @@
+"""Helpers shared by the problem setups: material lists, parameter merging, presets."""
+
+from __future__ import annotations
+
+from importlib import resources
+
+import yaml
+
+from impactpipe.hydro.eos import SPECIFIC_HEAT_DEFAULTS, pack_eos
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.solver import Simulation
+from impactpipe.hydro.state import HydroState
+
+
+def material_list(materials: dict[str, dict], used: list[str]):
+    """Names, resolved EOS specs and packed EOS of the materials in ``used`` (first-use order).
+
+    ``materials`` maps a material name to its resolved spec ``{"eos": {...}}``.
+    """
+    names: list[str] = []
+    for name in used:
+        if name not in materials:
+            raise KeyError(f"material {name!r} is not defined (known: {sorted(materials)})")
+        if name not in names:
+            names.append(name)
+    specs = [dict(materials[name]["eos"]) for name in names]
+    return names, specs, pack_eos(specs)
+
+
+def new_simulation(mesh: BlockMesh, names: list[str], specs: list[dict], state: HydroState, cfl: float) -> Simulation:
+    """A :class:`Simulation` over ``state`` with the given materials."""
+    return Simulation(mesh, names, specs, state, cfl=cfl)
+
+
+def merged(defaults: dict, params: dict) -> dict:
+    """``defaults`` updated by ``params`` (one level deep for nested dicts); unknown keys raise."""
+    unknown = set(params) - set(defaults)
+    if unknown:
+        raise KeyError(f"unknown problem parameters {sorted(unknown)}; known: {sorted(defaults)}")
+    out = {}
+    for key, value in defaults.items():
+        if isinstance(value, dict) and isinstance(params.get(key), dict):
+            out[key] = {**value, **params[key]}
+        else:
+            out[key] = params.get(key, value)
+    return out
+
+
+def preset_material(name: str, model: str = "tillotson") -> dict:
+    """Resolved material spec ``{"eos": {...}}`` for a preset of pipeline/data/materials.yaml.
+
+    For tests, benchmarks and examples; runs resolve presets through the config layer.
+    The specific heat is :data:`impactpipe.hydro.eos.SPECIFIC_HEAT_DEFAULTS` of the preset.
+    """
+    presets = yaml.safe_load(resources.files("impactpipe.pipeline").joinpath("data/materials.yaml").read_text())
+    values = {key: float(value) for key, value in presets[model][name].items()}
+    return {"eos": {"model": model, **values, "cv": SPECIFIC_HEAT_DEFAULTS[name]}}

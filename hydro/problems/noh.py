@@ -1,0 +1,48 @@
+"""Noh implosion: cold ideal gas streaming at ``velocity`` towards the origin.
+
+1d-planar (nu = 1) on [0, extent] with a reflecting wall at x = 0, or 2d-cylindrical
+(r, z) on [0, extent]^2 with the velocity aimed at the origin (a spherical implosion,
+nu = 3) and the z = 0 plane reflecting.  Outer boundaries are outflow (zero gradient),
+which is exact in planar symmetry and approximate (the inflowing density should grow as
+(1 + u0 t / r)^(nu - 1)) otherwise.  Exact solution:
+:func:`impactpipe.hydro.exact.noh.noh_solution`.  The scheme shows the usual wall heating:
+a density deficit (and temperature excess) in the first cells next to the origin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.state import HydroState
+
+DEFAULTS = {
+    "material": "gas",
+    "density": 1.0,
+    "velocity": 1.0,
+    "pressure": 1.0e-6,
+    "cells": 128,
+    "extent": 1.0,
+    "end_time": 0.6,
+}
+
+
+def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
+          geometry: str = "1d-planar"):
+    """Build the Noh :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    p = merged(DEFAULTS, params)
+    names, specs, eos = material_list(materials, [p["material"]])
+    if geometry not in ("1d-planar", "2d-cylindrical"):
+        raise ValueError("noh runs in 1d-planar or 2d-cylindrical")
+    ndim = 1 if geometry == "1d-planar" else 2
+    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["extent"]] * ndim, [p["cells"]] * ndim,
+                             [("reflecting", "outflow")] * ndim, block_cells)
+    centers = mesh.cell_centers()
+    radius = np.sqrt((centers[:, :ndim] ** 2).sum(axis=1))
+    velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
+    for d in range(ndim):
+        velocity[:, d] = -p["velocity"] * centers[:, d] / radius
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, 1.0, 0, eos, p["density"], velocity, pressure=p["pressure"])
+    return new_simulation(mesh, names, specs, state, cfl)

@@ -1,0 +1,61 @@
+"""Planar impact: a flyer plate at ``velocity`` hits a target plate at rest (1d-planar).
+
+The flyer occupies [-thickness_f, 0) and moves at +velocity (m/s); the target occupies
+[0, thickness_t) at rest; both start at their reference density with e = 0 (p = 0), with
+void margins of ``margin`` times the thicker plate on both sides (free surfaces) and
+outflow ends.  ``cells`` cells span the whole domain.  Until the shocks reach the free
+surfaces, the shocked states on both sides of the contact share the pressure and particle
+velocity of :func:`impactpipe.hydro.exact.impedance.planar_impact_state`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impactpipe.hydro.eos import reference_density
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.state import HydroState
+
+DEFAULTS = {
+    "flyer": {"material": "basalt", "thickness": 1.0, "velocity": 2000.0},
+    "target": {"material": "basalt", "thickness": 1.0},
+    "margin": 0.25,
+    "cells": 400,
+    "end_time": 1.0e-4,
+}
+
+
+def domain(p: dict) -> tuple[float, float]:
+    """Domain ends (m) for merged parameters ``p``."""
+    pad = p["margin"] * max(p["flyer"]["thickness"], p["target"]["thickness"])
+    return -p["flyer"]["thickness"] - pad, p["target"]["thickness"] + pad
+
+
+def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
+          geometry: str = "1d-planar"):
+    """Build the planar-impact :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    if geometry != "1d-planar":
+        raise ValueError("planar_impact runs in 1d-planar")
+    p = merged(DEFAULTS, params)
+    names, specs, eos = material_list(materials, [p["flyer"]["material"], p["target"]["material"]])
+    lo, hi = domain(p)
+    mesh = BlockMesh.uniform(geometry, [lo], [hi], [p["cells"]], [("outflow", "outflow")], block_cells)
+    state = HydroState.empty(mesh, len(names))
+    x = mesh.cell_centers()[:, 0]
+    dx = mesh.min_cell_size()
+    edges_lo = x - 0.5 * dx
+    edges_hi = x + 0.5 * dx
+
+    def overlap(a, b):
+        return np.clip((np.minimum(edges_hi, b) - np.maximum(edges_lo, a)) / dx, 0.0, 1.0)
+
+    plates = (
+        (p["flyer"], overlap(-p["flyer"]["thickness"], 0.0), p["flyer"]["velocity"]),
+        (p["target"], overlap(0.0, p["target"]["thickness"]), 0.0),
+    )
+    for plate, frac, speed in plates:
+        k = names.index(plate["material"])
+        rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
+        state.set_material(mesh, frac, k, eos, rho0, np.array([speed, 0.0, 0.0]), specific_energy=0.0)
+    return new_simulation(mesh, names, specs, state, cfl)

@@ -1,0 +1,50 @@
+"""Riemann problem (Sod's shock tube by default) along x.
+
+Two uniform states meet at ``interface`` (m) in a tube of ``length`` (m) with ``cells``
+cells along x and outflow ends.  1d-planar, or along x in 2d-planar / 3d with one block
+of periodic cells across (the solution must not depend on y, z).  Exact solution:
+:func:`impactpipe.hydro.exact.riemann.exact_riemann` (ideal gas, one material or two
+materials with the same gamma).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.state import HydroState
+
+DEFAULTS = {
+    "length": 1.0,
+    "cells": 400,
+    "interface": 0.5,
+    "left": {"material": "gas", "density": 1.0, "velocity": 0.0, "pressure": 1.0},
+    "right": {"material": "gas", "density": 0.125, "velocity": 0.0, "pressure": 0.1},
+}
+
+
+def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
+          geometry: str = "1d-planar"):
+    """Build the shock-tube :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    p = merged(DEFAULTS, params)
+    names, specs, eos = material_list(materials, [p["left"]["material"], p["right"]["material"]])
+    if geometry == "2d-cylindrical":
+        raise ValueError("shock_tube runs in 1d-planar, 2d-planar or 3d")
+    ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
+    if ndim == 1:
+        mesh = BlockMesh.uniform(geometry, [0.0], [p["length"]], [p["cells"]], [("outflow", "outflow")], block_cells)
+    else:
+        bc = block_cells or (16 if ndim == 2 else 8)
+        dx = p["length"] / p["cells"]
+        lo = [0.0] + [0.0] * (ndim - 1)
+        hi = [p["length"]] + [bc * dx] * (ndim - 1)
+        mesh = BlockMesh.uniform(geometry, lo, hi, [p["cells"]] + [bc] * (ndim - 1),
+                                 [("outflow", "outflow")] + [("periodic", "periodic")] * (ndim - 1), bc)
+    state = HydroState.empty(mesh, len(names))
+    x = mesh.cell_centers()[:, 0]
+    for side, sel in (("left", x < p["interface"]), ("right", x >= p["interface"])):
+        s = p[side]
+        state.set_material(mesh, sel.astype(float), names.index(s["material"]), eos, s["density"],
+                           np.array([s["velocity"], 0.0, 0.0]), pressure=s["pressure"])
+    return new_simulation(mesh, names, specs, state, cfl)

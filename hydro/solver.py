@@ -1,0 +1,319 @@
+"""The hydro driver: :class:`Simulation` advances a :class:`HydroState` on a :class:`BlockMesh`.
+
+One step: dt from the CFL condition (:mod:`impactpipe.hydro.timestep`), then one sweep per
+used axis (:mod:`impactpipe.hydro.sweep`), each after filling the ghosts along its axis; the
+sweep order alternates every step (x y z, then z y x), which makes the splitting second
+order over a pair of steps (Strang).  The state at the start of the step is kept, so a
+failing step leaves the last good state available (:meth:`Simulation.restore_last_good`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import h5py
+import numba
+import numpy as np
+
+from impactpipe.hydro.boundary import fill_state_ghosts
+from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.hydro.state import FIELDS, HydroState
+from impactpipe.hydro.sweep import (
+    AMOUNT_NAMES,
+    BND_ENERGY,
+    BND_MASS,
+    BND_MATERIAL,
+    BND_MOMENTUM,
+    FLOOR_NAMES,
+    NAMOUNT,
+    NFLOOR,
+    allocate_scratch,
+    sweep,
+)
+from impactpipe.hydro.timestep import cell_thermodynamics, max_signal_rate
+from impactpipe.pipeline.runstore import atomic_path
+
+logger = logging.getLogger(__name__)
+
+#: A time step below this fraction of the first step is a collapse (HydroFailure).
+DT_COLLAPSE_FRACTION = 1.0e-8
+LOG_INTERVAL = 100
+
+
+class HydroFailure(RuntimeError):
+    """The hydro step failed (NaN, negative density, time-step collapse).
+
+    Attributes: ``time`` (s) of the last good state, ``block`` and ``cell`` (padded
+    indices) of the failing cell (-1 / None when not cell-specific), ``state`` a dict of
+    that cell's conserved values after the failed update.
+    """
+
+    def __init__(self, message: str, time: float, block: int, cell, state: dict):
+        super().__init__(f"{message} (t = {time:.6g} s, block {block}, cell {cell})")
+        self.time = time
+        self.block = block
+        self.cell = cell
+        self.state = state
+
+
+class Simulation:
+    """Multi-material Eulerian hydrodynamics on a block mesh.
+
+    Args:
+        mesh: the block mesh (geometry, boundaries, neighbour table).
+        material_names: names of the M materials.
+        eos_specs: resolved EOS dicts, one per material (see :func:`impactpipe.hydro.eos.pack_eos`).
+        state: initial conserved state (interior cells set; ghosts are filled here).
+        cfl: Courant number (0 < cfl <= 0.5 for the split scheme with HLLC, default 0.4).
+        shear_modulus: (M,) shear modulus per material (Pa) for the signal speed; zeros
+            for strengthless materials.
+        time: initial time (s).
+    """
+
+    def __init__(self, mesh: BlockMesh, material_names: list[str], eos_specs: list[dict], state: HydroState,
+                 cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0):
+        if not 0.0 < cfl <= 1.0:
+            raise ValueError(f"cfl must be in (0, 1], got {cfl}")
+        if len(material_names) != state.nmat or len(eos_specs) != state.nmat:
+            raise ValueError("one name and one EOS spec per material")
+        self.mesh = mesh
+        self.material_names = list(material_names)
+        self.eos_specs = [dict(s) for s in eos_specs]
+        self.eos = pack_eos(self.eos_specs)
+        self.state = state
+        self.cfl = float(cfl)
+        self.shear_modulus = np.zeros(state.nmat) if shear_modulus is None else np.asarray(shear_modulus, float)
+        self.time = float(time)
+        self.step_count = 0
+        self.cell_updates = 0
+        self.dt_first: float | None = None
+        self.last_dt = 0.0
+        nb = mesh.nblocks
+        self.boundary = np.zeros((nb, BND_MATERIAL + state.nmat))
+        self.floors = np.zeros((nb, NFLOOR), dtype=np.int64)
+        self.amounts = np.zeros((nb, NAMOUNT))
+        self._failure = np.zeros((nb, 4), dtype=np.int64)
+        self._rate = np.zeros(nb)
+        self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape))
+        self._good = state.copy()
+        self._good_counters = (self.boundary.copy(), self.floors.copy(), self.amounts.copy())
+        self._good_clock = (self.time, self.step_count, self.cell_updates)
+
+    # ------------------------------------------------------------------ stepping
+
+    def stable_dt(self) -> float:
+        """CFL time step of the current state (s)."""
+        st = self.state
+        max_signal_rate(st.alpha, st.arho, st.arhoe, st.momentum, self.mesh.block_dx, self.eos.kind,
+                        self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim, self._rate)
+        rate = float(self._rate.max())
+        if not np.isfinite(rate):
+            raise HydroFailure("non-finite signal speed", self.time, int(np.argmax(~np.isfinite(self._rate))),
+                               None, {})
+        if rate <= 0.0:
+            raise HydroFailure("no signal speed anywhere (empty or cold mesh)", self.time, -1, None, {})
+        return self.cfl / rate
+
+    def step(self, dt_max: float = np.inf) -> float:
+        """Advance one step of at most ``dt_max`` (s); returns the step taken (s)."""
+        dt = self.stable_dt()
+        if self.dt_first is None:
+            self.dt_first = dt
+        elif dt < DT_COLLAPSE_FRACTION * self.dt_first:
+            raise HydroFailure(f"time step collapsed to {dt:.3e} s (first step {self.dt_first:.3e} s)",
+                               self.time, -1, None, {})
+        dt = min(dt, dt_max)
+        self._save_good()
+        axes = list(range(self.mesh.ndim))
+        if self.step_count % 2:
+            axes.reverse()
+        st = self.state
+        for axis in axes:
+            fill_state_ghosts(st, self.mesh, axis)
+            sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.momentum, st.energy,
+                  self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.eos.kind, self.eos.params,
+                  self.eos.table, self.shear_modulus, self._scratch, self.boundary, self.floors, self.amounts,
+                  self._failure)
+            if self._failure[:, 0].any():
+                self._raise_sweep_failure()
+        self.time += dt
+        self.step_count += 1
+        self.cell_updates += self.mesh.ncells
+        self.last_dt = dt
+        return dt
+
+    def run(self, end_time: float, output_times: Iterable[float] = (), on_output: Callable | None = None,
+            progress: Callable[[float], None] | None = None, max_steps: int | None = None) -> int:
+        """Advance to ``end_time`` (s); returns the number of steps taken.
+
+        At each of ``output_times`` (s, within (time, end_time]) the step is shortened to land
+        on it and ``on_output(self.snapshot())`` is called.  ``progress(t)`` is called after
+        every step.  ``max_steps`` stops the run early (no error).
+        """
+        outputs = sorted(t for t in output_times if self.time < t <= end_time)
+        steps = 0
+        while self.time < end_time * (1.0 - 1e-14) and (max_steps is None or steps < max_steps):
+            target = outputs[0] if outputs else end_time
+            self.step(dt_max=target - self.time)
+            steps += 1
+            if outputs and self.time >= outputs[0] * (1.0 - 1e-14):
+                self.time = outputs.pop(0)
+                if on_output is not None:
+                    on_output(self.snapshot())
+            if progress is not None:
+                progress(self.time)
+            if self.step_count % LOG_INTERVAL == 0:
+                logger.info("step %d t=%.6g s dt=%.3e s max p=%.4g Pa", self.step_count, self.time,
+                            self.last_dt, float(self.snapshot().pressure.max()))
+        if self.time >= end_time * (1.0 - 1e-14):
+            self.time = end_time
+        return steps
+
+    # ------------------------------------------------------------------ failure handling
+
+    def _save_good(self) -> None:
+        self._good.copy_from(self.state)
+        for dst, src in zip(self._good_counters, (self.boundary, self.floors, self.amounts)):
+            np.copyto(dst, src)
+        self._good_clock = (self.time, self.step_count, self.cell_updates)
+
+    def restore_last_good(self) -> None:
+        """Put back the state and counters from the start of the last (failed) step."""
+        self.state.copy_from(self._good)
+        for dst, src in zip((self.boundary, self.floors, self.amounts), self._good_counters):
+            np.copyto(dst, src)
+        self.time, self.step_count, self.cell_updates = self._good_clock
+        self._failure[:] = 0
+
+    def _raise_sweep_failure(self) -> None:
+        b = int(np.argmax(self._failure[:, 0] != 0))
+        code, ix, iy, iz = (int(v) for v in self._failure[b])
+        cell = (ix, iy, iz)
+        values = {name: getattr(self.state, name)[b, :, ix, iy, iz].tolist() for name in FIELDS}
+        values["before"] = {name: getattr(self._good, name)[b, :, ix, iy, iz].tolist() for name in FIELDS}
+        what = {1: "NaN in the updated state", 2: "negative density"}.get(code, "sweep failure")
+        raise HydroFailure(what, self._good_clock[0], b, cell, values)
+
+    # ------------------------------------------------------------------ diagnostics
+
+    @property
+    def floor_counts(self) -> dict[str, int]:
+        """How often each floor / fallback was applied since the start (cells x sweeps)."""
+        totals = self.floors.sum(axis=0)
+        return {name: int(v) for name, v in zip(FLOOR_NAMES, totals)}
+
+    @property
+    def floor_amounts(self) -> dict[str, float]:
+        """Mass (kg) and energy (J) added, reconciled or removed by the floors, since the start."""
+        totals = self.amounts.sum(axis=0)
+        return {name: float(v) for name, v in zip(AMOUNT_NAMES, totals)}
+
+    def totals(self) -> dict:
+        """Mesh totals and what left through the domain boundaries (SI).
+
+        ``mass`` (kg), ``material_mass`` (M,), ``momentum`` (3,) (kg m/s; in 2d-cylindrical
+        only the z component is a conserved total), ``energy`` (J); ``outflow_*`` the
+        amounts that left through domain faces (wall impulse included for momentum);
+        ``*_with_outflow`` the sums, constant in time up to the floor amounts.
+        """
+        mesh = self.mesh
+        vol = mesh.cell_volumes()
+        arho = mesh.interior(self.state.arho)
+        material_mass = (arho * vol[:, None]).sum(axis=(0, 2, 3, 4))
+        momentum = (mesh.interior(self.state.momentum) * vol[:, None]).sum(axis=(0, 2, 3, 4))
+        energy = float((mesh.interior(self.state.energy)[:, 0] * vol).sum())
+        bnd = self.boundary.sum(axis=0)
+        out = {
+            "mass": float(material_mass.sum()),
+            "material_mass": material_mass,
+            "momentum": momentum,
+            "energy": energy,
+            "outflow_mass": float(bnd[BND_MASS]),
+            "outflow_material_mass": bnd[BND_MATERIAL:].copy(),
+            "outflow_momentum": bnd[BND_MOMENTUM : BND_MOMENTUM + 3].copy(),
+            "outflow_energy": float(bnd[BND_ENERGY]),
+        }
+        out["mass_with_outflow"] = out["mass"] + out["outflow_mass"]
+        out["momentum_with_outflow"] = out["momentum"] + out["outflow_momentum"]
+        out["energy_with_outflow"] = out["energy"] + out["outflow_energy"]
+        return out
+
+    def snapshot(self) -> Snapshot:
+        """The interior cells at the current time as a :class:`Snapshot` (copies)."""
+        mesh = self.mesh
+        st = self.state
+        shape = (mesh.nblocks,) + mesh.interior_shape
+        pressure = np.zeros(shape)
+        sound = np.zeros(shape)
+        eint = np.zeros(shape)
+        temp = np.zeros(shape)
+        cell_thermodynamics(st.alpha, st.arho, st.arhoe, self.eos.kind, self.eos.params, self.eos.table,
+                            self.shear_modulus, pressure, sound, eint, temp)
+        arho = mesh.interior(st.arho).copy()
+        rho = arho.sum(axis=1)
+        safe = np.where(rho > 0.0, rho, 1.0)
+        velocity = np.where(rho[:, None] > 0.0, mesh.interior(st.momentum) / safe[:, None], 0.0)
+        return Snapshot(
+            time=self.time,
+            geometry=mesh.geometry,
+            material_names=list(self.material_names),
+            block_lo=mesh.block_lo.copy(),
+            block_hi=mesh.block_hi.copy(),
+            block_level=mesh.block_level.copy(),
+            block_id=mesh.block_id.copy(),
+            partial_density=arho,
+            volume_fraction=mesh.interior(st.alpha).copy(),
+            velocity=velocity,
+            specific_internal_energy=eint,
+            pressure=pressure,
+            temperature=temp,
+            sound_speed=sound,
+        )
+
+    # ------------------------------------------------------------------ checkpoints
+
+    def save_checkpoint(self, path: str | Path) -> None:
+        """Write the full state (ghosts included), mesh, materials and counters to HDF5, atomically."""
+        with atomic_path(path) as tmp:
+            with h5py.File(tmp, "w") as fh:
+                fh.attrs["time"] = self.time
+                fh.attrs["step_count"] = self.step_count
+                fh.attrs["cell_updates"] = self.cell_updates
+                fh.attrs["cfl"] = self.cfl
+                fh.attrs["dt_first"] = -1.0 if self.dt_first is None else self.dt_first
+                fh.attrs["material_names"] = json.dumps(self.material_names)
+                fh.attrs["eos_specs"] = json.dumps(self.eos_specs)
+                mesh_grp = fh.create_group("mesh")
+                for key, value in self.mesh.to_arrays().items():
+                    mesh_grp.attrs[key] = value if isinstance(value, (str, int)) else np.asarray(value)
+                state_grp = fh.create_group("state")
+                for name in FIELDS:
+                    state_grp.create_dataset(name, data=getattr(self.state, name))
+                ctr = fh.create_group("counters")
+                ctr.create_dataset("boundary", data=self.boundary)
+                ctr.create_dataset("floors", data=self.floors)
+                ctr.create_dataset("amounts", data=self.amounts)
+                ctr.create_dataset("shear_modulus", data=self.shear_modulus)
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path) -> "Simulation":
+        """Rebuild a Simulation written by :meth:`save_checkpoint`; it continues bit for bit."""
+        with h5py.File(path, "r") as fh:
+            mesh = BlockMesh.from_arrays(dict(fh["mesh"].attrs))
+            state = HydroState(**{name: fh["state"][name][()] for name in FIELDS})
+            sim = cls(mesh, json.loads(fh.attrs["material_names"]), json.loads(fh.attrs["eos_specs"]), state,
+                      cfl=float(fh.attrs["cfl"]), shear_modulus=fh["counters/shear_modulus"][()],
+                      time=float(fh.attrs["time"]))
+            sim.step_count = int(fh.attrs["step_count"])
+            sim.cell_updates = int(fh.attrs["cell_updates"])
+            dt_first = float(fh.attrs["dt_first"])
+            sim.dt_first = None if dt_first < 0 else dt_first
+            sim.boundary[:] = fh["counters/boundary"][()]
+            sim.floors[:] = fh["counters/floors"][()]
+            sim.amounts[:] = fh["counters/amounts"][()]
+        return sim

@@ -1,0 +1,112 @@
+"""Conserved multi-material state on the block mesh (structure of arrays over blocks).
+
+Arrays, shape ``(NB, C, NX, NY, NZ)`` with ghosts (see :mod:`impactpipe.hydro.mesh`):
+
+=========  ======  ============================================  ===========
+name       C       meaning                                       units
+=========  ======  ============================================  ===========
+alpha      M       volume fraction alpha_k                       -
+arho       M       partial density alpha_k rho_k                 kg/m^3
+arhoe      M       material internal energy alpha_k rho_k e_k    J/m^3
+momentum   3       rho u (2d-cylindrical: (rho v_r, rho v_z, 0)) kg/(m^2 s)
+energy     1       total energy rho (e + |u|^2 / 2)              J/m^3
+=========  ======  ============================================  ===========
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from impactpipe.hydro.eos import energy_from_pressure
+from impactpipe.hydro.mesh import BlockMesh
+
+FIELDS = ("alpha", "arho", "arhoe", "momentum", "energy")
+
+
+@dataclass
+class HydroState:
+    """The conserved fields of every block, ghosts included."""
+
+    alpha: np.ndarray
+    arho: np.ndarray
+    arhoe: np.ndarray
+    momentum: np.ndarray
+    energy: np.ndarray
+
+    @classmethod
+    def empty(cls, mesh: BlockMesh, nmat: int) -> "HydroState":
+        """All-void state (zeros) for ``nmat`` materials."""
+        shape = (mesh.nblocks,)
+        pad = mesh.padded_shape
+        return cls(
+            alpha=np.zeros(shape + (nmat,) + pad),
+            arho=np.zeros(shape + (nmat,) + pad),
+            arhoe=np.zeros(shape + (nmat,) + pad),
+            momentum=np.zeros(shape + (3,) + pad),
+            energy=np.zeros(shape + (1,) + pad),
+        )
+
+    @property
+    def nmat(self) -> int:
+        """Number of materials M."""
+        return int(self.alpha.shape[1])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The field arrays by name."""
+        return {name: getattr(self, name) for name in FIELDS}
+
+    def copy_from(self, other: "HydroState") -> None:
+        """Copy every field of ``other`` into this state's arrays (no allocation)."""
+        for name in FIELDS:
+            np.copyto(getattr(self, name), getattr(other, name))
+
+    def copy(self) -> "HydroState":
+        """A deep copy."""
+        return HydroState(**{name: arr.copy() for name, arr in self.arrays().items()})
+
+    def set_material(self, mesh: BlockMesh, fraction, material: int, eos, density, velocity,
+                     pressure=None, specific_energy=None) -> None:
+        """Put material ``material`` into the interior cells where ``fraction`` > 0.
+
+        ``fraction`` (volume fraction, -), ``density`` (kg/m^3), ``pressure`` (Pa) or
+        ``specific_energy`` (J/kg) are scalars or arrays broadcastable to (NB, nx, ny, nz);
+        ``velocity`` (m/s) is a (3,) vector or an array broadcastable to (NB, 3, nx, ny, nz).
+        Those cells are rebuilt: the material fills ``fraction`` of them, other materials keep
+        their partial amounts scaled by ``1 - fraction``, and the cell moves at ``velocity``.
+        ``eos`` is the packed :class:`impactpipe.hydro.eos.EOSArrays`.
+        """
+        shape = (mesh.nblocks,) + mesh.interior_shape
+        fraction = np.clip(np.broadcast_to(np.asarray(fraction, dtype=float), shape), 0.0, 1.0)
+        density = np.broadcast_to(np.asarray(density, dtype=float), shape)
+        if specific_energy is None:
+            pres = np.broadcast_to(np.asarray(pressure, dtype=float), shape)
+            kind, params, table = eos.kind[material], eos.params[material], eos.table
+            specific_energy = np.array([
+                energy_from_pressure(kind, params, table, r, p) for r, p in zip(density.ravel(), pres.ravel())
+            ]).reshape(shape)
+        specific_energy = np.broadcast_to(np.asarray(specific_energy, dtype=float), shape)
+        velocity = np.asarray(velocity, dtype=float)
+        if velocity.ndim == 1:
+            velocity = velocity.reshape((1, 3, 1, 1, 1))
+        velocity = np.broadcast_to(velocity, (mesh.nblocks, 3) + mesh.interior_shape)
+        sel = fraction > 0.0
+        alpha = mesh.interior(self.alpha)
+        arho = mesh.interior(self.arho)
+        arhoe = mesh.interior(self.arhoe)
+        keep = np.where(sel, 1.0 - fraction, 1.0)
+        for k in range(self.nmat):
+            alpha[:, k] *= keep
+            arho[:, k] *= keep
+            arhoe[:, k] *= keep
+        alpha[:, material] += fraction
+        arho[:, material] += fraction * density
+        arhoe[:, material] += fraction * density * specific_energy
+        rho = arho.sum(axis=1)
+        mom = mesh.interior(self.momentum)
+        for d in range(3):
+            mom[:, d] = np.where(sel, rho * velocity[:, d], mom[:, d])
+        kinetic = 0.5 * rho * (velocity**2).sum(axis=1)
+        energy = mesh.interior(self.energy)
+        energy[:, 0] = np.where(sel, arhoe.sum(axis=1) + kinetic, energy[:, 0])

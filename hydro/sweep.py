@@ -1,0 +1,545 @@
+"""One directionally split sweep of the multi-material Godunov scheme (the hydro kernel).
+
+Conserved fields per cell (``hydro.state``): volume fraction ``alpha_k``, partial density
+``alpha_k rho_k`` (kg/m^3), material internal energy density ``alpha_k rho_k e_k`` (J/m^3),
+momentum density (kg/m^2/s) and total energy density E (J/m^3).  Void fills ``1 - sum alpha_k``.
+
+A sweep along axis d advances every pencil of cells along d by dt in flux form
+
+    U_i^{n+1} = U_i - dt (A_{i+1/2} F_{i+1/2} - A_{i-1/2} F_{i-1/2}) / V_i  + dt S_i
+
+(A face areas, V cell volumes; 2d-cylindrical r faces have A = 2 pi r dz, V = pi (r_+^2 -
+r_-^2) dz and the radial momentum source S = p (A_{i+1/2} - A_{i-1/2}) / V, the same
+difference as in the flux term, so a uniform state at rest stays at rest to round-off).
+
+Stencil, cell i with ghosts g = 2 (``|`` faces)::
+
+      i-2 | i-1 | i | i+1 | i+2
+            slopes of i-1, i, i+1 -> face states at i-1/2 and i+1/2 -> fluxes
+
+1. Gather: mixture density rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k
+   (equal-strain mixture; void counts as a zero-pressure component), bulk modulus
+   K = sum alpha_k rho_k c_k^2, signal speed c = max_k c_k over the materials present
+   (``timestep.signal_speed_squared``).  A partly filled cell keeps the wave speed of its
+   material (K / rho = c_k^2), so it needs no smaller time step than a full one.
+2. MUSCL-Hancock: MC-limited slopes of (u_n, u_t1, u_t2, p) and per material
+   (alpha_k, rho_k, e_k); half-step predictor with the primitive equations
+   u_t = -u u_x - p_x / rho, p_t = -u p_x - K u_x, alpha_t = -u alpha_x,
+   rho_k,t = -u rho_k,x - rho_k u_x, e_k,t = -u e_k,x - (p_k / rho_k) u_x.
+   A cell next to void, or whose face state loses positivity (density <= 0, or a pressure
+   drop from p > 0 to below -TENSION_TOLERANCE K), uses its cell values; face e_k of a cell
+   with e_k >= 0 are clipped at 0.
+3. Faces: :func:`impactpipe.hydro.riemann.hllc_face` (free surface next to void) gives the
+   face velocity s, pressure p* and upwind star factors.  Material k's volume flux is
+   alpha_k,face s with the compressive ultrabee face value of alpha_k (capped so no more than
+   the donor's material volume leaves), its mass flux alpha_k,face rho_k,K chi s (capped by the
+   donor's mass), its internal energy flux the mass flux times e_k,K.  Momentum and total
+   energy fluxes use the summed mass flux (HLLC exactly for one material).
+4. Update with the volume closure: after the fluxes, a cell whose materials fill more than
+   its volume is compressed (alpha_k scaled to sum 1: void is squeezed out first, then the
+   materials share the strain); a full cell (no void) with positive velocity divergence
+   dV = dt div(s) expands each material by alpha_k dV (equal strain), while in a cell with
+   void the void takes the expansion (no material is spread into void by a divergence),
+   and a material at positive pressure p_k relaxes into the cell's void: it expands by
+   alpha_k p_k / K_k (the acoustic volume change that brings p_k to zero), all materials
+   scaled down together if the void is smaller, doing the work p_k / 2 per unit volume.  Each material takes the work
+   -p_k (change of its volume fraction from the closure).  Total energy is conserved by
+   the fluxes; the difference between E - |m|^2 / (2 rho) and sum alpha_k rho_k e_k is
+   given to the materials in proportion to their mass (counted as reconciled energy).
+5. Floors (counted per block): negative alpha_k or partial density -> 0, negative material
+   internal energy -> 0 with E raised to match, an emptied cell -> void.  NaN or a
+   mixture density below -FAIL_NEGATIVE_FRACTION of the cell's previous density is a
+   failure recorded in ``failure`` for the solver to raise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import get_thread_id, njit, prange
+
+from impactpipe.hydro.eos import pressure_sound_speed
+from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
+from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
+from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE, hllc_face
+from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, signal_speed_squared
+
+#: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
+#: positive pressure is non-physical: the cell falls back to first order.
+TENSION_TOLERANCE = 1.0e-3
+#: A cell whose materials fill more than 1 - FULL_TOLERANCE of it has no void.
+FULL_TOLERANCE = 1.0e-8
+#: A mixture density below -FAIL_NEGATIVE_FRACTION * (previous density) is a failure.
+FAIL_NEGATIVE_FRACTION = 1.0e-3
+
+# Floor counter slots (``floors[NB, NFLOOR]``).
+FLOOR_ALPHA = 0
+FLOOR_PARTIAL_DENSITY = 1
+FLOOR_INTERNAL_ENERGY = 2
+FLOOR_VOID_CLEANUP = 3
+FLOOR_FIRST_ORDER = 4
+FLOOR_EOS_CLAMP = 5
+NFLOOR = 6
+FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
+               "void_cleanup", "first_order_fallback", "eos_clamp")
+# Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
+AMOUNT_MASS_FLOOR = 0
+AMOUNT_ENERGY_FLOOR = 1
+AMOUNT_ENERGY_RECONCILED = 2
+AMOUNT_ENERGY_VOID = 3
+NAMOUNT = 4
+AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
+                "energy_removed_by_void_cleanup")
+# Boundary counter slots (``boundary[NB, 5 + M]``): what left the domain (kg, kg m/s, J).
+BND_MASS = 0
+BND_MOMENTUM = 1
+BND_ENERGY = 4
+BND_MATERIAL = 5
+
+# Failure record (``failure[NB, 4]``): code, ix, iy, iz.
+FAIL_NAN = 1
+FAIL_NEGATIVE_DENSITY = 2
+
+# Rows of the per-thread scratch: cell values W, face states FM/FP, face fluxes F.
+W_RHO, W_UN, W_UT1, W_UT2, W_P, W_C, W_K, W_PHI, W_VOL, W_IVL, W_IVR = range(11)
+W_MAT = 11          # + W_STRIDE k: alpha_k, rho_k, e_k, p_k, K_k = rho_k c_K,k^2
+W_STRIDE = 5
+Q_UN, Q_UT1, Q_UT2, Q_P = range(4)
+Q_MAT = 4           # + 3 k: alpha_k, rho_k, e_k
+F_MN, F_MT1, F_MT2, F_E, F_S = range(5)
+F_MAT = 5           # + 3 k: volume, mass, internal energy
+
+
+def scratch_rows(nmat: int) -> int:
+    """Number of scratch rows per thread for ``nmat`` materials."""
+    return (W_MAT + W_STRIDE * nmat) + 2 * (Q_MAT + 3 * nmat) + (F_MAT + 3 * nmat)
+
+
+def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int) -> np.ndarray:
+    """Per-thread scratch ``(nthreads, rows, pencil_cells + 1)`` for :func:`sweep`."""
+    return np.zeros((nthreads, scratch_rows(nmat), pencil_cells + 1))
+
+
+@njit(cache=True, inline="always")
+def _cell_index(axis, i, j1, j2):
+    if axis == 0:
+        return i, j1, j2
+    if axis == 1:
+        return j1, i, j2
+    return j1, j2, i
+
+
+@njit(cache=True, parallel=True)
+def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_dx, neighbor,
+          eos_kind, eos_params, eos_table, shear_modulus, scratch, boundary, floors, amounts, failure):
+    """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
+
+    Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
+    ``boundary``, ``floors``, ``amounts`` accumulate per block; ``failure`` records the first
+    failing cell of each block.
+    """
+    nb, nmat, nx, ny, nz = alpha.shape
+    npad = (nx, ny, nz)
+    ncell = npad[axis]
+    g = GHOST
+    n = ncell - 2 * g
+    t1 = 1 if axis == 0 else 0
+    t2 = 1 if axis == 2 else 2
+    n1 = npad[t1]
+    n2 = npad[t2]
+    lo1 = g if n1 > 1 else 0
+    hi1 = n1 - g if n1 > 1 else 1
+    lo2 = g if n2 > 1 else 0
+    hi2 = n2 - g if n2 > 1 else 1
+    q0 = W_MAT + W_STRIDE * nmat
+    qm_row = q0
+    qp_row = q0 + Q_MAT + 3 * nmat
+    f_row = qp_row + Q_MAT + 3 * nmat
+    radial = geometry == CYLINDRICAL and axis == 0
+    axial = geometry == CYLINDRICAL and axis == 1
+    for b in prange(nb):
+        sc = scratch[get_thread_id()]
+        dx = block_dx[b, axis]
+        dtdx = dt / dx
+        half = 0.5 * dtdx
+        d1 = block_dx[b, t1] if n1 > 1 else 1.0
+        d2 = block_dx[b, t2] if n2 > 1 else 1.0
+        for j1 in range(lo1, hi1):
+            for j2 in range(lo2, hi2):
+                # geometry of the pencil: A/V on both sides of each cell and physical volumes
+                face_area_lo = d1 * d2
+                face_area_hi = d1 * d2
+                for i in range(ncell):
+                    if radial:
+                        r_lo = block_lo[b, 0] + (i - g) * dx
+                        r_hi = r_lo + dx
+                        vol = abs(r_hi * r_hi - r_lo * r_lo)
+                        sc[W_IVL, i] = 2.0 * abs(r_lo) / vol
+                        sc[W_IVR, i] = 2.0 * abs(r_hi) / vol
+                        sc[W_VOL, i] = np.pi * vol * d1
+                        if i == g:
+                            face_area_lo = 2.0 * np.pi * abs(r_lo) * d1
+                        if i == g + n - 1:
+                            face_area_hi = 2.0 * np.pi * abs(r_hi) * d1
+                    elif axial:
+                        r_lo = block_lo[b, 0] + (j1 - g) * d1
+                        r_hi = r_lo + d1
+                        ring = np.pi * abs(r_hi * r_hi - r_lo * r_lo)
+                        sc[W_IVL, i] = 1.0 / dx
+                        sc[W_IVR, i] = 1.0 / dx
+                        sc[W_VOL, i] = ring * dx
+                        face_area_lo = ring
+                        face_area_hi = ring
+                    else:
+                        sc[W_IVL, i] = 1.0 / dx
+                        sc[W_IVR, i] = 1.0 / dx
+                        sc[W_VOL, i] = dx * d1 * d2
+                # 1. gather cell values
+                for i in range(ncell):
+                    ix, iy, iz = _cell_index(axis, i, j1, j2)
+                    rho = 0.0
+                    p = 0.0
+                    kmod = 0.0
+                    c2max = 0.0
+                    phi = 0.0
+                    for k in range(nmat):
+                        a = alpha[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        phi += a
+                        rho += ar
+                        row = W_MAT + W_STRIDE * k
+                        if a > ALPHA_MIN and ar > 0.0:
+                            rk = ar / a
+                            ek = arhoe[b, k, ix, iy, iz] / ar
+                            pk, c2k, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                            if flag != 0 and i >= g and i < g + n:
+                                floors[b, FLOOR_EOS_CLAMP] += 1
+                            sc[row + 4, i] = rk * c2k
+                            c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
+                            p += a * pk
+                            kmod += ar * c2k
+                            if c2k > c2max:
+                                c2max = c2k
+                        else:
+                            rk = 0.0
+                            ek = 0.0
+                            pk = 0.0
+                            sc[row + 4, i] = 0.0
+                        sc[row, i] = a
+                        sc[row + 1, i] = rk
+                        sc[row + 2, i] = ek
+                        sc[row + 3, i] = pk
+                    sc[W_PHI, i] = phi
+                    sc[W_C, i] = np.sqrt(c2max)
+                    if rho > 0.0 and phi >= PHI_VOID:
+                        sc[W_RHO, i] = rho
+                        sc[W_P, i] = p
+                        sc[W_K, i] = kmod
+                        inv = 1.0 / rho
+                        sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
+                        sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
+                        sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
+                    else:
+                        sc[W_RHO, i] = 0.0
+                        sc[W_P, i] = 0.0
+                        sc[W_K, i] = 0.0
+                        sc[W_UN, i] = 0.0
+                        sc[W_UT1, i] = 0.0
+                        sc[W_UT2, i] = 0.0
+                # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
+                for i in range(1, ncell - 1):
+                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
+                # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
+                for f in range(g, g + n + 1):
+                    _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row)
+                # boundary counters: fluxes through domain faces (positive = leaving)
+                for side in range(2):
+                    if neighbor[b, axis, side] < 0:
+                        f = g if side == 0 else g + n
+                        w = -dt * face_area_lo if side == 0 else dt * face_area_hi
+                        mass = 0.0
+                        for k in range(nmat):
+                            mk = sc[f_row + F_MAT + 3 * k + 1, f]
+                            mass += mk
+                            boundary[b, BND_MATERIAL + k] += w * mk
+                        boundary[b, BND_MASS] += w * mass
+                        boundary[b, BND_MOMENTUM + axis] += w * sc[f_row + F_MN, f]
+                        boundary[b, BND_MOMENTUM + t1] += w * sc[f_row + F_MT1, f]
+                        boundary[b, BND_MOMENTUM + t2] += w * sc[f_row + F_MT2, f]
+                        boundary[b, BND_ENERGY] += w * sc[f_row + F_E, f]
+                # 4-5. update interior cells
+                for i in range(g, g + n):
+                    ix, iy, iz = _cell_index(axis, i, j1, j2)
+                    _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
+                                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure)
+
+
+@njit(cache=True, inline="always")
+def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
+    """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i."""
+    first_order = (sc[W_PHI, i - 1] < PHI_VOID or sc[W_PHI, i] < PHI_VOID or sc[W_PHI, i + 1] < PHI_VOID
+                   or sc[W_RHO, i] <= 0.0)
+    if not first_order:
+        rho = sc[W_RHO, i]
+        un = sc[W_UN, i]
+        dun = mc_slope(sc[W_UN, i - 1], un, sc[W_UN, i + 1])
+        dp = mc_slope(sc[W_P, i - 1], sc[W_P, i], sc[W_P, i + 1])
+        for c in range(3):
+            row = W_UN + c
+            q = sc[row, i]
+            dq = mc_slope(sc[row, i - 1], q, sc[row, i + 1])
+            if c == 0:
+                qh = q - half * (un * dq + dp / rho)
+            else:
+                qh = q - half * un * dq
+            sc[qm_row + Q_UN + c, i] = qh - 0.5 * dq
+            sc[qp_row + Q_UN + c, i] = qh + 0.5 * dq
+        p = sc[W_P, i]
+        ph = p - half * (un * dp + sc[W_K, i] * dun)
+        sc[qm_row + Q_P, i] = ph - 0.5 * dp
+        sc[qp_row + Q_P, i] = ph + 0.5 * dp
+        if p > 0.0 and ph - 0.5 * abs(dp) < -TENSION_TOLERANCE * sc[W_K, i]:
+            first_order = True
+        for k in range(nmat):
+            row = W_MAT + W_STRIDE * k
+            qrow = Q_MAT + 3 * k
+            a = sc[row, i]
+            da = mc_slope(sc[row, i - 1], a, sc[row, i + 1])
+            ah = a - half * un * da
+            am = min(max(ah - 0.5 * da, 0.0), 1.0)
+            ap = min(max(ah + 0.5 * da, 0.0), 1.0)
+            sc[qm_row + qrow, i] = am
+            sc[qp_row + qrow, i] = ap
+            rk = sc[row + 1, i]
+            ek = sc[row + 2, i]
+            if rk > 0.0:
+                rkm = sc[row + 1, i - 1] if sc[row + 1, i - 1] > 0.0 else rk
+                rkp = sc[row + 1, i + 1] if sc[row + 1, i + 1] > 0.0 else rk
+                ekm = sc[row + 2, i - 1] if sc[row + 1, i - 1] > 0.0 else ek
+                ekp = sc[row + 2, i + 1] if sc[row + 1, i + 1] > 0.0 else ek
+                drk = mc_slope(rkm, rk, rkp)
+                dek = mc_slope(ekm, ek, ekp)
+                rh = rk - half * (un * drk + rk * dun)
+                eh = ek - half * (un * dek + sc[row + 3, i] / rk * dun)
+                if rh - 0.5 * abs(drk) <= 0.0:
+                    first_order = True
+                em = eh - 0.5 * dek
+                ep = eh + 0.5 * dek
+                if ek >= 0.0:
+                    em = max(em, 0.0)
+                    ep = max(ep, 0.0)
+                sc[qm_row + qrow + 1, i] = rh - 0.5 * drk
+                sc[qp_row + qrow + 1, i] = rh + 0.5 * drk
+                sc[qm_row + qrow + 2, i] = em
+                sc[qp_row + qrow + 2, i] = ep
+            else:
+                sc[qm_row + qrow + 1, i] = 0.0
+                sc[qp_row + qrow + 1, i] = 0.0
+                sc[qm_row + qrow + 2, i] = 0.0
+                sc[qp_row + qrow + 2, i] = 0.0
+        if first_order and interior:
+            floors[b, FLOOR_FIRST_ORDER] += 1
+    if first_order:
+        for c in range(3):
+            sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
+            sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
+        sc[qm_row + Q_P, i] = sc[W_P, i]
+        sc[qp_row + Q_P, i] = sc[W_P, i]
+        for k in range(nmat):
+            row = W_MAT + W_STRIDE * k
+            qrow = Q_MAT + 3 * k
+            for c in range(3):
+                sc[qm_row + qrow + c, i] = sc[row + c, i]
+                sc[qp_row + qrow + c, i] = sc[row + c, i]
+
+
+@njit(cache=True, inline="always")
+def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
+    """Fluxes through face f (between cells f-1 and f), stored in column f of the F rows."""
+    il = f - 1
+    ir = f
+    rho_l = 0.0
+    rho_r = 0.0
+    for k in range(nmat):
+        qrow = Q_MAT + 3 * k
+        rho_l += sc[qp_row + qrow, il] * sc[qp_row + qrow + 1, il]
+        rho_r += sc[qm_row + qrow, ir] * sc[qm_row + qrow + 1, ir]
+    void_l = sc[W_PHI, il] < PHI_VOID or rho_l <= 0.0
+    void_r = sc[W_PHI, ir] < PHI_VOID or rho_r <= 0.0
+    side, s, p_star, chi, de = hllc_face(
+        rho_l, sc[qp_row + Q_UN, il], sc[qp_row + Q_P, il], sc[W_C, il], void_l,
+        rho_r, sc[qm_row + Q_UN, ir], sc[qm_row + Q_P, ir], sc[W_C, ir], void_r)
+    if side == UPWIND_LEFT:
+        donor = il
+        up = il - 1
+        down = ir
+        krow = qp_row
+        iv_donor = sc[W_IVR, il]
+        donor_void = void_l
+    else:
+        donor = ir
+        up = ir + 1
+        down = il
+        krow = qm_row
+        iv_donor = sc[W_IVL, ir]
+        donor_void = void_r
+    nu = abs(s) * dtdx
+    flow = abs(s) * dt * iv_donor
+    mass = 0.0
+    eint = 0.0
+    for k in range(nmat):
+        row = W_MAT + W_STRIDE * k
+        qrow = Q_MAT + 3 * k
+        a_donor = sc[row, donor]
+        frow = f_row + F_MAT + 3 * k
+        if side == UPWIND_NONE or donor_void or a_donor < ALPHA_MIN or s == 0.0:
+            sc[frow, f] = 0.0
+            sc[frow + 1, f] = 0.0
+            sc[frow + 2, f] = 0.0
+            continue
+        af = ultrabee_face(sc[row, up], a_donor, sc[row, down], nu)
+        if af > 1.0:
+            af = 1.0
+        if af * flow > a_donor:
+            af = a_donor / flow
+        mk = af * sc[krow + qrow + 1, donor] * chi * s
+        mcap = a_donor * sc[row + 1, donor] / (dt * iv_donor)
+        if abs(mk) > mcap:
+            mk = mcap if mk > 0.0 else -mcap
+        ek = sc[krow + qrow + 2, donor]
+        sc[frow, f] = af * s
+        sc[frow + 1, f] = mk
+        sc[frow + 2, f] = mk * ek
+        mass += mk
+        eint += mk * ek
+    un = sc[krow + Q_UN, donor]
+    ut1 = sc[krow + Q_UT1, donor]
+    ut2 = sc[krow + Q_UT2, donor]
+    sc[f_row + F_MN, f] = mass * s + p_star
+    sc[f_row + F_MT1, f] = mass * ut1
+    sc[f_row + F_MT2, f] = mass * ut2
+    sc[f_row + F_E, f] = eint + mass * (0.5 * (un * un + ut1 * ut1 + ut2 * ut2) + de) + p_star * s
+    sc[f_row + F_S, f] = s
+
+
+@njit(cache=True, inline="always")
+def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
+                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure):
+    """Flux-form update of cell i with volume closure, energy reconciliation and floors."""
+    wl = dt * sc[W_IVL, i]
+    wr = dt * sc[W_IVR, i]
+    vol = sc[W_VOL, i]
+    fl = i
+    fr = i + 1
+    dv = wr * sc[f_row + F_S, fr] - wl * sc[f_row + F_S, fl]
+    rho_old = sc[W_RHO, i]
+    # volume fractions after the fluxes
+    asum = 0.0
+    for k in range(nmat):
+        frow = f_row + F_MAT + 3 * k
+        a_new = alpha[b, k, ix, iy, iz] - (wr * sc[frow, fr] - wl * sc[frow, fl])
+        alpha[b, k, ix, iy, iz] = a_new
+        asum += a_new
+    # volume closure and p dV work
+    full = sc[W_PHI, i] > 1.0 - FULL_TOLERANCE
+    relax = 0.0
+    if asum <= 1.0 and not full:
+        want = 0.0
+        for k in range(nmat):
+            row = W_MAT + W_STRIDE * k
+            if sc[row + 3, i] > 0.0 and sc[row + 4, i] > 0.0:
+                want += alpha[b, k, ix, iy, iz] * sc[row + 3, i] / sc[row + 4, i]
+        if want > 0.0:
+            relax = min(1.0, (1.0 - asum) / want)
+    for k in range(nmat):
+        frow = f_row + F_MAT + 3 * k
+        row = W_MAT + W_STRIDE * k
+        a_flux = alpha[b, k, ix, iy, iz]
+        work_pressure = sc[row + 3, i]
+        if asum > 1.0:
+            a_new = a_flux / asum
+        elif dv > 0.0 and full:
+            a_new = a_flux + sc[row, i] * dv
+        elif relax > 0.0 and sc[row + 3, i] > 0.0 and sc[row + 4, i] > 0.0:
+            a_new = a_flux * (1.0 + relax * sc[row + 3, i] / sc[row + 4, i])
+            work_pressure = 0.5 * sc[row + 3, i]
+        else:
+            a_new = a_flux
+        ar = arho[b, k, ix, iy, iz] - (wr * sc[frow + 1, fr] - wl * sc[frow + 1, fl])
+        ae = arhoe[b, k, ix, iy, iz] - (wr * sc[frow + 2, fr] - wl * sc[frow + 2, fl])
+        ae -= work_pressure * (a_new - a_flux)
+        if a_new < 0.0:
+            a_new = 0.0
+            floors[b, FLOOR_ALPHA] += 1
+        elif a_new > 1.0:
+            a_new = 1.0
+        alpha[b, k, ix, iy, iz] = a_new
+        arho[b, k, ix, iy, iz] = ar
+        arhoe[b, k, ix, iy, iz] = ae
+    mn = mom[b, axis, ix, iy, iz] - (wr * sc[f_row + F_MN, fr] - wl * sc[f_row + F_MN, fl])
+    if radial:
+        p_half = 0.5 * (sc[qm_row + Q_P, i] + sc[qp_row + Q_P, i])
+        mn += p_half * (wr - wl)
+    m1 = mom[b, t1, ix, iy, iz] - (wr * sc[f_row + F_MT1, fr] - wl * sc[f_row + F_MT1, fl])
+    m2 = mom[b, t2, ix, iy, iz] - (wr * sc[f_row + F_MT2, fr] - wl * sc[f_row + F_MT2, fl])
+    e_tot = energy[b, 0, ix, iy, iz] - (wr * sc[f_row + F_E, fr] - wl * sc[f_row + F_E, fl])
+    rho = 0.0
+    for k in range(nmat):
+        rho += arho[b, k, ix, iy, iz]
+    if not (rho == rho and e_tot == e_tot and mn == mn and m1 == m1 and m2 == m2):
+        _record_failure(failure, b, FAIL_NAN, ix, iy, iz)
+    elif rho < -FAIL_NEGATIVE_FRACTION * rho_old:
+        _record_failure(failure, b, FAIL_NEGATIVE_DENSITY, ix, iy, iz)
+    # floors on partial densities
+    rho = 0.0
+    for k in range(nmat):
+        ar = arho[b, k, ix, iy, iz]
+        if ar < 0.0:
+            amounts[b, AMOUNT_MASS_FLOOR] -= ar * vol
+            floors[b, FLOOR_PARTIAL_DENSITY] += 1
+            arho[b, k, ix, iy, iz] = 0.0
+            ar = 0.0
+        rho += ar
+    if rho <= 0.0:
+        if e_tot != 0.0 or mn != 0.0 or m1 != 0.0 or m2 != 0.0:
+            floors[b, FLOOR_VOID_CLEANUP] += 1
+            amounts[b, AMOUNT_ENERGY_VOID] += e_tot * vol
+        for k in range(nmat):
+            alpha[b, k, ix, iy, iz] = 0.0
+            arhoe[b, k, ix, iy, iz] = 0.0
+        mom[b, axis, ix, iy, iz] = 0.0
+        mom[b, t1, ix, iy, iz] = 0.0
+        mom[b, t2, ix, iy, iz] = 0.0
+        energy[b, 0, ix, iy, iz] = 0.0
+        return
+    # reconcile material internal energies with the conserved total energy
+    kinetic = 0.5 * (mn * mn + m1 * m1 + m2 * m2) / rho
+    e_int = e_tot - kinetic
+    esum = 0.0
+    for k in range(nmat):
+        esum += arhoe[b, k, ix, iy, iz]
+    delta = (e_int - esum) / rho
+    amounts[b, AMOUNT_ENERGY_RECONCILED] += abs(e_int - esum) * vol
+    added = 0.0
+    for k in range(nmat):
+        ae = arhoe[b, k, ix, iy, iz] + delta * arho[b, k, ix, iy, iz]
+        if ae < 0.0:
+            added -= ae
+            ae = 0.0
+            floors[b, FLOOR_INTERNAL_ENERGY] += 1
+        arhoe[b, k, ix, iy, iz] = ae
+    if added > 0.0:
+        e_tot += added
+        amounts[b, AMOUNT_ENERGY_FLOOR] += added * vol
+    mom[b, axis, ix, iy, iz] = mn
+    mom[b, t1, ix, iy, iz] = m1
+    mom[b, t2, ix, iy, iz] = m2
+    energy[b, 0, ix, iy, iz] = e_tot
+
+
+@njit(cache=True, inline="always")
+def _record_failure(failure, b, code, ix, iy, iz):
+    if failure[b, 0] == 0:
+        failure[b, 0] = code
+        failure[b, 1] = ix
+        failure[b, 2] = iy
+        failure[b, 3] = iz

@@ -1,0 +1,120 @@
+"""Signal speeds, the CFL time step and the cell thermodynamics of the mixture.
+
+Time step (split scheme, every sweep must satisfy its own Courant condition):
+
+    dt = cfl / max_cells max_d (|u_d| + c) / dx_d
+
+with the cell signal speed c = max_k c_k over the materials present, and per material
+
+    c_k^2 = c_K,k^2 + 4 G_k / (3 rho_k)        (:func:`signal_speed_squared`)
+
+the longitudinal speed: bulk sound speed from the EOS plus the shear modulus term of
+material strength (G_k = 0 for a strengthless material).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from impactpipe.hydro.eos import pressure_sound_speed, temperature
+from impactpipe.hydro.mesh import GHOST
+
+#: Volume fraction below which a material is left out of a cell's thermodynamics.
+ALPHA_MIN = 1.0e-10
+#: Material volume fraction below which a cell counts as void (no signal, no Riemann state).
+PHI_VOID = 1.0e-6
+
+
+@njit(cache=True, inline="always")
+def signal_speed_squared(c2_bulk, rho, shear_modulus):
+    """Longitudinal signal speed squared c_K^2 + 4 G / (3 rho) (m^2/s^2).
+
+    c2_bulk: bulk sound speed squared (m^2/s^2); rho: material density (kg/m^3);
+    shear_modulus: G (Pa), 0 without strength.
+    """
+    if shear_modulus > 0.0:
+        return c2_bulk + 4.0 * shear_modulus / (3.0 * rho)
+    return c2_bulk
+
+
+@njit(cache=True, parallel=True)
+def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus, ndim, out):
+    """Per block, the largest max_d (|u_d| + c) / dx_d (1/s) over non-void interior cells, into ``out[NB]``."""
+    nb, nmat, nx, ny, nz = alpha.shape
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(nb):
+        rate = 0.0
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    rho = 0.0
+                    phi = 0.0
+                    c2max = 0.0
+                    for k in range(nmat):
+                        a = alpha[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        rho += ar
+                        phi += a
+                        if a > ALPHA_MIN and ar > 0.0:
+                            rk = ar / a
+                            pk, c2k, flag = pressure_sound_speed(
+                                eos_kind[k], eos_params[k], eos_table, rk, arhoe[b, k, ix, iy, iz] / ar)
+                            c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
+                            if c2k > c2max:
+                                c2max = c2k
+                    if rho <= 0.0 or phi < PHI_VOID:
+                        continue
+                    c = np.sqrt(c2max)
+                    for d in range(ndim):
+                        r = (abs(mom[b, d, ix, iy, iz]) / rho + c) / block_dx[b, d]
+                        if r > rate:
+                            rate = r
+        out[b] = rate
+
+
+@njit(cache=True, parallel=True)
+def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_modulus,
+                        pressure, sound_speed, specific_energy, temp):
+    """Interior-cell mixture thermodynamics into ``(NB, nx, ny, nz)`` outputs.
+
+    pressure = sum_k alpha_k p_k (Pa); sound_speed = max_k c_k (m/s);
+    specific_energy = sum_k alpha_k rho_k e_k / rho (J/kg); temp = sum_k alpha_k rho_k T_k / rho (K).
+    Void cells get zeros.
+    """
+    nb, nmat, nx, ny, nz = alpha.shape
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(nb):
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    rho = 0.0
+                    p = 0.0
+                    c2max = 0.0
+                    esum = 0.0
+                    tsum = 0.0
+                    for k in range(nmat):
+                        a = alpha[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        rho += ar
+                        if a > ALPHA_MIN and ar > 0.0:
+                            rk = ar / a
+                            ek = arhoe[b, k, ix, iy, iz] / ar
+                            pk, c2k, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                            c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
+                            p += a * pk
+                            if c2k > c2max:
+                                c2max = c2k
+                            esum += ar * ek
+                            tsum += ar * temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                    jx = ix - gx
+                    jy = iy - gy
+                    jz = iz - gz
+                    pressure[b, jx, jy, jz] = p
+                    sound_speed[b, jx, jy, jz] = np.sqrt(c2max)
+                    specific_energy[b, jx, jy, jz] = esum / rho if rho > 0.0 else 0.0
+                    temp[b, jx, jy, jz] = tsum / rho if rho > 0.0 else 0.0

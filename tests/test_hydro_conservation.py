@@ -1,0 +1,76 @@
+"""Conservation in closed and periodic boxes, and a cylindrical state at rest."""
+
+import numpy as np
+import pytest
+
+from impactpipe.hydro import BlockMesh, HydroState, Simulation
+from impactpipe.hydro.eos import pack_eos
+
+GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
+HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
+
+
+def _smooth_2d_state(mesh, eos, nmat=1):
+    c = mesh.cell_centers()
+    x, y = c[:, 0], c[:, 1]
+    state = HydroState.empty(mesh, nmat)
+    rho = 1.0 + 0.3 * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y)
+    p = 1.0 + 0.5 * np.exp(-((x - 0.4) ** 2 + (y - 0.6) ** 2) / 0.01)
+    vel = np.stack([0.3 + 0.2 * np.sin(2 * np.pi * y), -0.1 + 0.2 * np.cos(2 * np.pi * x), np.zeros_like(x)], axis=1)
+    state.set_material(mesh, 1.0, 0, eos, rho, vel, pressure=p)
+    if nmat == 2:
+        blob = ((x - 0.5) ** 2 + (y - 0.5) ** 2) < 0.06
+        state.set_material(mesh, blob.astype(float), 1, eos, 20.0 * rho, vel, pressure=p)
+    return state
+
+
+@pytest.mark.parametrize("nmat", [1, 2])
+def test_periodic_box_conserves_mass_momentum_energy(nmat):
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [32, 32], [("periodic", "periodic")] * 2, 16)
+    specs = [GAS, HEAVY][:nmat]
+    eos = pack_eos(specs)
+    sim = Simulation(mesh, ["a", "b"][:nmat], specs, _smooth_2d_state(mesh, eos, nmat))
+    start = sim.totals()
+    sim.run(100.0, max_steps=1000)
+    assert sim.step_count == 1000
+    end = sim.totals()
+    assert np.allclose(end["material_mass"], start["material_mass"], rtol=1e-12, atol=0)
+    scale = start["energy"]
+    assert np.abs(end["momentum"] - start["momentum"]).max() < 1e-12 * scale
+    added = sim.floor_amounts["energy_added_by_floors"] - sim.floor_amounts["energy_removed_by_void_cleanup"]
+    assert abs(end["energy"] - start["energy"] - added) < 1e-12 * scale
+    assert sim.floor_amounts["mass_added_by_floors"] < 1e-14 * start["mass"]
+
+
+def test_reflecting_box_conserves_mass_and_energy():
+    mesh = BlockMesh.uniform("3d", [0, 0, 0], [1, 1, 1], [16, 16, 16], [("reflecting", "reflecting")] * 3, 8)
+    eos = pack_eos([GAS])
+    state = HydroState.empty(mesh, 1)
+    c = mesh.cell_centers()
+    r2 = ((c - 0.3) ** 2).sum(axis=1)
+    state.set_material(mesh, 1.0, 0, eos, 1.0, np.zeros(3), pressure=1.0 + 10.0 * np.exp(-r2 / 0.02))
+    sim = Simulation(mesh, ["gas"], [GAS], state)
+    start = sim.totals()
+    sim.run(10.0, max_steps=300)
+    end = sim.totals()
+    assert end["mass"] == pytest.approx(start["mass"], rel=1e-12)
+    assert end["energy"] == pytest.approx(start["energy"], rel=1e-12)
+    assert end["outflow_mass"] == 0.0 and end["outflow_energy"] == 0.0
+    # walls push: the momentum change equals the recorded wall impulse
+    assert np.abs(end["momentum_with_outflow"] - start["momentum"]).max() < 1e-12 * start["energy"]
+
+
+@pytest.mark.parametrize("boundary", ["reflecting", "outflow"])
+def test_cylindrical_uniform_state_at_rest_stays_at_rest(boundary):
+    mesh = BlockMesh.uniform("2d-cylindrical", [0, 0], [1, 1], [32, 32],
+                             [("reflecting", boundary), (boundary, boundary)], 16)
+    eos = pack_eos([GAS])
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, 1.0, 0, eos, 1.0, np.zeros(3), pressure=1.0e5)
+    sim = Simulation(mesh, ["gas"], [GAS], state)
+    sim.run(1.0, max_steps=200)
+    snap = sim.snapshot()
+    c = np.sqrt(1.4e5)
+    assert np.abs(snap.velocity).max() < 1e-12 * c
+    assert np.abs(snap.pressure / 1.0e5 - 1.0).max() < 1e-12
+    assert np.abs(snap.density - 1.0).max() < 1e-12

@@ -1,0 +1,49 @@
+"""Block mesh: neighbour table, ghost filling and cell geometry."""
+
+import numpy as np
+import pytest
+
+from impactpipe.hydro.boundary import fill_ghosts
+from impactpipe.hydro.mesh import GHOST, OUTFLOW, REFLECTING, BlockMesh
+
+
+def test_neighbour_table_2d_periodic_and_walls():
+    boundaries = [("periodic", "periodic"), ("reflecting", "outflow")]
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 2], [32, 64], boundaries, 16)
+    assert mesh.nblocks == 2 * 4
+    # block 0 (ix=0, iy=0): x-low wraps to block 1, y-low is a wall, y-high is block 2
+    assert mesh.neighbor[0, 0, 0] == 1 and mesh.neighbor[0, 0, 1] == 1
+    assert mesh.neighbor[0, 1, 0] == REFLECTING and mesh.neighbor[0, 1, 1] == 2
+    assert mesh.neighbor[7, 1, 1] == OUTFLOW
+    assert mesh.padded_shape == (16 + 2 * GHOST, 16 + 2 * GHOST, 1)
+
+
+def test_cell_volumes_cylindrical_sum_to_cylinder():
+    mesh = BlockMesh.uniform("2d-cylindrical", [0, -1], [2, 3], [32, 64], [("reflecting", "outflow")] * 2, 16)
+    assert mesh.cell_volumes().sum() == pytest.approx(np.pi * 2**2 * 4, rel=1e-13)
+
+
+def test_ghost_fill_kinds_along_x():
+    mesh = BlockMesh.uniform("1d-planar", [0], [1], [16], [("reflecting", "outflow")], 8)
+    field = np.zeros((2, 2) + mesh.padded_shape)
+    interior = mesh.interior(field)
+    interior[:, 0, :, 0, 0] = np.arange(16).reshape(2, 8) + 1.0
+    interior[:, 1] = interior[:, 0]
+    fill_ghosts(field, mesh.neighbor, 0, GHOST, 1)
+    g = GHOST
+    # block 0 low side: mirror with the flipped component negated
+    assert field[0, 0, g - 1, 0, 0] == 1.0 and field[0, 0, g - 2, 0, 0] == 2.0
+    assert field[0, 1, g - 1, 0, 0] == -1.0
+    # between blocks: copies of the neighbour's interior
+    assert field[0, 0, g + 8, 0, 0] == 9.0 and field[1, 0, g - 1, 0, 0] == 8.0
+    # block 1 high side: outflow, zero gradient
+    assert field[1, 0, g + 8, 0, 0] == 16.0 and field[1, 0, g + 9, 0, 0] == 16.0
+
+
+def test_bad_mesh_inputs_raise():
+    with pytest.raises(ValueError, match="multiple"):
+        BlockMesh.uniform("1d-planar", [0], [1], [20], [("outflow", "outflow")], 8)
+    with pytest.raises(ValueError, match="periodic"):
+        BlockMesh.uniform("1d-planar", [0], [1], [16], [("periodic", "outflow")], 8)
+    with pytest.raises(ValueError, match="axis"):
+        BlockMesh.uniform("2d-cylindrical", [0, 0], [1, 1], [16, 16], [("outflow", "outflow")] * 2, 16)
