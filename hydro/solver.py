@@ -72,11 +72,17 @@ class Simulation:
         cfl: Courant number (0 < cfl <= 0.5 for the split scheme with HLLC, default 0.4).
         shear_modulus: (M,) shear modulus per material (Pa) for the signal speed; zeros
             for strengthless materials.
+        tensile_strength: (M,) tensile strength Y_T per material (Pa): the most tension a
+            material holds before it fails and opens void; zeros (no tension) by default.
         time: initial time (s).
+        tracers: Lagrangian tracers carried with the flow, or None.  Any object with
+            ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
+            ``save(h5group)`` (see :mod:`impactpipe.hydro.tracers`).
     """
 
     def __init__(self, mesh: BlockMesh, material_names: list[str], eos_specs: list[dict], state: HydroState,
-                 cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0):
+                 cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0,
+                 tracers=None, tensile_strength: Iterable[float] | None = None):
         if not 0.0 < cfl <= 1.0:
             raise ValueError(f"cfl must be in (0, 1], got {cfl}")
         if len(material_names) != state.nmat or len(eos_specs) != state.nmat:
@@ -88,7 +94,12 @@ class Simulation:
         self.state = state
         self.cfl = float(cfl)
         self.shear_modulus = np.zeros(state.nmat) if shear_modulus is None else np.asarray(shear_modulus, float)
+        self.tensile_strength = (np.zeros(state.nmat) if tensile_strength is None
+                                 else np.asarray(tensile_strength, float))
+        if self.tensile_strength.shape != (state.nmat,) or (self.tensile_strength < 0).any():
+            raise ValueError(f"tensile_strength must be {state.nmat} values >= 0 (Pa)")
         self.time = float(time)
+        self.tracers = tracers
         self.step_count = 0
         self.cell_updates = 0
         self.dt_first: float | None = None
@@ -129,6 +140,8 @@ class Simulation:
                                self.time, -1, None, {})
         dt = min(dt, dt_max)
         self._save_good()
+        if self.tracers is not None:
+            self.tracers.before_step(self)
         axes = list(range(self.mesh.ndim))
         if self.step_count % 2:
             axes.reverse()
@@ -137,7 +150,8 @@ class Simulation:
             fill_state_ghosts(st, self.mesh, axis)
             sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.momentum, st.energy,
                   self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.eos.kind, self.eos.params,
-                  self.eos.table, self.shear_modulus, self._scratch, self.boundary, self.floors, self.amounts,
+                  self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary,
+                  self.floors, self.amounts,
                   self._failure)
             if self._failure[:, 0].any():
                 self._raise_sweep_failure()
@@ -145,6 +159,8 @@ class Simulation:
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
         self.last_dt = dt
+        if self.tracers is not None:
+            self.tracers.after_step(self, dt)
         return dt
 
     def run(self, end_time: float, output_times: Iterable[float] = (), on_output: Callable | None = None,
@@ -189,6 +205,8 @@ class Simulation:
             np.copyto(dst, src)
         self.time, self.step_count, self.cell_updates = self._good_clock
         self._failure[:] = 0
+        if self.tracers is not None:
+            self.tracers.restore_good()
 
     def _raise_sweep_failure(self) -> None:
         b = int(np.argmax(self._failure[:, 0] != 0))
@@ -299,6 +317,9 @@ class Simulation:
                 ctr.create_dataset("floors", data=self.floors)
                 ctr.create_dataset("amounts", data=self.amounts)
                 ctr.create_dataset("shear_modulus", data=self.shear_modulus)
+                ctr.create_dataset("tensile_strength", data=self.tensile_strength)
+                if self.tracers is not None:
+                    self.tracers.save(fh.create_group("tracers"))
 
     @classmethod
     def from_checkpoint(cls, path: str | Path) -> "Simulation":
@@ -308,6 +329,7 @@ class Simulation:
             state = HydroState(**{name: fh["state"][name][()] for name in FIELDS})
             sim = cls(mesh, json.loads(fh.attrs["material_names"]), json.loads(fh.attrs["eos_specs"]), state,
                       cfl=float(fh.attrs["cfl"]), shear_modulus=fh["counters/shear_modulus"][()],
+                      tensile_strength=fh["counters/tensile_strength"][()],
                       time=float(fh.attrs["time"]))
             sim.step_count = int(fh.attrs["step_count"])
             sim.cell_updates = int(fh.attrs["cell_updates"])
@@ -316,4 +338,8 @@ class Simulation:
             sim.boundary[:] = fh["counters/boundary"][()]
             sim.floors[:] = fh["counters/floors"][()]
             sim.amounts[:] = fh["counters/amounts"][()]
+            if "tracers" in fh:
+                from impactpipe.hydro.tracers import Tracers
+
+                sim.tracers = Tracers.load(fh["tracers"])
         return sim

@@ -70,6 +70,15 @@ TENSION_TOLERANCE = 1.0e-3
 FULL_TOLERANCE = 1.0e-8
 #: A mixture density below -FAIL_NEGATIVE_FRACTION * (previous density) is a failure.
 FAIL_NEGATIVE_FRACTION = 1.0e-3
+#: A cell whose material nearly all left in a sweep (new density below EMPTIED_FRACTION
+#: times the old, and volume fraction below PHI_VOID) holds only round-off residue of
+#: the fluxes; it becomes void and the residue's mass, momentum and energy are counted.
+EMPTIED_FRACTION = 1.0e-8
+#: In a cell filled below PHI_SMALL the velocity may not exceed the fastest speed of the
+#: material around it (the pencil neighbours and the face speeds): momentum residues of
+#: the fluxes would otherwise give the small mass an unbounded velocity.  The momentum
+#: and kinetic energy removed are counted.
+PHI_SMALL = 1.0e-3
 
 # Floor counter slots (``floors[NB, NFLOOR]``).
 FLOOR_ALPHA = 0
@@ -78,17 +87,26 @@ FLOOR_INTERNAL_ENERGY = 2
 FLOOR_VOID_CLEANUP = 3
 FLOOR_FIRST_ORDER = 4
 FLOOR_EOS_CLAMP = 5
-NFLOOR = 6
+FLOOR_VELOCITY_LIMIT = 6
+FLOOR_TENSILE_LIMIT = 7
+NFLOOR = 8
 FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
-               "void_cleanup", "first_order_fallback", "eos_clamp")
+               "void_cleanup", "first_order_fallback", "eos_clamp", "small_cell_velocity_limit",
+               "tensile_limit")
 # Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
 AMOUNT_MASS_FLOOR = 0
 AMOUNT_ENERGY_FLOOR = 1
 AMOUNT_ENERGY_RECONCILED = 2
 AMOUNT_ENERGY_VOID = 3
-NAMOUNT = 4
+AMOUNT_MASS_VOID = 4
+AMOUNT_MOMENTUM_VOID = 5
+AMOUNT_MOMENTUM_LIMITER = 6
+AMOUNT_ENERGY_LIMITER = 7
+NAMOUNT = 8
 AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
-                "energy_removed_by_void_cleanup")
+                "energy_removed_by_void_cleanup", "mass_removed_by_void_cleanup",
+                "momentum_removed_by_void_cleanup", "momentum_removed_by_velocity_limit",
+                "energy_removed_by_velocity_limit")
 # Boundary counter slots (``boundary[NB, 5 + M]``): what left the domain (kg, kg m/s, J).
 BND_MASS = 0
 BND_MOMENTUM = 1
@@ -130,7 +148,8 @@ def _cell_index(axis, i, j1, j2):
 
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_dx, neighbor,
-          eos_kind, eos_params, eos_table, shear_modulus, scratch, boundary, floors, amounts, failure):
+          eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary, floors, amounts,
+          failure):
     """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -213,6 +232,10 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                             pk, c2k, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
                             if flag != 0 and i >= g and i < g + n:
                                 floors[b, FLOOR_EOS_CLAMP] += 1
+                            if pk < -tensile_strength[k]:
+                                pk = -tensile_strength[k]
+                                if i >= g and i < g + n:
+                                    floors[b, FLOOR_TENSILE_LIMIT] += 1
                             sc[row + 4, i] = rk * c2k
                             c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
                             p += a * pk
@@ -270,7 +293,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                 for i in range(g, g + n):
                     ix, iy, iz = _cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
-                                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure)
+                                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
+                                 tensile_strength)
 
 
 @njit(cache=True, inline="always")
@@ -401,11 +425,17 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
             af = 1.0
         if af * flow > a_donor:
             af = a_donor / flow
-        mk = af * sc[krow + qrow + 1, donor] * chi * s
+        if a_donor < 1.0 - FULL_TOLERANCE:
+            # mixed or partly void donor: the material leaves at its cell-average density and
+            # energy, so transported material is neither diluted nor compressed by the flux
+            mk = af * sc[row + 1, donor] * s
+            ek = sc[row + 2, donor]
+        else:
+            mk = af * sc[krow + qrow + 1, donor] * chi * s
+            ek = sc[krow + qrow + 2, donor]
         mcap = a_donor * sc[row + 1, donor] / (dt * iv_donor)
         if abs(mk) > mcap:
             mk = mcap if mk > 0.0 else -mcap
-        ek = sc[krow + qrow + 2, donor]
         sc[frow, f] = af * s
         sc[frow + 1, f] = mk
         sc[frow + 2, f] = mk * ek
@@ -423,8 +453,13 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
 
 @njit(cache=True, inline="always")
 def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
-                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure):
-    """Flux-form update of cell i with volume closure, energy reconciliation and floors."""
+                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure, tensile_strength):
+    """Flux-form update of cell i with volume closure, energy reconciliation and floors.
+
+    A material at its tensile limit (pressure <= -Y_T, Y_T = ``tensile_strength[k]``) does
+    not share the expansion of a full cell: the cell opens void instead (tensile failure
+    by void insertion, as CTH does), so no material is stretched beyond its strength.
+    """
     wl = dt * sc[W_IVL, i]
     wr = dt * sc[W_IVR, i]
     vol = sc[W_VOL, i]
@@ -457,7 +492,7 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         work_pressure = sc[row + 3, i]
         if asum > 1.0:
             a_new = a_flux / asum
-        elif dv > 0.0 and full:
+        elif dv > 0.0 and full and sc[row + 3, i] > -tensile_strength[k]:
             a_new = a_flux + sc[row, i] * dv
         elif relax > 0.0 and sc[row + 3, i] > 0.0 and sc[row + 4, i] > 0.0:
             a_new = a_flux * (1.0 + relax * sc[row + 3, i] / sc[row + 4, i])
@@ -499,18 +534,46 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             arho[b, k, ix, iy, iz] = 0.0
             ar = 0.0
         rho += ar
-    if rho <= 0.0:
-        if e_tot != 0.0 or mn != 0.0 or m1 != 0.0 or m2 != 0.0:
+    phi_new = 0.0
+    for k in range(nmat):
+        phi_new += alpha[b, k, ix, iy, iz]
+    if rho <= 0.0 or (phi_new < PHI_VOID and rho < EMPTIED_FRACTION * rho_old):
+        if rho > 0.0 or e_tot != 0.0 or mn != 0.0 or m1 != 0.0 or m2 != 0.0:
             floors[b, FLOOR_VOID_CLEANUP] += 1
             amounts[b, AMOUNT_ENERGY_VOID] += e_tot * vol
+            amounts[b, AMOUNT_MASS_VOID] += rho * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID] += np.sqrt(mn * mn + m1 * m1 + m2 * m2) * vol
         for k in range(nmat):
             alpha[b, k, ix, iy, iz] = 0.0
+            arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
         mom[b, axis, ix, iy, iz] = 0.0
         mom[b, t1, ix, iy, iz] = 0.0
         mom[b, t2, ix, iy, iz] = 0.0
         energy[b, 0, ix, iy, iz] = 0.0
         return
+    if phi_new < PHI_SMALL:
+        vmax = max(abs(sc[f_row + F_S, fl]), abs(sc[f_row + F_S, fr]))
+        for j in range(i - 1, i + 2):
+            vj = np.sqrt(sc[W_UN, j] ** 2 + sc[W_UT1, j] ** 2 + sc[W_UT2, j] ** 2)
+            if vj > vmax:
+                vmax = vj
+        m_abs = np.sqrt(mn * mn + m1 * m1 + m2 * m2)
+        if m_abs > vmax * rho:
+            # the excess momentum is a flux residue, so is any kinetic energy it implies: keep
+            # the materials' internal energies and rebuild the total energy around them
+            scale = vmax * rho / m_abs
+            mn *= scale
+            m1 *= scale
+            m2 *= scale
+            esum = 0.0
+            for k in range(nmat):
+                esum += max(arhoe[b, k, ix, iy, iz], 0.0)
+            e_new = esum + 0.5 * m_abs * m_abs * scale * scale / rho
+            floors[b, FLOOR_VELOCITY_LIMIT] += 1
+            amounts[b, AMOUNT_MOMENTUM_LIMITER] += m_abs * (1.0 - scale) * vol
+            amounts[b, AMOUNT_ENERGY_LIMITER] += (e_tot - e_new) * vol
+            e_tot = e_new
     # reconcile material internal energies with the conserved total energy
     kinetic = 0.5 * (mn * mn + m1 * m1 + m2 * m2) / rho
     e_int = e_tot - kinetic
@@ -519,9 +582,15 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         esum += arhoe[b, k, ix, iy, iz]
     delta = (e_int - esum) / rho
     amounts[b, AMOUNT_ENERGY_RECONCILED] += abs(e_int - esum) * vol
+    # a gain is shared by mass; a loss by internal energy, so cold material is not driven
+    # below zero while the cell as a whole still has internal energy to give
+    shrink = e_int / esum if (delta < 0.0 and esum > 0.0 and e_int >= 0.0) else -1.0
     added = 0.0
     for k in range(nmat):
-        ae = arhoe[b, k, ix, iy, iz] + delta * arho[b, k, ix, iy, iz]
+        if shrink >= 0.0:
+            ae = arhoe[b, k, ix, iy, iz] * shrink
+        else:
+            ae = arhoe[b, k, ix, iy, iz] + delta * arho[b, k, ix, iy, iz]
         if ae < 0.0:
             added -= ae
             ae = 0.0

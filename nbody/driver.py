@@ -58,7 +58,7 @@ from .simulation import G, build_simulation, collision_time_step, dynamical_time
 
 log = logging.getLogger(__name__)
 
-ESCAPE_CHECK_FRACTION = 0.5   # escape test beyond this fraction of the box half-width
+ESCAPE_RADIUS_FACTOR = 2.0    # escape test beyond this many initial cloud extents from the centre of mass
 BOX_GUARD_FRACTION = 0.9      # particles beyond this fraction are removed (left_box)
 CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
@@ -214,6 +214,7 @@ class _Run:
         v_com = weighted_mean(m, v)
         extent = float(np.max(np.linalg.norm(x - x_com, axis=1) + r))
         self.box_half_width = self.params["box_factor"] * extent
+        self.escape_radius = ESCAPE_RADIUS_FACTOR * extent
         self.origin_ref = x_com
         self.frame_velocity = v_com
         self.t_ref = 0.0
@@ -244,6 +245,7 @@ class _Run:
         self.resolver.params[3] = meta["contact_energy_added"]
         self.parent[:] = arrays["parent"]
         self.box_half_width = meta["box_half_width"]
+        self.escape_radius = meta["escape_radius"]
         self.origin_ref = np.array(meta["origin_ref"])
         self.frame_velocity = np.array(meta["frame_velocity"])
         self.t_ref = meta["t_ref"]
@@ -285,7 +287,8 @@ class _Run:
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
             "n_separating": int(self.resolver.ctx[CTX_N_SEPARATING]),
             "contact_energy_added": float(self.resolver.params[3]),
-            "box_half_width": self.box_half_width, "origin_ref": self.origin_ref.tolist(),
+            "box_half_width": self.box_half_width, "escape_radius": self.escape_radius,
+            "origin_ref": self.origin_ref.tolist(),
             "frame_velocity": self.frame_velocity.tolist(), "t_ref": self.t_ref,
             "next_output": self.next_output, "next_archive": self.next_archive,
         }
@@ -348,7 +351,7 @@ class _Run:
             for k in rows:
                 self._record_escape(self.last_slots[k], self.last_m[k], self.last_x[k] + self.last_origin,
                                     self.last_v[k] + self.last_frame_velocity, self.last_t, LOST)
-        esc = dg.escaping(x, v, m, ESCAPE_CHECK_FRACTION * self.box_half_width)
+        esc = dg.escaping(x, v, m, self.escape_radius)
         guard = (np.linalg.norm(x, axis=1) > BOX_GUARD_FRACTION * self.box_half_width) & ~esc
         if guard.any():
             log.warning("%d bound particle(s) reached %.2f of the box half-width at t = %.6g s; "
@@ -394,8 +397,9 @@ class _Run:
         dt = collision_time_step(m, r, v, bulk_density=self.params["bulk_density"],
                                  steps_per_dynamical_time=self.params["steps_per_dynamical_time"],
                                  collision_step_fraction=self.params["collision_step_fraction"])
-        if dt < self.sim.dt:
-            log.info("time step reduced from %.4g s to %.4g s at t = %.6g s", self.sim.dt, dt, self.sim.t)
+        if dt < self.sim.dt or dt > 2.0 * self.sim.dt:
+            log.info("time step %s from %.4g s to %.4g s at t = %.6g s",
+                     "reduced" if dt < self.sim.dt else "raised", self.sim.dt, dt, self.sim.t)
             self.sim.dt = dt
 
     # --- diagnostics and result ----------------------------------------------------------

@@ -17,7 +17,7 @@ import numpy as np
 
 from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS, BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import material_list, merged, new_simulation, tensile_strengths
 from impactpipe.hydro.state import HydroState
 
 DEFAULTS = {
@@ -80,4 +80,5 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         frac = sphere_fraction(mesh, z_center, body["radius"], p["subsamples"])
         state.set_material(mesh, frac, k, eos, rho0, np.array([0.0, vz, 0.0]), specific_energy=0.0)
-    return new_simulation(mesh, names, specs, state, cfl)
+    strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
+    return new_simulation(mesh, names, specs, state, cfl, strengths)

@@ -14,7 +14,7 @@ import numpy as np
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import material_list, merged, new_simulation, tensile_strengths
 from impactpipe.hydro.state import HydroState
 
 DEFAULTS = {
@@ -58,4 +58,4 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         k = names.index(plate["material"])
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         state.set_material(mesh, frac, k, eos, rho0, np.array([speed, 0.0, 0.0]), specific_energy=0.0)
-    return new_simulation(mesh, names, specs, state, cfl)
+    return new_simulation(mesh, names, specs, state, cfl, tensile_strengths(materials, names))
