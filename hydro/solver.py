@@ -271,7 +271,7 @@ class Simulation:
         eint = np.zeros(shape)
         temp = np.zeros(shape)
         cell_thermodynamics(st.alpha, st.arho, st.arhoe, self.eos.kind, self.eos.params, self.eos.table,
-                            self.shear_modulus, pressure, sound, eint, temp)
+                            self.shear_modulus, self.tensile_strength, pressure, sound, eint, temp)
         arho = mesh.interior(st.arho).copy()
         rho = arho.sum(axis=1)
         safe = np.where(rho > 0.0, rho, 1.0)

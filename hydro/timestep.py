@@ -76,11 +76,12 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
 
 
 @njit(cache=True, parallel=True)
-def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_modulus,
+def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
                         pressure, sound_speed, specific_energy, temp):
     """Interior-cell mixture thermodynamics into ``(NB, nx, ny, nz)`` outputs.
 
-    pressure = sum_k alpha_k p_k (Pa); sound_speed = max_k c_k (m/s);
+    pressure = sum_k alpha_k max(p_k, -Y_T,k) (Pa), the material pressures limited by the
+    tensile strengths as in the sweeps; sound_speed = max_k c_k (m/s);
     specific_energy = sum_k alpha_k rho_k e_k / rho (J/kg); temp = sum_k alpha_k rho_k T_k / rho (K).
     Void cells get zeros.
     """
@@ -106,7 +107,7 @@ def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, she
                             ek = arhoe[b, k, ix, iy, iz] / ar
                             pk, c2k, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
                             c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
-                            p += a * pk
+                            p += a * max(pk, -tensile_strength[k])
                             if c2k > c2max:
                                 c2max = c2k
                             esum += ar * ek
