@@ -131,7 +131,11 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     checkpoint.unlink(missing_ok=True)
     log.info("hydro: %d steps, %.3g cell-updates, %.3g cell-updates/s", sim.step_count, sim.cell_updates,
              sim.cell_updates / max(wall, 1e-9))
+    warnings = derived.physics_warnings(values)
+    for message in warnings:
+        log.warning("hydro: %s", message)
     return {
+        "physics_not_modelled": warnings,
         "hydro_budget": budget,
         "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts},
     }

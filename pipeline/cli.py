@@ -42,6 +42,8 @@ def _load_or_exit(path: str):
         for message in errors:
             click.echo(f"{path}: {message}", err=True)
         sys.exit(2)
+    for message in derived.physics_warnings(values):
+        click.echo(f"{path}: warning: {message}", err=True)
     return config, values
 
 
@@ -184,18 +186,26 @@ def analyze_cmd(run_dir: str, verbose: int, quiet: bool) -> None:
                 type=click.Path(file_okay=False, exists=True))
 @click.option("--by", "by", type=click.Choice(["velocity", "projectile_radius"]), default="velocity",
               show_default=True, help="The variable the runs differ in (gives the critical value).")
+@click.option("--common-velocity", type=float, help="Also give Q*_D moved to this impact speed (m/s) with mu.")
+@click.option("--mu", type=float, default=0.45, show_default=True, help="Point-source coupling exponent.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=".", show_default=True,
-              help="Directory for qstar.csv and qstar.png.")
-def qstar_cmd(run_dirs: tuple[str, ...], by: str, out_dir: str) -> None:
-    """Fit Q*_D over finished runs: weighted line of M_lr/M_T against Q, crossing 0.5."""
+              help="Directory for the tables and figures.")
+def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None, mu: float, out_dir: str) -> None:
+    """Fit Q*_D over finished runs: weighted line of M_lr/M_T against Q, crossing 0.5.
+
+    Runs are grouped by target radius; each group gets its fit, table and figure (with the
+    published laws for comparison); five or more target radii also get the fit of
+    Q*_D(R) = q_b R^alpha + rho q_g R^beta.
+    """
     import numpy as np
 
+    from impactpipe.analysis.energies import comparison_laws, fit_qstar_size_law, scale_qstar_to_velocity
     from impactpipe.analysis.plots import plot_qstar
     from impactpipe.analysis.qstar import fit_qstar, write_qstar_table
 
     from .stages import read_summary
 
-    q, mlr, n_lr, swept, labels = [], [], [], [], []
+    runs = []
     for run_dir in run_dirs:
         summary = read_summary(run_dir)
         missing = [k for k in ("Q", "M_lr_over_M_T", "N_lr") if k not in summary]
@@ -203,27 +213,51 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, out_dir: str) -> None:
             click.echo(f"{run_dir}: summary.json lacks {', '.join(missing)} (has the analysis stage run?)", err=True)
             sys.exit(2)
         config = _load_run_config(run_dir)
-        q.append(summary["Q"])
-        mlr.append(summary["M_lr_over_M_T"])
-        n_lr.append(summary["N_lr"])
-        swept.append(config.scene.impact.velocity if by == "velocity" else config.scene.projectile.radius)
-        labels.append(Path(run_dir).name)
-    kwargs = {by: np.array(swept)}
-    try:
-        fit = fit_qstar(np.array(q), np.array(mlr), np.array(n_lr), **kwargs)
-    except ValueError as exc:
-        click.echo(f"error: {exc}", err=True)
-        sys.exit(1)
+        values = derived.derive(config)
+        runs.append({"dir": Path(run_dir), "summary": summary, "config": config, "values": values})
+    groups: dict[float, list[dict]] = {}
+    for run in runs:
+        groups.setdefault(run["config"].scene.target.radius, []).append(run)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    write_qstar_table(out / "qstar.csv", np.array(q), np.array(mlr), np.array(n_lr), fit, labels=labels, **kwargs)
-    plot_qstar(out / "qstar.png", np.array(q), np.array(mlr), np.array(n_lr), fit)
-    click.echo(f"Q*_D = {fit.qstar:.4g} +- {fit.qstar_err:.2g} J/kg from {int(np.sum(fit.used))} of {len(q)} runs")
-    critical = fit.critical_velocity if by == "velocity" else fit.critical_radius
-    critical_err = fit.critical_velocity_err if by == "velocity" else fit.critical_radius_err
-    unit = "m/s" if by == "velocity" else "m"
-    click.echo(f"critical {by.replace('_', ' ')} = {critical:.4g} +- {critical_err:.2g} {unit}")
-    click.echo(f"slope of M_lr/M_T against Q/Q*_D = {fit.normalized_slope:.3f} +- {fit.normalized_slope_err:.2g}")
-    if not fit.brackets:
-        click.echo("warning: the runs do not bracket M_lr/M_T = 0.5; Q*_D is an extrapolation", err=True)
-    click.echo(f"wrote {out / 'qstar.csv'} and {out / 'qstar.png'}")
+    sizes = []
+    for radius, group in sorted(groups.items()):
+        suffix = "" if len(groups) == 1 else f"_R{radius:g}"
+        q = np.array([r["summary"]["Q"] for r in group])
+        mlr = np.array([r["summary"]["M_lr_over_M_T"] for r in group])
+        n_lr = np.array([r["summary"]["N_lr"] for r in group])
+        swept = np.array([r["config"].scene.impact.velocity if by == "velocity" else r["config"].scene.projectile.radius
+                          for r in group])
+        try:
+            fit = fit_qstar(q, mlr, n_lr, **{by: swept})
+        except ValueError as exc:
+            click.echo(f"R_T = {radius:g} m: error: {exc}", err=True)
+            sys.exit(1)
+        rho = group[0]["values"]["target_reference_density"]
+        gamma = group[0]["values"]["projectile_mass"] / group[0]["values"]["target_mass"]
+        grid = np.geomspace(min(radius / 10.0, 1.0e2), max(radius * 10.0, 1.0e5), 60)
+        laws = {label: (grid, values) for label, values in comparison_laws(grid, rho, gamma).items()}
+        write_qstar_table(out / f"qstar{suffix}.csv", q, mlr, n_lr, fit, labels=[r["dir"].name for r in group],
+                          **{by: swept})
+        plot_qstar(out / f"qstar{suffix}.png", q, mlr, n_lr, fit, target_radius=radius, comparisons=laws)
+        click.echo(f"R_T = {radius:g} m: Q*_D = {fit.qstar:.4g} +- {fit.qstar_err:.2g} J/kg "
+                   f"from {int(np.sum(fit.used))} of {len(q)} runs")
+        critical = fit.critical_velocity if by == "velocity" else fit.critical_radius
+        critical_err = fit.critical_velocity_err if by == "velocity" else fit.critical_radius_err
+        unit = "m/s" if by == "velocity" else "m"
+        click.echo(f"critical {by.replace('_', ' ')} = {critical:.4g} +- {critical_err:.2g} {unit}")
+        click.echo(f"slope of M_lr/M_T against Q/Q*_D = {fit.normalized_slope:.3f} +- {fit.normalized_slope_err:.2g}")
+        if common_velocity is not None:
+            v_from = critical if by == "velocity" else float(group[0]["config"].scene.impact.velocity)
+            moved = float(scale_qstar_to_velocity(fit.qstar, v_from, common_velocity, mu))
+            click.echo(f"Q*_D at {common_velocity:g} m/s (mu = {mu:g}) = {moved:.4g} J/kg")
+        if not fit.brackets:
+            click.echo("warning: the runs do not bracket M_lr/M_T = 0.5; Q*_D is an extrapolation", err=True)
+        sizes.append((radius, fit.qstar, rho))
+    if len(sizes) >= 5:
+        law = fit_qstar_size_law([s[0] for s in sizes], [s[1] for s in sizes], [s[2] for s in sizes])
+        click.echo(f"Q*_D(R) = {law.q_b:.3g} R^{law.alpha:.3f} + rho {law.q_g:.3g} R^{law.beta:.3f} "
+                   f"(R in m, J/kg; rms log10 residual {law.rms_log10:.3f})")
+    elif len(sizes) > 1:
+        click.echo(f"{len(sizes)} target radii: the size-law fit needs at least 5")
+    click.echo(f"wrote tables and figures to {out}/")

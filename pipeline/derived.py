@@ -105,7 +105,17 @@ def strength_choice(strength: dict[str, Any]) -> dict[str, Any]:
         enabled = strength["Y0"] > 0 or strength["Y_M"] > 0
     if not enabled:
         return {"enabled": False, "rule": f"{model} yield strength is zero everywhere (hydro preset): no strength kernel"}
-    return {"enabled": True, "rule": f"{model} model with non-zero yield strength"}
+    return {"enabled": True, "rule": f"{model} model with non-zero yield strength",
+            "modelled": False,
+            "warning": (f"the {model} yield model is not implemented in the hydro stage of this version: the "
+                        f"material runs strengthless, with only its tensile strength Y_T = "
+                        f"{strength.get('Y_T', 0.0):.3g} Pa applied")}
+
+
+def physics_warnings(values: dict[str, Any]) -> list[str]:
+    """Physics a config asks for that this version does not model, one line each."""
+    return [f"materials.{name}.strength: {choice['warning']}"
+            for name, choice in values.get("strength", {}).items() if "warning" in choice]
 
 
 def self_gravity_choice(setting: bool | str, rho: float, radius: float, strength: dict[str, Any],

@@ -30,12 +30,25 @@ def test_qstar_command_fits_runs(tmp_path):
         runs.append(str(tmp_path / f"v{v:.0f}"))
     result = CliRunner().invoke(main, ["qstar", *runs, "--out", str(tmp_path / "fit")])
     assert result.exit_code == 0, result.output
-    line = next(l for l in result.output.splitlines() if l.startswith("Q*_D"))
-    assert abs(float(line.split()[2]) - QSTAR) / QSTAR < 1e-3
+    line = next(l for l in result.output.splitlines() if "Q*_D =" in l)
+    assert abs(float(line.split("Q*_D = ")[1].split()[0]) - QSTAR) / QSTAR < 1e-3
     v_crit = np.sqrt(2 * QSTAR / (830.0 / 1.0e4) ** 3)
     line = next(l for l in result.output.splitlines() if l.startswith("critical velocity"))
     assert abs(float(line.split()[3]) - v_crit) / v_crit < 1e-3
     assert (tmp_path / "fit" / "qstar.csv").is_file() and (tmp_path / "fit" / "qstar.png").stat().st_size > 0
+
+
+def test_qstar_moves_to_a_common_velocity(tmp_path):
+    runs = []
+    for v in (1500.0, 2000.0, 2500.0, 3000.0):
+        make_run(tmp_path / f"v{v:.0f}", v)
+        runs.append(str(tmp_path / f"v{v:.0f}"))
+    result = CliRunner().invoke(main, ["qstar", *runs, "--out", str(tmp_path / "fit"), "--common-velocity", "5000"])
+    assert result.exit_code == 0, result.output
+    line = next(l for l in result.output.splitlines() if l.startswith("Q*_D at 5000"))
+    v_crit = np.sqrt(2 * QSTAR / (830.0 / 1.0e4) ** 3)
+    expected = QSTAR * (5000.0 / v_crit) ** (2 - 3 * 0.45)
+    assert abs(float(line.split("=")[-1].split()[0]) - expected) / expected < 1e-3
 
 
 def test_qstar_warns_when_runs_do_not_bracket(tmp_path):
