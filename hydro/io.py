@@ -5,6 +5,11 @@ Each snapshot group carries the attributes ``time`` (s), ``geometry`` and
 array, each with a ``units`` attribute (:func:`impactpipe.pipeline.runstore.write_dataset`).
 Extra fields go to ``extra/<name>``; the snapshot contract gives them no units, so they
 are stored with ``units = "unspecified"``.
+
+Tracers go to the group ``/tracers``: one dataset per
+:class:`~impactpipe.hydro.snapshot.TracerSet` field and, when written from a
+:class:`~impactpipe.hydro.tracers.Tracers` with a history, ``history_time`` (K,) and
+``history_position`` (K, N, 3), all with ``units`` attributes.
 """
 
 from __future__ import annotations
@@ -15,10 +20,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.hydro.snapshot import Snapshot, TracerSet
+from impactpipe.hydro.tracers import HISTORY_UNITS, TRACER_UNITS, Tracers
 from impactpipe.pipeline.runstore import write_dataset
 
 SNAPSHOT_GROUP = "snapshots"
+TRACER_GROUP = "tracers"
 
 #: Snapshot array fields with their units and descriptions.
 FIELD_UNITS = {
@@ -88,3 +95,43 @@ def read_snapshot(path: str | Path, index: int = -1) -> Snapshot:
             extra=extra,
             **fields,
         )
+
+
+def write_tracers(h5file: h5py.File, tracers: Tracers | TracerSet) -> None:
+    """Write tracer records into ``/tracers`` of an open file, replacing a previous ``/tracers``.
+
+    ``tracers`` is a :class:`~impactpipe.hydro.tracers.Tracers` (its trajectory history is
+    written too) or a :class:`~impactpipe.hydro.snapshot.TracerSet`.
+    """
+    history = None
+    if isinstance(tracers, Tracers):
+        history = tracers.history
+        tracers = tracers.to_tracer_set()
+    if TRACER_GROUP in h5file:
+        del h5file[TRACER_GROUP]
+    group = h5file.create_group(TRACER_GROUP)
+    for name, (units, description) in TRACER_UNITS.items():
+        write_dataset(group, name, getattr(tracers, name), units, description)
+    if history is not None:
+        for name, values in zip(HISTORY_UNITS, history):
+            write_dataset(group, name, values, *HISTORY_UNITS[name])
+
+
+def read_tracers(path: str | Path) -> TracerSet | None:
+    """The :class:`~impactpipe.hydro.snapshot.TracerSet` in ``/tracers`` of ``path``, or None without one."""
+    with h5py.File(path, "r") as fh:
+        if TRACER_GROUP not in fh:
+            return None
+        group = fh[TRACER_GROUP]
+        fields = {name: np.asarray(group[name][()]) for name in TRACER_UNITS}
+    fields["exited"] = fields["exited"].astype(np.bool_)
+    return TracerSet(**fields)
+
+
+def read_tracer_history(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(times (K,) s, positions (K, N, 3) m) of the tracer trajectories in ``path``, or None without."""
+    with h5py.File(path, "r") as fh:
+        if TRACER_GROUP not in fh or "history_time" not in fh[TRACER_GROUP]:
+            return None
+        group = fh[TRACER_GROUP]
+        return np.asarray(group["history_time"][()]), np.asarray(group["history_position"][()])

@@ -23,9 +23,10 @@ import numpy as np
 from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
-from .io import append_snapshot
+from .io import append_snapshot, write_tracers
 from .problems import PROBLEMS
 from .solver import HydroFailure, Simulation
+from .tracers import Tracers, place_on_rays
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +84,32 @@ def build_simulation(config, values: dict[str, Any]) -> Simulation:
     return PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
 
 
+#: Rays of the 2d-cylindrical tracer layout (the count per ray is hydro.tracers.count / rays).
+TRACER_RAYS = 30
+
+
+def tracers_enabled(config) -> tuple[bool, str]:
+    """(on, why) for tracers: auto turns them on for impacts, whose analysis needs peak pressures."""
+    setting = config.hydro.tracers.enabled
+    if setting != "auto":
+        return bool(setting), "set in the config"
+    if config.scene.problem == "impact":
+        return True, "auto: on for impacts (peak pressures for the shock histories of the analysis)"
+    return False, f"auto: off for the {config.scene.problem} verification problem"
+
+
+def add_tracers(sim: Simulation, config, end_time: float) -> None:
+    """Place the impact scene's tracers (rays from the impact point, plus the projectile)."""
+    scene = config.scene
+    r_t, r_p = scene.target.radius, scene.projectile.radius
+    count = config.hydro.tracers.count
+    rays = min(TRACER_RAYS, max(1, count))
+    positions, materials = place_on_rays((0.0, r_t), r_t, 0.0, n_rays=rays, count=max(count, rays),
+                                         projectile_radius=r_p, projectile_center_z=r_t + r_p)
+    sim.tracers = Tracers(positions, materials, history_interval=config.hydro.tracers.history_interval,
+                          end_time=end_time)
+
+
 def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     """Run the hydro stage for ``ctx.config``; returns its summary entries."""
     started = runstore.utc_now()
@@ -127,6 +154,8 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         f.attrs["cell_updates"] = sim.cell_updates
         f.attrs["steps"] = sim.step_count
         f.attrs["floor_counts"] = json.dumps(sim.floor_counts)
+        if sim.tracers is not None:
+            write_tracers(f, sim.tracers)
     os.replace(work, ctx.path("hydro"))
     checkpoint.unlink(missing_ok=True)
     log.info("hydro: %d steps, %.3g cell-updates, %.3g cell-updates/s", sim.step_count, sim.cell_updates,
@@ -134,7 +163,10 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     warnings = derived.physics_warnings(values)
     for message in warnings:
         log.warning("hydro: %s", message)
+    tracer_summary = ({"count": len(sim.tracers.to_tracer_set()),
+                       "exited": int(sim.tracers.to_tracer_set().exited.sum())} if sim.tracers is not None else None)
     return {
+        "tracers": tracer_summary,
         "physics_not_modelled": warnings,
         "hydro_budget": budget,
         "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts},
@@ -184,6 +216,10 @@ def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: s
     checkpoint.unlink(missing_ok=True)
     work.unlink(missing_ok=True)
     sim = build_simulation(config, values)
+    if tracers_enabled(config)[0]:
+        if config.scene.problem != "impact":
+            raise ValueError("hydro.tracers.enabled: tracers are placed for impact scenes only in this version")
+        add_tracers(sim, config, float(values["end_time"]))
     initial = sim.totals()
     with h5py.File(work, "w") as f:
         f.attrs["stage_hash"] = stage_hash

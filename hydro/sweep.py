@@ -423,8 +423,14 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
         af = ultrabee_face(sc[row, up], a_donor, sc[row, down], nu)
         if af > 1.0:
             af = 1.0
-        if af * flow > a_donor:
-            af = a_donor / flow
+        # a donor cell holding void whose flow diverges loses material through both faces:
+        # each face may take at most half of its content, so together they never overdraw
+        # it (the test uses the donor's own face states, the same in both blocks of a face)
+        share = 1.0
+        if sc[W_PHI, donor] <= 1.0 - FULL_TOLERANCE and sc[qm_row + Q_UN, donor] < 0.0 < sc[qp_row + Q_UN, donor]:
+            share = 0.5
+        if af * flow > share * a_donor:
+            af = share * a_donor / flow
         if a_donor < 1.0 - FULL_TOLERANCE:
             # mixed or partly void donor: the material leaves at its cell-average density and
             # energy, so transported material is neither diluted nor compressed by the flux
@@ -433,7 +439,7 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
         else:
             mk = af * sc[krow + qrow + 1, donor] * chi * s
             ek = sc[krow + qrow + 2, donor]
-        mcap = a_donor * sc[row + 1, donor] / (dt * iv_donor)
+        mcap = share * a_donor * sc[row + 1, donor] / (dt * iv_donor)
         if abs(mk) > mcap:
             mk = mcap if mk > 0.0 else -mcap
         sc[frow, f] = af * s

@@ -62,6 +62,10 @@ def derive(config: Config) -> dict[str, Any]:
     out: dict[str, Any] = {"geometry": geom, "geometry_rule": why}
     materials = config.resolved_materials()
     out["strength"] = {name: strength_choice(mat["strength"]) for name, mat in materials.items()}
+    from impactpipe.hydro.stage import tracers_enabled
+
+    out["tracers"], out["tracers_rule"] = tracers_enabled(config)
+    out["mesh"] = "uniform, one level at the finest cell size (adaptive refinement is not available yet)"
     if config.scene.problem != "impact":
         out["end_time"] = config.scene.end_time
         return out
