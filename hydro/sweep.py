@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed
+from impactpipe.hydro.eos import pressure_sound_speed, reference_density
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
 from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE, hllc_face
@@ -79,6 +79,10 @@ EMPTIED_FRACTION = 1.0e-8
 #: the fluxes would otherwise give the small mass an unbounded velocity.  The momentum
 #: and kinetic energy removed are counted.
 PHI_SMALL = 1.0e-3
+#: Material thinner than DISCARD_FRACTION of its reference density rho0 is discarded from
+#: the cell (as CTH's discard density does): its mass, momentum share and energy are
+#: counted with the void cleanup.  Materials without a reference density (gases) are kept.
+DISCARD_FRACTION = 1.0e-6
 
 # Floor counter slots (``floors[NB, NFLOOR]``).
 FLOOR_ALPHA = 0
@@ -294,7 +298,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                     ix, iy, iz = _cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
-                                 tensile_strength)
+                                 tensile_strength, eos_kind, eos_params, eos_table)
 
 
 @njit(cache=True, inline="always")
@@ -459,7 +463,8 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
 
 @njit(cache=True, inline="always")
 def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
-                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure, tensile_strength):
+                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure, tensile_strength,
+                 eos_kind, eos_params, eos_table):
     """Flux-form update of cell i with volume closure, energy reconciliation and floors.
 
     A material at its tensile limit (pressure <= -Y_T, Y_T = ``tensile_strength[k]``) does
@@ -528,7 +533,9 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         rho += arho[b, k, ix, iy, iz]
     if not (rho == rho and e_tot == e_tot and mn == mn and m1 == m1 and m2 == m2):
         _record_failure(failure, b, FAIL_NAN, ix, iy, iz)
-    elif rho < -FAIL_NEGATIVE_FRACTION * rho_old:
+    elif rho < -FAIL_NEGATIVE_FRACTION * rho_old and sc[W_PHI, i] > PHI_SMALL:
+        # in spray cells (filled below PHI_SMALL) an overdraw is a transport artifact, floored
+        # and counted below; in any fuller cell a negative density is a failure
         _record_failure(failure, b, FAIL_NEGATIVE_DENSITY, ix, iy, iz)
     # floors on partial densities
     rho = 0.0
@@ -540,6 +547,25 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             arho[b, k, ix, iy, iz] = 0.0
             ar = 0.0
         rho += ar
+    for k in range(nmat):
+        ak = alpha[b, k, ix, iy, iz]
+        ark = arho[b, k, ix, iy, iz]
+        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
+        if ark > 0.0 and rho0 > 0.0 and ark < DISCARD_FRACTION * rho0 * ak:
+            share = ark / rho
+            floors[b, FLOOR_VOID_CLEANUP] += 1
+            amounts[b, AMOUNT_MASS_VOID] += ark * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID] += share * np.sqrt(mn * mn + m1 * m1 + m2 * m2) * vol
+            removed = arhoe[b, k, ix, iy, iz] + share * 0.5 * (mn * mn + m1 * m1 + m2 * m2) / rho
+            amounts[b, AMOUNT_ENERGY_VOID] += removed * vol
+            e_tot -= removed
+            mn -= share * mn
+            m1 -= share * m1
+            m2 -= share * m2
+            rho -= ark
+            alpha[b, k, ix, iy, iz] = 0.0
+            arho[b, k, ix, iy, iz] = 0.0
+            arhoe[b, k, ix, iy, iz] = 0.0
     phi_new = 0.0
     for k in range(nmat):
         phi_new += alpha[b, k, ix, iy, iz]
