@@ -121,3 +121,39 @@ def plot_snapshot(path: str | Path, snapshot: Snapshot, field: str, outlines: bo
         fig.savefig(tmp, dpi=150, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
     return path
+
+
+def axis_ray(tracers, impact_point: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(distance from the impact point (m), peak pressure (Pa)) of the target tracers on the
+    ray closest to the symmetry axis (2d-cylindrical tracer layout of place_on_rays)."""
+    r0 = tracers.initial_position[:, 0]
+    z0 = tracers.initial_position[:, 1]
+    dz = impact_point[1] - z0
+    angle = np.arctan2(r0 - impact_point[0], dz)
+    target = (tracers.material == 0) & np.isfinite(tracers.peak_pressure)
+    if not target.any():
+        raise ValueError("no target tracer with a recorded peak pressure")
+    first = angle[target].min()
+    on_ray = target & (angle <= first * (1 + 1e-6) + 1e-12)
+    distance = np.hypot(r0[on_ray] - impact_point[0], dz[on_ray])
+    order = np.argsort(distance)
+    return distance[order], tracers.peak_pressure[on_ray][order]
+
+
+def plot_peak_pressure_along_axis_ray(path: str | Path, tracers, impact_point: tuple[float, float]) -> float:
+    """Log-log figure of peak pressure against distance along the axis ray; returns the
+    least-squares power-law exponent d ln P / d ln r over the ray's far half."""
+    distance, peak = axis_ray(tracers, impact_point)
+    far = distance >= np.median(distance)
+    good = far & (peak > 0)
+    slope = float(np.polyfit(np.log(distance[good]), np.log(peak[good]), 1)[0]) if good.sum() >= 2 else float("nan")
+    fig, ax = plt.subplots(figsize=(6.0, 4.5), constrained_layout=True)
+    ax.loglog(distance, peak, "o-", ms=3, lw=1)
+    ax.set_xlabel("distance from the impact point (m)")
+    ax.set_ylabel("peak pressure (Pa)")
+    ax.set_title(f"tracers on the axis ray; far-half slope {slope:.2f}")
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=150, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return slope

@@ -261,3 +261,46 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     elif len(sizes) > 1:
         click.echo(f"{len(sizes)} target radii: the size-law fit needs at least 5")
     click.echo(f"wrote tables and figures to {out}/")
+
+
+@main.command("plot")
+@click.argument("run_dir", metavar="RUN_DIR", type=click.Path(file_okay=False, exists=True))
+@click.option("--field", default="pressure", show_default=True,
+              help="density, pressure, temperature, specific_internal_energy, sound_speed, speed, volume_fraction")
+@click.option("--time", "at_time", type=float, help="Snapshot time (s); the nearest snapshot is used (default: last).")
+@click.option("--tracers", "tracer_plot", is_flag=True, help="Peak pressure against distance along the tracer ray "
+              "next to the axis, instead of a field slice.")
+@click.option("--out", "out_path", type=click.Path(dir_okay=False), help="Output PNG (default RUN_DIR/plots/...).")
+def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool, out_path: str | None) -> None:
+    """Write a PNG of a hydro snapshot field (with block outlines) or of the tracers' peak pressures."""
+    import h5py
+    import numpy as np
+
+    from impactpipe.hydro.io import read_snapshot, read_tracers
+    from impactpipe.hydro.plots import FIELDS, plot_peak_pressure_along_axis_ray, plot_snapshot
+
+    path = Path(run_dir) / "hydro.h5"
+    if not path.is_file():
+        click.echo(f"{run_dir}: no hydro.h5 (has the hydro stage finished?)", err=True)
+        sys.exit(2)
+    plots = Path(run_dir) / "plots"
+    if tracer_plot:
+        tracers = read_tracers(path)
+        if tracers is None:
+            click.echo(f"{path}: no tracers (hydro.tracers.enabled was off)", err=True)
+            sys.exit(2)
+        config = _load_run_config(run_dir)
+        target = Path(out_path or plots / "tracers_peak_pressure.png")
+        slope = plot_peak_pressure_along_axis_ray(target, tracers, impact_point=(0.0, config.scene.target.radius))
+        click.echo(f"wrote {target}; peak pressure falls with distance as r^{slope:.2f}")
+        return
+    if field not in FIELDS:
+        click.echo(f"--field: unknown field '{field}' (allowed: {', '.join(FIELDS)})", err=True)
+        sys.exit(2)
+    with h5py.File(path, "r") as f:
+        times = np.array([f["snapshots"][name].attrs["time"] for name in sorted(f["snapshots"])])
+    index = len(times) - 1 if at_time is None else int(np.argmin(np.abs(times - at_time)))
+    snapshot = read_snapshot(path, index)
+    target = Path(out_path or plots / f"{field}_t{snapshot.time:.4g}s.png")
+    plot_snapshot(target, snapshot, field)
+    click.echo(f"wrote {target} (snapshot {index}, t = {snapshot.time:.6g} s)")

@@ -72,3 +72,17 @@ def test_rerun_skips_every_finished_stage(quickstart):
     result = CliRunner().invoke(main, ["run", str(QUICKSTART), "--out", str(out), "-q"])
     assert result.exit_code == 0, result.output
     assert json.loads((out / "stages.json").read_text()) == before
+
+
+def test_plot_field_slice_and_tracer_ray(quickstart):
+    out, _ = quickstart
+    result = CliRunner().invoke(main, ["plot", str(out), "--field", "pressure", "--time", "0.5"])
+    assert result.exit_code == 0, result.output
+    png = Path(result.output.split("wrote ")[1].split(" (")[0])
+    assert png.stat().st_size > 10_000
+    result = CliRunner().invoke(main, ["plot", str(out), "--tracers"])
+    assert result.exit_code == 0, result.output
+    slope = float(result.output.split("r^")[1])
+    assert -4.0 < slope < -0.5, "peak pressure must fall with distance from the impact point"
+    result = CliRunner().invoke(main, ["plot", str(out), "--field", "pressur"])
+    assert result.exit_code == 2 and "unknown field" in result.output
