@@ -148,3 +148,24 @@ def test_sweep_with_bad_axis_is_rejected_before_work(tmp_path):
     with pytest.raises(SweepError, match="not a config key"):
         load_sweep(path)
     assert not (tmp_path / "sweep").exists()
+
+
+def test_real_stages_share_one_hydro_run_between_collision_models(tmp_path):
+    """A tiny real impact: merge and conditional merge reuse one hydro and hand-off run."""
+    base = tmp_path / "tiny.yaml"
+    base.write_text((HERE.parent / "configs" / "quickstart.yaml").read_text()
+                    .replace("cells_per_projectile_radius: 4", "cells_per_projectile_radius: 2"))
+    spec = {"name": "real", "base": str(base), "output": str(tmp_path / "sweep"),
+            "axes": {"nbody.collision_model": ["merge", "conditional_merge"]}}
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    with cf.ThreadPoolExecutor(1) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    points = list(result["points"].values())
+    assert [p["status"] for p in points] == ["complete", "complete"]
+    records = [yaml.safe_load(Path(p["run_dir"], "stages.json").read_text()) for p in points]
+    reused = [r["hydro"].get("reused_from") for r in records]
+    assert sum(x is not None for x in reused) == 1, "exactly one point reuses the other's hydro run"
+    hydro_files = [Path(p["run_dir"], "hydro.h5").stat().st_ino for p in points]
+    assert hydro_files[0] == hydro_files[1], "the shared hydro.h5 is one file (hard link)"
+    assert all(0.0 < p["summary"]["M_lr_over_M_T"] <= 1.0 for p in points)
