@@ -169,6 +169,12 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     if config.scene.problem not in PROBLEMS:
         errors.append(f"scene.problem: '{config.scene.problem}' has no hydro setup in this version "
                       f"(available: {', '.join(sorted(PROBLEMS))})")
+    if config.scene.problem == "impact" and values["geometry"] != "2d-cylindrical":
+        errors.append(f"scene.impact.angle: a {values['geometry']} impact (angle {config.scene.impact.angle:g}) is not "
+                      f"available in this version; only head-on impacts (angle 90, 2d-cylindrical) run")
+    if config.hydro.max_levels not in ("auto", 1):
+        errors.append(f"hydro.max_levels: {config.hydro.max_levels} refinement levels are not available in this "
+                      f"version (adaptive refinement is not implemented); use 'auto' or 1")
     if values.get("self_gravity"):
         errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
                       f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")
