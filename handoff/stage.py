@@ -28,7 +28,7 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     config = ctx.config
     values = derived.derive(config)
     hydro_path = ctx.path("hydro")
-    snapshot = read_snapshot(hydro_path, index=-1)
+    snapshot = read_snapshot(hydro_path, index=snapshot_index(hydro_path, config.handoff.time))
     tracers = read_tracers(hydro_path)
     with h5py.File(hydro_path, "r") as f:
         mass_left = float(f["budget"].attrs["mass_left_mesh"])
@@ -56,6 +56,20 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     log.info("handoff: %d particles from %d blocks at t = %.4g s; %.3g kg dropped", len(particles),
              budget.n_blocks, snapshot.time, budget.dropped_mass)
     return {"N_init": len(particles), "handoff_time": float(snapshot.time), "handoff_budget": budget.to_summary()}
+
+
+def snapshot_index(hydro_path, time: float | None) -> int:
+    """Index of the hydro snapshot at ``time`` (s); the last one when ``time`` is None."""
+    if time is None:
+        return -1
+    with h5py.File(hydro_path, "r") as f:
+        names = sorted(f["snapshots"])
+        times = [float(f["snapshots"][name].attrs["time"]) for name in names]
+    for index, t in enumerate(times):
+        if abs(t - time) <= 1e-9 * max(time, 1e-300):
+            return index
+    raise ValueError(f"handoff.time = {time:g} s: no hydro snapshot at that time (snapshots at "
+                     f"{', '.join(f'{t:.6g}' for t in times)} s)")
 
 
 def _projectile_index(material_names: list[str]) -> int | None:

@@ -304,3 +304,36 @@ def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool,
     target = Path(out_path or plots / f"{field}_t{snapshot.time:.4g}s.png")
     plot_snapshot(target, snapshot, field)
     click.echo(f"wrote {target} (snapshot {index}, t = {snapshot.time:.6g} s)")
+
+
+@main.command("handoff-scan")
+@click.argument("config_path", metavar="CONFIG", type=click.Path(dir_okay=False))
+@click.option("--times", required=True, help="Hand-off times in seconds, comma-separated (e.g. 4,6,8,10,12,15).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), help="Directory (default runs/<name>-handoff-scan).")
+@click.option("--workers", type=int, help="Parallel runs for the hand-off points.")
+@click.option("-v", "--verbose", count=True, help="More log output.")
+@click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
+def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers: int | None, verbose: int,
+                     quiet: bool) -> None:
+    """Run the hydro stage once, hand off at each of --times, reaccumulate and analyse each."""
+    from .handoff_scan import handoff_scan
+    from .sweep import SweepError
+
+    _setup_logging(verbose, quiet)
+    config, _ = _load_or_exit(config_path)
+    try:
+        values = [float(t) for t in times.split(",") if t.strip()]
+    except ValueError:
+        click.echo(f"--times: expected comma-separated seconds (got {times!r})", err=True)
+        sys.exit(2)
+    out = Path(out_dir or Path("runs") / f"{config.name}-handoff-scan")
+    try:
+        result = handoff_scan(config_path, values, out, show_progress=not quiet,
+                              execution={"workers": workers} if workers else None)
+    except (SweepError, ValueError) as exc:
+        click.echo(str(exc), err=True)
+        sys.exit(2)
+    for t, m in zip(result["times"], result["mlr_over_mt"]):
+        click.echo(f"t = {t:g} s: M_lr/M_T = {m:.4g}")
+    click.echo(f"slope over t >= {result['late_from']:.4g} s: {result['slope']:.4g} +- {result['slope_err']:.2g} /s")
+    click.echo(f"wrote {out / 'handoff_scan.csv'} and {out / 'handoff_scan.png'}")

@@ -329,6 +329,8 @@ class Hydro(Strict):
 
 
 class Handoff(Strict):
+    time: float | None = Field(None, gt=0, description="hand-off time (s): the hydro snapshot at this time; "
+                                                       "default the end of the hydro stage")
     min_density_fraction: float = Field(0.75, gt=0, le=1)
     min_mass_fraction: float = Field(4.0e-7, ge=0, lt=1)
     velocity_noise: float = Field(0.01, ge=0, description="fraction of the target's escape speed")

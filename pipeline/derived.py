@@ -172,6 +172,13 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     if config.scene.problem == "impact" and values["geometry"] != "2d-cylindrical":
         errors.append(f"scene.impact.angle: a {values['geometry']} impact (angle {config.scene.impact.angle:g}) is not "
                       f"available in this version; only head-on impacts (angle 90, 2d-cylindrical) run")
+    t_handoff = config.handoff.time
+    if t_handoff is not None:
+        outputs = config.hydro.output_times or []
+        end = values["end_time"]
+        if not (any(abs(t - t_handoff) <= 1e-9 * max(t, 1e-300) for t in outputs) or abs(end - t_handoff) <= 1e-9 * end):
+            errors.append(f"handoff.time: {t_handoff:g} s has no hydro snapshot; it must be one of "
+                          f"hydro.output_times or the hydro end time ({end:.6g} s)")
     if config.hydro.max_levels not in ("auto", 1):
         errors.append(f"hydro.max_levels: {config.hydro.max_levels} refinement levels are not available in this "
                       f"version (adaptive refinement is not implemented); use 'auto' or 1")

@@ -306,7 +306,7 @@ class SweepRunner:
         name = point_name(params, config)
         if name not in self.points:
             self.points[name] = {"params": params, "group": group, "run_dir": str(self.runs_dir / name),
-                                 "handoff_hash": stage_hashes(config)["handoff"], "status": "pending",
+                                 "hydro_hash": stage_hashes(config)["hydro"], "status": "pending",
                                  "attempts": 0}
             self._configs[name] = config
         return name
@@ -357,21 +357,22 @@ class SweepRunner:
         return results
 
     def _shared_sources(self, names: list[str]) -> dict[str, str]:
-        """For each point, the point whose hydro + hand-off it reuses (the first of its group)."""
+        """For each point, the point whose finished stages it reuses: the first of the points with
+        the same hydro hash (it adopts the hydro run, and the hand-off too when that matches)."""
         first: dict[str, str] = {}
         for name in names:
-            first.setdefault(self.points[name]["handoff_hash"], name)
+            first.setdefault(self.points[name]["hydro_hash"], name)
         for name in names:
             if self._has_shared(name):
-                first[self.points[name]["handoff_hash"]] = name
-        return {name: first[self.points[name]["handoff_hash"]] for name in names}
+                first[self.points[name]["hydro_hash"]] = name
+        return {name: first[self.points[name]["hydro_hash"]] for name in names}
 
     def _has_shared(self, name: str) -> bool:
         records_path = Path(self.points[name]["run_dir"]) / "stages.json"
         if not records_path.is_file():
             return False
         records = json.loads(records_path.read_text())
-        return records.get("handoff", {}).get("status") == "complete"
+        return records.get("hydro", {}).get("status") == "complete"
 
     def _submit(self, name: str, reuse: str | None) -> cf.Future:
         point = self.points[name]
