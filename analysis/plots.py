@@ -65,7 +65,7 @@ def plot_cumulative_pressure(path, curves) -> Path:
 
 
 def origin_figure(origin_position, peak_pressure, *, axes: tuple[int, int] = (0, 2),
-                  slab_half_width: float | None = None) -> Figure:
+                  slab_half_width: float | None = None, axis_names: tuple[str, str, str] = AXIS_NAMES) -> Figure:
     """Pre-impact positions of material, coloured by log10 peak pressure.
 
     Left: cross-section in the plane of coordinates ``axes`` (default x-z, the
@@ -78,6 +78,7 @@ def origin_figure(origin_position, peak_pressure, *, axes: tuple[int, int] = (0,
     Args:
         origin_position: (N, 3) pre-impact positions (m), hydro mesh coordinates.
         peak_pressure: (N,) peak pressures (Pa).
+        axis_names: labels of the three mesh coordinates (("r", "z", "-") for 2d-cylindrical).
     """
     pos = np.asarray(origin_position, dtype=float)
     p = np.asarray(peak_pressure, dtype=float)
@@ -92,8 +93,8 @@ def origin_figure(origin_position, peak_pressure, *, axes: tuple[int, int] = (0,
     sc = ax2.scatter(pos[in_slab, h] / 1e3, pos[in_slab, v] / 1e3, c=logp[in_slab], s=4, cmap="inferno",
                      norm=norm, linewidths=0)
     ax2.set_aspect("equal")
-    ax2.set_xlabel(f"Pre-impact {AXIS_NAMES[h]} (km)")
-    ax2.set_ylabel(f"Pre-impact {AXIS_NAMES[v]} (km)")
+    ax2.set_xlabel(f"Pre-impact {axis_names[h]} (km)")
+    ax2.set_ylabel(f"Pre-impact {axis_names[v]} (km)")
     title = "projection" if slab_half_width is None else f"|{AXIS_NAMES[other]}| <= {slab_half_width / 1e3:g} km"
     ax2.set_title(f"Cross-section ({title})", fontsize="medium")
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")

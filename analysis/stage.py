@@ -101,6 +101,7 @@ def _figures(directory: Path, particles, owner, remnants, curves, values, config
     largest = remnants.largest
     if largest is not None and np.isfinite(particles.peak_pressure_mean).any():
         in_lr = np.isin(owner, largest.members)
-        axes = (0, 1) if values["geometry"] == "2d-cylindrical" else (0, 2)
+        cylindrical = values["geometry"] == "2d-cylindrical"
         plot_origin_positions(directory / "largest_remnant_origins.png", particles.origin_position[in_lr],
-                              particles.peak_pressure_mean[in_lr], axes=axes)
+                              particles.peak_pressure_mean[in_lr], axes=(0, 1) if cylindrical else (0, 2),
+                              axis_names=("r", "z", "-") if cylindrical else ("x", "y", "z"))
