@@ -74,8 +74,8 @@ FAIL_NEGATIVE_FRACTION = 1.0e-3
 #: times the old, and volume fraction below PHI_VOID) holds only round-off residue of
 #: the fluxes; it becomes void and the residue's mass, momentum and energy are counted.
 EMPTIED_FRACTION = 1.0e-8
-#: In a cell filled below PHI_SMALL the velocity may not exceed the fastest speed of the
-#: material around it (the pencil neighbours and the face speeds): momentum residues of
+#: In a cell filled below PHI_SMALL (by volume, or by mass: sum_k alpha_k rho_k / rho0_k)
+#: the velocity may not exceed the fastest speed of the material around it (the pencil neighbours and the face speeds): momentum residues of
 #: the fluxes would otherwise give the small mass an unbounded velocity.  The momentum
 #: and kinetic energy removed are counted.
 PHI_SMALL = 1.0e-3
@@ -584,7 +584,16 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         mom[b, t2, ix, iy, iz] = 0.0
         energy[b, 0, ix, iy, iz] = 0.0
         return
-    if phi_new < PHI_SMALL:
+    # how full the cell is, by volume and by mass: material expanded far below its reference
+    # density (vapour) fills a cell by volume but is as light as a spray of it
+    fill = phi_new
+    solid = 0.0
+    for k in range(nmat):
+        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
+        solid += arho[b, k, ix, iy, iz] / rho0 if rho0 > 0.0 else alpha[b, k, ix, iy, iz]
+    if solid < fill:
+        fill = solid
+    if fill < PHI_SMALL:
         vmax = max(abs(sc[f_row + F_S, fl]), abs(sc[f_row + F_S, fr]))
         for j in range(i - 1, i + 2):
             vj = np.sqrt(sc[W_UN, j] ** 2 + sc[W_UT1, j] ** 2 + sc[W_UT2, j] ** 2)
