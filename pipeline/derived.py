@@ -163,12 +163,24 @@ def as_plain(values: dict[str, Any]) -> dict[str, Any]:
 
 def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     """Requests this version cannot carry out, as ``key: message`` lines (checked before any work)."""
+    from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS
     from impactpipe.hydro.problems import PROBLEMS
+    from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS
 
     errors = []
     if config.scene.problem not in PROBLEMS:
         errors.append(f"scene.problem: '{config.scene.problem}' has no hydro setup in this version "
                       f"(available: {', '.join(sorted(PROBLEMS))})")
+    problem = PROBLEMS[config.scene.problem] if config.scene.problem in PROBLEMS else None
+    if problem is not None and config.scene.problem != "impact" and values["geometry"] not in problem.GEOMETRIES:
+        errors.append(f"scene.geometry: the {config.scene.problem} problem runs in {', '.join(problem.GEOMETRIES)} "
+                      f"(got {values['geometry']})")
+    cells = getattr(config.scene, "cells", None)
+    if cells is not None and values["geometry"] in GEOMETRY_DIMENSIONS:
+        block = config.hydro.block_cells or DEFAULT_BLOCK_CELLS[GEOMETRY_DIMENSIONS[values["geometry"]]]
+        if cells % block:
+            errors.append(f"scene.cells: {cells} is not a multiple of the block size {block} "
+                          f"(hydro.block_cells); use a multiple of {block}")
     if config.scene.problem == "impact" and values["geometry"] != "2d-cylindrical":
         errors.append(f"scene.impact.angle: a {values['geometry']} impact (angle {config.scene.impact.angle:g}) is not "
                       f"available in this version; only head-on impacts (angle 90, 2d-cylindrical) run")

@@ -11,8 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('1d-planar', '2d-planar', '3d')
 
 DEFAULTS = {
     "material": "gas",
@@ -35,6 +38,7 @@ def exact_density(p: dict, x: np.ndarray, t: float) -> np.ndarray:
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "1d-planar"):
     """Build the advection :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    check_geometry("advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["material"]])
     ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]

@@ -61,3 +61,9 @@ def preset_material(name: str, model: str = "tillotson") -> dict:
     presets = yaml.safe_load(resources.files("impactpipe.pipeline").joinpath("data/materials.yaml").read_text())
     values = {key: float(value) for key, value in presets[model][name].items()}
     return {"eos": {"model": model, **values, "cv": SPECIFIC_HEAT_DEFAULTS[name]}}
+
+
+def check_geometry(problem: str, supported: tuple[str, ...], geometry: str) -> None:
+    """Raise ValueError unless ``geometry`` is one the problem supports."""
+    if geometry not in supported:
+        raise ValueError(f"{problem} runs in {', '.join(supported)} (got {geometry})")

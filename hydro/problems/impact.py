@@ -17,8 +17,11 @@ import numpy as np
 
 from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS, BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation, tensile_strengths
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation, tensile_strengths
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('2d-cylindrical',)
 
 DEFAULTS = {
     "target": {"material": "basalt", "radius": 1000.0},
@@ -52,8 +55,7 @@ def sphere_fraction(mesh: BlockMesh, z_center: float, radius: float, subsamples:
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "2d-cylindrical"):
     """Build the impact :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
-    if geometry != "2d-cylindrical":
-        raise ValueError("impact runs in 2d-cylindrical (head-on)")
+    check_geometry("impact", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     tgt, prj = p["target"], p["projectile"]
     _, specs, _ = material_list(materials, [tgt["material"], prj["material"]])

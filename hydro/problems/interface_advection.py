@@ -13,8 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('1d-planar', '2d-planar', '3d')
 
 DEFAULTS = {
     "length": 1.0,
@@ -32,6 +35,7 @@ DEFAULTS = {
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "1d-planar"):
     """Build the interface-advection :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    check_geometry("interface_advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     used = [p["inner"]["material"]] + ([p["outer"]["material"]] if p["outer"]["material"] else [])
     names, specs, eos = material_list(materials, used)

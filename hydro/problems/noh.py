@@ -14,8 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('1d-planar', '2d-cylindrical')
 
 DEFAULTS = {
     "material": "gas",
@@ -31,10 +34,9 @@ DEFAULTS = {
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "1d-planar"):
     """Build the Noh :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    check_geometry("noh", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["material"]])
-    if geometry not in ("1d-planar", "2d-cylindrical"):
-        raise ValueError("noh runs in 1d-planar or 2d-cylindrical")
     ndim = 1 if geometry == "1d-planar" else 2
     mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["extent"]] * ndim, [p["cells"]] * ndim,
                              [("reflecting", "outflow")] * ndim, block_cells)

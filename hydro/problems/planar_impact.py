@@ -14,8 +14,11 @@ import numpy as np
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation, tensile_strengths
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation, tensile_strengths
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('1d-planar',)
 
 DEFAULTS = {
     "flyer": {"material": "basalt", "thickness": 1.0, "velocity": 2000.0},
@@ -35,8 +38,7 @@ def domain(p: dict) -> tuple[float, float]:
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "1d-planar"):
     """Build the planar-impact :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
-    if geometry != "1d-planar":
-        raise ValueError("planar_impact runs in 1d-planar")
+    check_geometry("planar_impact", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["flyer"]["material"], p["target"]["material"]])
     lo, hi = domain(p)

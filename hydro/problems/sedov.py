@@ -14,8 +14,11 @@ import numpy as np
 
 from impactpipe.hydro.eos import energy_from_pressure
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('2d-cylindrical', '3d')
 
 DEFAULTS = {
     "energy": 1.0,
@@ -30,15 +33,11 @@ DEFAULTS = {
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "2d-cylindrical"):
     """Build the Sedov :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    check_geometry("sedov", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     amb = p["ambient"]
     names, specs, eos = material_list(materials, [amb["material"]])
-    if geometry == "2d-cylindrical":
-        ndim, share = 2, 0.5
-    elif geometry == "3d":
-        ndim, share = 3, 0.125
-    else:
-        raise ValueError("sedov runs in 2d-cylindrical or 3d")
+    ndim, share = (2, 0.5) if geometry == "2d-cylindrical" else (3, 0.125)
     n = p["cells"]
     mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["extent"]] * ndim, [n] * ndim,
                              [("reflecting", "outflow")] * ndim, block_cells)

@@ -12,8 +12,11 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
 from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('1d-planar', '2d-planar', '3d')
 
 DEFAULTS = {
     "length": 1.0,
@@ -27,10 +30,9 @@ DEFAULTS = {
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "1d-planar"):
     """Build the shock-tube :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    check_geometry("shock_tube", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["left"]["material"], p["right"]["material"]])
-    if geometry == "2d-cylindrical":
-        raise ValueError("shock_tube runs in 1d-planar, 2d-planar or 3d")
     ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
     if ndim == 1:
         mesh = BlockMesh.uniform(geometry, [0.0], [p["length"]], [p["cells"]], [("outflow", "outflow")], block_cells)
