@@ -57,11 +57,11 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed, reference_density
+from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
 from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE, hllc_face
-from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, signal_speed_squared
+from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, material_state
 
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
@@ -230,27 +230,20 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                         phi += a
                         rho += ar
                         row = W_MAT + W_STRIDE * k
-                        if a > ALPHA_MIN and ar > 0.0:
-                            rk = ar / a
-                            ek = arhoe[b, k, ix, iy, iz] / ar
-                            pk, c2k, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                            if flag != 0 and i >= g and i < g + n:
+                        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
+                            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
+                            shear_modulus[k], tensile_strength[k])
+                        if present and i >= g and i < g + n:
+                            if flag != 0:
                                 floors[b, FLOOR_EOS_CLAMP] += 1
-                            if pk < -tensile_strength[k]:
-                                pk = -tensile_strength[k]
-                                if i >= g and i < g + n:
-                                    floors[b, FLOOR_TENSILE_LIMIT] += 1
-                            sc[row + 4, i] = rk * c2k
-                            c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
+                            if limited:
+                                floors[b, FLOOR_TENSILE_LIMIT] += 1
+                        sc[row + 4, i] = rk * c2b
+                        if present:
                             p += a * pk
                             kmod += ar * c2k
                             if c2k > c2max:
                                 c2max = c2k
-                        else:
-                            rk = 0.0
-                            ek = 0.0
-                            pk = 0.0
-                            sc[row + 4, i] = 0.0
                         sc[row, i] = a
                         sc[row + 1, i] = rk
                         sc[row + 2, i] = ek

@@ -38,6 +38,28 @@ def signal_speed_squared(c2_bulk, rho, shear_modulus):
     return c2_bulk
 
 
+@njit(cache=True, inline="always")
+def material_state(a, ar, are, kind, params, table, shear_modulus, tensile_strength):
+    """Thermodynamic state of one material in one cell from its conserved amounts.
+
+    a = alpha_k (-), ar = alpha_k rho_k (kg/m^3), are = alpha_k rho_k e_k (J/m^3).
+    Returns (present, rho_k, e_k, p_k, c2_bulk, c2_signal, eos_flag, tension_limited):
+    rho_k = ar / a, e_k = are / ar, p_k = max(P(rho_k, e_k), -Y_T) with Y_T =
+    ``tensile_strength`` (Pa), c2_bulk the EOS bulk sound speed squared and c2_signal the
+    time-step signal speed squared (:func:`signal_speed_squared`).  A material below
+    ALPHA_MIN or without mass is absent (present False, zeros).
+    """
+    if not (a > ALPHA_MIN and ar > 0.0):
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0, False
+    rk = ar / a
+    ek = are / ar
+    pk, c2k, flag = pressure_sound_speed(kind, params, table, rk, ek)
+    limited = pk < -tensile_strength
+    if limited:
+        pk = -tensile_strength
+    return True, rk, ek, pk, c2k, signal_speed_squared(c2k, rk, shear_modulus), flag, limited
+
+
 @njit(cache=True, parallel=True)
 def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus, ndim, out):
     """Per block, the largest max_d (|u_d| + c) / dx_d (1/s) over non-void interior cells, into ``out[NB]``."""
@@ -58,13 +80,11 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                         ar = arho[b, k, ix, iy, iz]
                         rho += ar
                         phi += a
-                        if a > ALPHA_MIN and ar > 0.0:
-                            rk = ar / a
-                            pk, c2k, flag = pressure_sound_speed(
-                                eos_kind[k], eos_params[k], eos_table, rk, arhoe[b, k, ix, iy, iz] / ar)
-                            c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
-                            if c2k > c2max:
-                                c2max = c2k
+                        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
+                            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
+                            shear_modulus[k], 0.0)
+                        if present and c2k > c2max:
+                            c2max = c2k
                     if rho <= 0.0 or phi < PHI_VOID:
                         continue
                     c = np.sqrt(c2max)
@@ -102,12 +122,11 @@ def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, she
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
                         rho += ar
-                        if a > ALPHA_MIN and ar > 0.0:
-                            rk = ar / a
-                            ek = arhoe[b, k, ix, iy, iz] / ar
-                            pk, c2k, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                            c2k = signal_speed_squared(c2k, rk, shear_modulus[k])
-                            p += a * max(pk, -tensile_strength[k])
+                        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
+                            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
+                            shear_modulus[k], tensile_strength[k])
+                        if present:
+                            p += a * pk
                             if c2k > c2max:
                                 c2max = c2k
                             esum += ar * ek
