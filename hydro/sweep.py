@@ -66,6 +66,11 @@ from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, material_state
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
 TENSION_TOLERANCE = 1.0e-3
+#: Cells filled below PHI_SECOND_ORDER, and their neighbours, reconstruct at first order: the
+#: limited slope of a volume fraction next to void can take the face density to zero while
+#: the face pressure keeps the cell's, and that face state (p > 0 on a vanishing density)
+#: would give an unbounded face velocity p / (rho c).  Free surfaces are first order.
+PHI_SECOND_ORDER = 1.0 - 1.0e-3
 #: A cell whose materials fill more than 1 - FULL_TOLERANCE of it has no void.
 FULL_TOLERANCE = 1.0e-8
 #: A mixture density below -FAIL_NEGATIVE_FRACTION * (previous density) is a failure.
@@ -267,7 +272,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                         sc[W_UT2, i] = 0.0
                 # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                 for i in range(1, ncell - 1):
-                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
+                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n,
+                                      tensile_strength)
                 # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
                 for f in range(g, g + n + 1):
                     _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row)
@@ -295,10 +301,17 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
 
 
 @njit(cache=True, inline="always")
-def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
-    """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i."""
-    first_order = (sc[W_PHI, i - 1] < PHI_VOID or sc[W_PHI, i] < PHI_VOID or sc[W_PHI, i + 1] < PHI_VOID
-                   or sc[W_RHO, i] <= 0.0)
+def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior, tensile_strength):
+    """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i.
+
+    The face pressures must stay admissible: not below the most tension the cell's materials
+    hold, p_min = -sum_k alpha_k Y_T,k (Pa), and not from p > 0 to below -TENSION_TOLERANCE K.
+    A predictor that leaves that range (the Hancock term K du/dx of a cell at its tensile
+    limit can predict tens of MPa of tension, which would pull a light neighbour to many
+    km/s) falls back to the cell values (first order, counted).
+    """
+    first_order = (sc[W_PHI, i - 1] < PHI_SECOND_ORDER or sc[W_PHI, i] < PHI_SECOND_ORDER
+                   or sc[W_PHI, i + 1] < PHI_SECOND_ORDER or sc[W_RHO, i] <= 0.0)
     if not first_order:
         rho = sc[W_RHO, i]
         un = sc[W_UN, i]
@@ -318,7 +331,13 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
         ph = p - half * (un * dp + sc[W_K, i] * dun)
         sc[qm_row + Q_P, i] = ph - 0.5 * dp
         sc[qp_row + Q_P, i] = ph + 0.5 * dp
-        if p > 0.0 and ph - 0.5 * abs(dp) < -TENSION_TOLERANCE * sc[W_K, i]:
+        p_face = ph - 0.5 * abs(dp)
+        if p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i]:
+            first_order = True
+        p_min = 0.0
+        for k in range(nmat):
+            p_min -= sc[W_MAT + W_STRIDE * k, i] * tensile_strength[k]
+        if p_face < p_min and p_face < p:
             first_order = True
         for k in range(nmat):
             row = W_MAT + W_STRIDE * k
