@@ -19,9 +19,11 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
 
 1. Gather: mixture density rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k
    (equal-strain mixture; void counts as a zero-pressure component), bulk modulus
-   K = sum alpha_k rho_k c_k^2, signal speed c = max_k c_k over the materials present
-   (``timestep.signal_speed_squared``).  A partly filled cell keeps the wave speed of its
-   material (K / rho = c_k^2), so it needs no smaller time step than a full one.
+   K = sum alpha_k rho_k c_k^2 (c_k the longitudinal signal speed,
+   ``timestep.signal_speed_squared``), signal speed c = sqrt(K / rho), the sound speed of the
+   equal-strain mixture.  A partly filled cell keeps the wave speed of its material
+   (K / rho = c_k^2), and a trace of a material (a volume fraction of 1e-10 holding a
+   round-off share of the energy, hence an enormous c_k) does not set the time step.
 2. MUSCL-Hancock: MC-limited slopes of (u_n, u_t1, u_t2, p) and per material
    (alpha_k, rho_k, e_k); half-step predictor with the primitive equations
    u_t = -u u_x - p_x / rho, p_t = -u p_x - K u_x, alpha_t = -u alpha_x,
@@ -84,6 +86,11 @@ EMPTIED_FRACTION = 1.0e-8
 #: the fluxes would otherwise give the small mass an unbounded velocity.  The momentum
 #: and kinetic energy removed are counted.
 PHI_SMALL = 1.0e-3
+#: In the same small cells the specific total energy E / rho may not exceed the largest
+#: specific total enthalpy (E + max(p, 0)) / rho of the cell and its pencil neighbours before
+#: the sweep: mixing cannot exceed it, so only the face work p* s of a full neighbour
+#: concentrated into a vanishing mass can, and that is the path by which spray and vapour
+#: reached 1e9 - 1e14 J/kg in case 8c.  The energy removed is counted.
 #: Material thinner than DISCARD_FRACTION of its reference density rho0 is discarded from
 #: the cell (as CTH's discard density does): its mass, momentum share and energy are
 #: counted with the void cleanup.  Materials without a reference density (gases) are kept.
@@ -98,10 +105,11 @@ FLOOR_FIRST_ORDER = 4
 FLOOR_EOS_CLAMP = 5
 FLOOR_VELOCITY_LIMIT = 6
 FLOOR_TENSILE_LIMIT = 7
-NFLOOR = 8
+FLOOR_ENERGY_LIMIT = 8
+NFLOOR = 9
 FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
                "void_cleanup", "first_order_fallback", "eos_clamp", "small_cell_velocity_limit",
-               "tensile_limit")
+               "tensile_limit", "small_cell_energy_limit")
 # Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
 AMOUNT_MASS_FLOOR = 0
 AMOUNT_ENERGY_FLOOR = 1
@@ -111,11 +119,12 @@ AMOUNT_MASS_VOID = 4
 AMOUNT_MOMENTUM_VOID = 5
 AMOUNT_MOMENTUM_LIMITER = 6
 AMOUNT_ENERGY_LIMITER = 7
-NAMOUNT = 8
+AMOUNT_ENERGY_CAP = 8
+NAMOUNT = 9
 AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
                 "energy_removed_by_void_cleanup", "mass_removed_by_void_cleanup",
                 "momentum_removed_by_void_cleanup", "momentum_removed_by_velocity_limit",
-                "energy_removed_by_velocity_limit")
+                "energy_removed_by_velocity_limit", "energy_removed_by_energy_limit")
 # Boundary counter slots (``boundary[NB, 5 + M]``): what left the domain (kg, kg m/s, J).
 BND_MASS = 0
 BND_MOMENTUM = 1
@@ -227,7 +236,6 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                     rho = 0.0
                     p = 0.0
                     kmod = 0.0
-                    c2max = 0.0
                     phi = 0.0
                     for k in range(nmat):
                         a = alpha[b, k, ix, iy, iz]
@@ -247,14 +255,12 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                         if present:
                             p += a * pk
                             kmod += ar * c2k
-                            if c2k > c2max:
-                                c2max = c2k
                         sc[row, i] = a
                         sc[row + 1, i] = rk
                         sc[row + 2, i] = ek
                         sc[row + 3, i] = pk
                     sc[W_PHI, i] = phi
-                    sc[W_C, i] = np.sqrt(c2max)
+                    sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
                     if rho > 0.0 and phi >= PHI_VOID:
                         sc[W_RHO, i] = rho
                         sc[W_P, i] = p
@@ -554,9 +560,13 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
     for k in range(nmat):
         ar = arho[b, k, ix, iy, iz]
         if ar < 0.0:
+            # the floored material keeps no internal energy of its own (a remnant energy on no
+            # mass would give the next arrival an unbounded e_k); the cell's total energy is
+            # unchanged and the reconciliation below hands it to the materials present
             amounts[b, AMOUNT_MASS_FLOOR] -= ar * vol
             floors[b, FLOOR_PARTIAL_DENSITY] += 1
             arho[b, k, ix, iy, iz] = 0.0
+            arhoe[b, k, ix, iy, iz] = 0.0
             ar = 0.0
         rho += ar
     for k in range(nmat):
@@ -627,6 +637,22 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             amounts[b, AMOUNT_MOMENTUM_LIMITER] += m_abs * (1.0 - scale) * vol
             amounts[b, AMOUNT_ENERGY_LIMITER] += (e_tot - e_new) * vol
             e_tot = e_new
+        h_max = 0.0
+        for j in range(i - 1, i + 2):
+            rho_j = sc[W_RHO, j]
+            if rho_j > 0.0:
+                e_j = 0.0
+                for k in range(nmat):
+                    row = W_MAT + W_STRIDE * k
+                    e_j += sc[row, j] * sc[row + 1, j] * sc[row + 2, j]
+                h_j = ((e_j + max(sc[W_P, j], 0.0)) / rho_j
+                       + 0.5 * (sc[W_UN, j] ** 2 + sc[W_UT1, j] ** 2 + sc[W_UT2, j] ** 2))
+                if h_j > h_max:
+                    h_max = h_j
+        if e_tot > rho * h_max:
+            floors[b, FLOOR_ENERGY_LIMIT] += 1
+            amounts[b, AMOUNT_ENERGY_CAP] += (e_tot - rho * h_max) * vol
+            e_tot = rho * h_max
     # reconcile material internal energies with the conserved total energy
     kinetic = 0.5 * (mn * mn + m1 * m1 + m2 * m2) / rho
     e_int = e_tot - kinetic
