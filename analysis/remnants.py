@@ -297,10 +297,10 @@ class RemnantResult:
 
     @property
     def mlr_over_mt(self) -> float:
-        """M_lr / M_T (NaN without a target mass)."""
-        if self.target_mass is None or self.largest is None:
+        """M_lr / M_T (0 when there is no remnant, e.g. every particle escaped; NaN without a target mass)."""
+        if self.target_mass is None:
             return float("nan")
-        return self.largest.mass / self.target_mass
+        return 0.0 if self.largest is None else self.largest.mass / self.target_mass
 
     @property
     def mslr_over_mt(self) -> float:

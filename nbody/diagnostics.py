@@ -102,7 +102,10 @@ def contact_groups(position: np.ndarray, radius: np.ndarray) -> np.ndarray:
 
 
 def remnant_and_orbiting(position, velocity, mass, radius) -> tuple[float, float, np.ndarray]:
-    """(M_lr, orbiting mass, boolean mask of C) for the largest remnant C (see module doc)."""
+    """(M_lr, orbiting mass, boolean mask of C) for the largest remnant C (see module doc);
+    (0, 0, empty mask) without particles."""
+    if mass.shape[0] == 0:
+        return 0.0, 0.0, np.zeros(0, dtype=bool)
     labels = contact_groups(position, radius)
     in_c = labels == labels[int(np.argmax(mass))]
     m_c = float(mass[in_c].sum())

@@ -16,7 +16,9 @@ The run (see docs/nbody.md for the full description):
    removed by itself is recorded as ``lost`` (with a warning): nothing leaves silently.
    After a removal the frame is re-centred on the remaining centre of mass.  If the
    particles now move faster than the time-step rule assumed, the step is reduced.
-4. At output times the diagnostics are recorded and the stop criteria checked:
+4. At output times the diagnostics are recorded and the stop criteria checked
+   (``no_particles_left`` as soon as a removal leaves the simulation empty, with a last
+   diagnostics row; an empty hand-off returns that status at once, without diagnostics):
    ``equilibrium`` when the mass orbiting the largest remnant (``diagnostics`` module) is
    below ``max_orbiting_fraction`` M_lr and t >= ``min_dynamical_times`` t_dyn;
    ``time_cap`` at the first output time >= ``max_sim_time``; ``wall_cap`` at the first
@@ -31,6 +33,10 @@ The run (see docs/nbody.md for the full description):
    snapshot pass through the same loaded states.  A later call with the same particles
    and parameters and ``resume=True`` (after an exception, a kill or a cap) continues
    from the last snapshot and reproduces the uninterrupted run bit for bit.
+6. Cost counters: ``steps`` is REBOUND's ``steps_done`` (stored in the snapshots) and
+   ``particle_steps`` the sum over steps of the particles each step integrated, counted
+   by the compiled post-step hook of :mod:`impactpipe.nbody.resolver` and carried in the
+   sidecar; both continue across resumes.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ import logging
 import math
 import os
 import time as _time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -51,9 +58,9 @@ from impactpipe.handoff.particles import ParticleSet
 from impactpipe.pipeline.runstore import atomic_path
 
 from . import diagnostics as dg
-from .resolver import (CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, MODEL_CODES, CollisionResolver,
-                       particle_view)
-from .result import ESCAPE_ORBIT, LEFT_BOX, LOST, NBodyResult
+from .resolver import (CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, CTX_PARTICLE_STEPS, MODEL_CODES,
+                       CollisionResolver, particle_view)
+from .result import ESCAPE_ORBIT, LEFT_BOX, LOST, NO_PARTICLES_LEFT, TERMINAL_STATUSES, NBodyResult
 from .simulation import G, build_simulation, collision_time_step, dynamical_time, weighted_mean
 
 log = logging.getLogger(__name__)
@@ -64,6 +71,10 @@ CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
 SIDECAR_FORMAT = 2            # 2: contact-time bounces, kinetic-energy accumulator, initial-overlap report
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
                        "escaped_momentum", "escaped_angular_momentum")
+
+
+class ArchiveMismatch(ValueError):
+    """The archive holds a run of other particles or parameters, or was written by another version."""
 
 
 def reaccumulate(
@@ -116,7 +127,13 @@ def reaccumulate(
         box_factor: box half-width over the cloud's extent about its centre of mass.
 
     Returns:
-        The final state, provenance, escapes and diagnostics.
+        The final state, provenance, escapes, diagnostics and cost counters.  An empty
+        ``particles`` (or a run whose removals leave no particle) ends with status
+        ``no_particles_left``.
+
+    Raises:
+        ArchiveMismatch: ``resume`` and ``archive_path`` holds a run of other particles or
+            parameters, or a sidecar of another format.
     """
     wall_start = _time.monotonic()
     if collision_model not in MODEL_CODES:
@@ -128,11 +145,12 @@ def reaccumulate(
         raise ValueError(f"max_orbiting_fraction must be in (0, 1] (got {max_orbiting_fraction})")
     if not box_factor > 1.0:
         raise ValueError(f"box_factor must be > 1 (got {box_factor})")
-    if len(particles) == 0:
-        raise ValueError("no particles")
     if np.unique(particles.id).size != len(particles):
         raise ValueError("particle ids are not unique")
     t_dyn = dynamical_time(bulk_density)
+    if len(particles) == 0:
+        log.warning("nbody: the hand-off has no particles; nothing to simulate (status %s)", NO_PARTICLES_LEFT)
+        return _empty_result(t_dyn, collision_model)
     output_interval = 0.5 * t_dyn if output_interval is None else float(output_interval)
     archive_interval = 5.0 * t_dyn if archive_interval is None else float(archive_interval)
     if not (output_interval > 0 and archive_interval > 0):
@@ -162,7 +180,12 @@ def reaccumulate(
         t_target = min(run.next_output, run.chunk_end_by_box())
         run.advance(t_target)
         t = run.sim.t
-        if t >= run.next_output:
+        if run.sim.N == 0:
+            run.status = NO_PARTICLES_LEFT
+            run.record_diagnostics()
+            log.warning("nbody: every particle was removed (escaped, left the box or lost) by t = %.6g s; "
+                        "no remnant", t)
+        elif t >= run.next_output:
             run.record_diagnostics()
             while run.next_output <= t:
                 run.next_output += output_interval
@@ -181,8 +204,8 @@ def reaccumulate(
             while run.next_archive <= t:
                 run.next_archive += archive_interval
             run.checkpoint(archive, sidecar)
-    log.info("nbody stopped: %s at t = %.6g s (%.3g t_dyn), N = %d", run.status, run.sim.t,
-             run.sim.t / t_dyn, run.sim.N)
+    log.info("nbody stopped: %s at t = %.6g s (%.3g t_dyn), N = %d, %d steps, %d particle-steps", run.status,
+             run.sim.t, run.sim.t / t_dyn, run.sim.N, run.sim.steps_done, run.resolver.ctx[CTX_PARTICLE_STEPS])
     return run.result()
 
 
@@ -200,6 +223,7 @@ class _Run:
                                           params["restitution_tangential"], G)
         self.fingerprint = _fingerprint(particles, params)
         self.status: str | None = None
+        self.particle_steps_known = True
         self.escaped = {k: [] for k in ("slot", "mass", "momentum", "position", "velocity", "spin", "time", "reason")}
         self.merges = {"time": [], "survivor": [], "absorbed": []}
         self.diag: dict[str, list] = {}
@@ -241,17 +265,26 @@ class _Run:
             meta = json.loads(str(z["meta"]))
             arrays = {k: z[k] for k in z.files if k != "meta"}
         if meta.get("format") != SIDECAR_FORMAT:
-            raise ValueError(f"{sidecar} was written by another version of the N-body stage (sidecar format "
-                             f"{meta.get('format', 1)}, this one writes {SIDECAR_FORMAT}); pass resume=False to start over")
+            raise ArchiveMismatch(f"{sidecar} was written by another version of the N-body stage (sidecar format "
+                                  f"{meta.get('format', 1)}, this one writes {SIDECAR_FORMAT}); pass resume=False "
+                                  "to start over")
         if meta["fingerprint"] != self.fingerprint:
-            raise ValueError(f"{archive} holds a run of other particles or parameters; pass resume=False to start over")
-        self._read_snapshot(archive, meta["t"], arrays["snapshot_slots"])
+            raise ArchiveMismatch(f"{archive} holds a run of other particles or parameters; pass resume=False to "
+                                  "start over")
+        if meta["status"] == NO_PARTICLES_LEFT:  # no snapshot of the empty end state (see checkpoint)
+            self.sim = rebound.Simulation()
+            self.sim.t, self.sim.dt, self.sim.steps_done = meta["t"], meta["dt"], meta["steps_done"]
+        else:
+            self._read_snapshot(archive, meta["t"], arrays["snapshot_slots"])
         self.resolver.spin[:] = arrays["spin"]
         self.resolver.ctx[CTX_N_MERGE] = meta["n_merge"]
         self.resolver.ctx[CTX_N_BOUNCE] = meta["n_bounce"]
         self.resolver.ctx[CTX_N_SEPARATING] = meta["n_separating"]
         self.resolver.params[3] = meta["collision_kinetic_energy_change"]
         self.resolver.ctx[CTX_N_OVERLAP] = meta["n_overlap_push"]
+        # sidecars written before the counter existed lack it: the count is then unknown (-1)
+        self.particle_steps_known = "particle_steps" in meta
+        self.resolver.ctx[CTX_PARTICLE_STEPS] = meta.get("particle_steps", 0)
         self.parent[:] = arrays["parent"]
         self.box_half_width = meta["box_half_width"]
         self.escape_radius = meta["escape_radius"]
@@ -261,7 +294,7 @@ class _Run:
         self.initial_overlaps = tuple(meta["initial_overlaps"])
         self.next_output = meta["next_output"]
         self.next_archive = meta["next_archive"]
-        self.status = meta["status"] if meta["status"] == "equilibrium" else None
+        self.status = meta["status"] if meta["status"] in TERMINAL_STATUSES else None
         for k in self.escaped:
             self.escaped[k] = list(arrays["escaped_" + k])
         for k in self.merges:
@@ -289,15 +322,21 @@ class _Run:
         tree on loading, which can change the order in which the pairs of one step are
         resolved, so an uninterrupted run continues from the same loaded state a resumed
         run starts from, and both follow the same path bit for bit.
+
+        A run that ended without particles writes the sidecar alone (REBOUND 5.2 cannot read
+        back a snapshot of an empty simulation); its time, step and step count are in the sidecar.
         """
         snapshot_slots = particle_view(self.sim)["ap"] - 1
-        self.sim.save_to_file(str(archive), delete_file=first)
+        if self.sim.N:
+            self.sim.save_to_file(str(archive), delete_file=first)
         meta = {
             "format": SIDECAR_FORMAT, "fingerprint": self.fingerprint, "t": self.sim.t, "status": self.status,
+            "dt": self.sim.dt, "steps_done": int(self.sim.steps_done),
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
             "n_separating": int(self.resolver.ctx[CTX_N_SEPARATING]),
             "collision_kinetic_energy_change": float(self.resolver.params[3]),
             "n_overlap_push": int(self.resolver.ctx[CTX_N_OVERLAP]),
+            **({"particle_steps": int(self.resolver.ctx[CTX_PARTICLE_STEPS])} if self.particle_steps_known else {}),
             "box_half_width": self.box_half_width, "escape_radius": self.escape_radius,
             "origin_ref": self.origin_ref.tolist(),
             "frame_velocity": self.frame_velocity.tolist(), "t_ref": self.t_ref,
@@ -315,7 +354,8 @@ class _Run:
         with atomic_path(sidecar) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
-        self._read_snapshot(archive, self.sim.t, snapshot_slots)
+        if self.sim.N:
+            self._read_snapshot(archive, self.sim.t, snapshot_slots)
 
     # --- frame and state ---------------------------------------------------------------
     def origin(self, t: float) -> np.ndarray:
@@ -373,8 +413,13 @@ class _Run:
         for k in remove:
             self._record_escape(slots[k], m[k], x[k] + origin, v[k] + self.frame_velocity, t,
                                 ESCAPE_ORBIT if esc[k] else LEFT_BOX)
-        for k in remove[::-1]:
-            self.sim.remove(int(k))
+        with warnings.catch_warnings():  # REBOUND warns when the last one goes; reaccumulate reports it
+            warnings.filterwarnings("ignore", "Last particle removed", RuntimeWarning)
+            for k in remove[::-1]:
+                self.sim.remove(int(k))
+        if self.sim.N == 0:  # no frame to re-centre, no step to choose: the run ends
+            self._remember_state()
+            return
         if remove.size or lost.size:
             self._recentre()
         self._check_time_step()
@@ -430,7 +475,7 @@ class _Run:
             "escaped_mass": esc["mass"].sum(), "escaped_momentum": esc["momentum"].sum(axis=0),
             "escaped_angular_momentum": l_esc,
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
-            "largest_mass": float(m.max()), "remnant_mass": m_lr, "orbiting_mass": m_orb,
+            "largest_mass": float(m.max()) if len(m) else 0.0, "remnant_mass": m_lr, "orbiting_mass": m_orb,
             "time_step": self.sim.dt,
             "collision_kinetic_energy_change": float(self.resolver.params[3]),
             "n_overlap_push": int(self.resolver.ctx[CTX_N_OVERLAP]),
@@ -439,7 +484,8 @@ class _Run:
         for k, val in row.items():
             self.diag.setdefault(k, []).append(val)
         log.info("t = %.6g s (%.3g t_dyn), N = %d, M_lr = %.4g kg, orbiting = %.3g M_lr, merges %d, bounces %d",
-                 t, t / self.t_dyn, len(m), m_lr, m_orb / m_lr, row["n_merge"], row["n_bounce"])
+                 t, t / self.t_dyn, len(m), m_lr, m_orb / m_lr if m_lr > 0 else 0.0, row["n_merge"],
+                 row["n_bounce"])
 
     def _escaped_arrays(self) -> dict[str, np.ndarray]:
         e = self.escaped
@@ -487,7 +533,27 @@ class _Run:
             collision_model=self.params["collision_model"],
             initial_overlapping_pairs=int(self.initial_overlaps[0]),
             initial_overlap_energy=float(self.initial_overlaps[2]),
+            steps=int(self.sim.steps_done),
+            particle_steps=int(self.resolver.ctx[CTX_PARTICLE_STEPS]) if self.particle_steps_known else -1,
         )
+
+
+def _empty_result(t_dyn: float, collision_model: str) -> NBodyResult:
+    """The result of a run without particles: no final particles, escapes, mergers or diagnostics."""
+    ids = np.zeros(0, dtype=np.int64)
+    scalars = np.zeros(0)
+    vectors = np.zeros((0, 3))
+    offsets = np.zeros(1, dtype=np.int64)
+    return NBodyResult(
+        id=ids, mass=scalars, radius=scalars, position=vectors, velocity=vectors, spin=vectors,
+        members_offset=offsets, members=ids,
+        escaped_id=ids, escaped_mass=scalars, escaped_momentum=vectors, escaped_position=vectors,
+        escaped_velocity=vectors, escaped_spin=vectors, escaped_time=scalars,
+        escaped_reason=np.zeros(0, dtype=np.int8), escaped_members_offset=offsets, escaped_members=ids,
+        merge_time=scalars, merge_survivor=ids, merge_absorbed=ids,
+        status=NO_PARTICLES_LEFT, time=0.0, dynamical_time=t_dyn, time_step=0.0, collision_model=collision_model,
+        steps=0, particle_steps=0,
+    )
 
 
 def _roots(parent: np.ndarray) -> np.ndarray:

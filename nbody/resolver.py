@@ -103,7 +103,8 @@ CTX_N_BOUNCE = 8      # cumulative bounces
 CTX_N_SEPARATING = 9  # cumulative reports of pairs left alone (separating or no contact in the step)
 CTX_OVERFLOW = 10     # 1 if a merger found the event buffer full (it was not performed)
 CTX_N_OVERLAP = 11    # cumulative bounces of pairs overlapping since before the step (pushed apart)
-CTX_LEN = 12
+CTX_PARTICLE_STEPS = 12  # cumulative sum over steps of the particles the step integrated (step counter)
+CTX_LEN = 13
 
 PARTICLE_DTYPE = np.dtype(
     {
@@ -124,6 +125,8 @@ def _check_layout() -> None:
             raise ImportError(f"unsupported REBOUND particle layout (field {name}); rebound {rebound.__version__}")
     if ctypes.sizeof(rebound.Particle) != 8 * P_STRIDE:
         raise ImportError(f"unsupported REBOUND particle size; rebound {rebound.__version__}")
+    if rebound.Simulation.N.size != 8:
+        raise ImportError(f"unsupported REBOUND simulation layout (N is not 8 bytes); rebound {rebound.__version__}")
     c = rebound.simulation.CollisionS
     if (c.p1.offset, c.p2.offset, ctypes.sizeof(c)) != (0, 8, 72):
         raise ImportError(f"unsupported REBOUND reb_collision layout; rebound {rebound.__version__}")
@@ -456,9 +459,13 @@ class CollisionResolver:
         events: (n_slots, 2) merge events (survivor slot, absorbed slot) since the last
             :meth:`drain_events`; event_time: (n_slots,) their times (s).
         ctx: the int64 context array (counters at ``CTX_N_MERGE``, ``CTX_N_BOUNCE``,
-            ``CTX_N_OVERLAP``, ``CTX_N_SEPARATING``).
+            ``CTX_N_OVERLAP``, ``CTX_N_SEPARATING``, ``CTX_PARTICLE_STEPS``).
         params: float64 [G, eps_n, eps_t, cumulative kinetic-energy change by the resolver (J)].
         address: the C function address to assign to ``sim.collision_resolve``.
+        step_counter: the C function address :meth:`attach` assigns to
+            ``sim.post_timestep_modifications``: adds ``sim->N`` to ``ctx[CTX_PARTICLE_STEPS]``
+            once per step, after the step's drift and kicks and before its collision search
+            (so a step counts the particles it integrated; mergers count from the next step).
     """
 
     def __init__(self, n_slots: int, model: str, restitution_normal: float,
@@ -476,11 +483,13 @@ class CollisionResolver:
         self.ctx[CTX_EVENT_TIME] = self.event_time.ctypes.data
         self.ctx[CTX_CAPACITY] = n_slots
         self.ctx[CTX_MODEL] = MODEL_CODES[model]
-        self._engine, self.address = _build_trampoline(self.ctx.ctypes.data)
+        self._engine, self.address, self.step_counter = _build_trampoline(self.ctx.ctypes.data)
 
     def attach(self, sim: rebound.Simulation) -> None:
-        """Set this resolver as ``sim``'s collision resolver (again after loading an archive)."""
+        """Set this resolver as ``sim``'s collision resolver and its particle-step counter as the
+        post-step hook (again after loading an archive: REBOUND stores no function pointers)."""
         sim.collision_resolve = self.address
+        sim.post_timestep_modifications = self.step_counter
 
     def drain_events(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies of the merge events (slots (k, 2), times (k,)) since the last call; resets the buffer."""
@@ -504,7 +513,11 @@ class CollisionResolver:
 
 
 def _build_trampoline(ctx_address: int):
-    """Compile ``int32 f(reb_simulation*, reb_collision by value)`` calling the cfunc with the context."""
+    """Compile ``int32 f(reb_simulation*, reb_collision by value)`` calling the cfunc with the context,
+    and ``void g(reb_simulation*)`` adding ``sim->N`` to ``ctx[CTX_PARTICLE_STEPS]``.
+
+    Returns the execution engine (keep it alive) and the addresses of f and g.
+    """
     llvm.initialize_native_target()
     llvm.initialize_native_asmprinter()
     attr = f" byval({_COLLISION_IR}) align 8" if _calling_convention() == "byval" else ""
@@ -515,13 +528,24 @@ define i32 @impactpipe_resolve(ptr %sim, ptr{attr} %coll) {{
   %r = call i32 %f(ptr %sim, ptr %coll, ptr %ctx)
   ret i32 %r
 }}
+
+define void @impactpipe_count_step(ptr %sim) {{
+  %np = getelementptr i8, ptr %sim, i64 {rebound.Simulation.N.offset}
+  %n = load i64, ptr %np, align 8
+  %cp = inttoptr i64 {ctx_address + 8 * CTX_PARTICLE_STEPS} to ptr
+  %c = load i64, ptr %cp, align 8
+  %s = add i64 %c, %n
+  store i64 %s, ptr %cp, align 8
+  ret void
+}}
 """
     module = llvm.parse_assembly(text)
     module.verify()
     machine = llvm.Target.from_default_triple().create_target_machine()
     engine = llvm.create_mcjit_compiler(module, machine)
     engine.finalize_object()
-    return engine, engine.get_function_address("impactpipe_resolve")
+    return (engine, engine.get_function_address("impactpipe_resolve"),
+            engine.get_function_address("impactpipe_count_step"))
 
 
 def particle_view(sim: rebound.Simulation) -> np.ndarray:

@@ -10,7 +10,9 @@ import numpy as np
 
 from impactpipe.pipeline.runstore import atomic_path, write_dataset
 
-STATUSES = ("equilibrium", "time_cap", "wall_cap")
+NO_PARTICLES_LEFT = "no_particles_left"  # every particle was removed, or the hand-off had none
+STATUSES = ("equilibrium", "time_cap", "wall_cap", NO_PARTICLES_LEFT)
+TERMINAL_STATUSES = ("equilibrium", NO_PARTICLES_LEFT)  # a resumed run does not continue past these
 # escaped_reason codes
 ESCAPE_ORBIT = 1   # beyond half the box half-width on an escape orbit, moving away
 LEFT_BOX = 2       # still bound but about to leave the box (beyond 0.9 of its half-width)
@@ -102,7 +104,9 @@ class NBodyResult:
             members (CSR).  Final and escaped members together partition the hand-off ids.
         merge_time, merge_survivor, merge_absorbed: every merger (s, surviving id, absorbed id).
         diagnostics: time series, keys and units in ``DIAGNOSTIC_UNITS``.
-        status: 'equilibrium', 'time_cap' or 'wall_cap'.
+        status: one of ``STATUSES``: 'equilibrium', 'time_cap', 'wall_cap' or
+            'no_particles_left' (every particle was removed: no final particles, M_lr = 0;
+            also for an empty hand-off, with time 0 and no diagnostics).
         time: simulated time reached (s).
         dynamical_time: 1 / sqrt(G rho_bulk) (s).  time_step: final leapfrog step (s).
         collision_model: 'merge', 'conditional_merge' or 'bounce'.
@@ -110,6 +114,10 @@ class NBodyResult:
         initial_overlap_energy: J, sum over them of G m_i m_j (1/d_ij - 1/(r_i + r_j)): the
             potential energy their separation costs, which the collision resolution can add
             in a cold start (docs/nbody.md).
+        steps: leapfrog steps done (REBOUND ``steps_done``), over all resumes.
+        particle_steps: sum over the steps of the particles each step integrated, over all
+            resumes; -1 when the run resumed from a checkpoint written before this counter
+            existed (the count is then unknown).
     """
 
     id: np.ndarray
@@ -141,6 +149,8 @@ class NBodyResult:
     collision_model: str = "merge"
     initial_overlapping_pairs: int = 0
     initial_overlap_energy: float = 0.0
+    steps: int = 0
+    particle_steps: int = 0
 
     def __len__(self) -> int:
         return int(self.id.shape[0])
@@ -151,8 +161,10 @@ class NBodyResult:
 
 
 _SCALARS = ("status", "time", "dynamical_time", "time_step", "collision_model", "initial_overlapping_pairs",
-            "initial_overlap_energy")
-_OVERLAP_SCALARS = ("initial_overlapping_pairs", "initial_overlap_energy")
+            "initial_overlap_energy", "steps", "particle_steps")
+# attributes that files written before they existed lack, and the value read for them then
+_LATER_SCALARS = {"initial_overlapping_pairs": -1, "initial_overlap_energy": float("nan"), "steps": -1,
+                  "particle_steps": -1}
 
 
 def write_result(path: str | os.PathLike, result: NBodyResult, attrs: dict) -> None:
@@ -177,14 +189,14 @@ def read_result(path: str | os.PathLike) -> NBodyResult:
     with h5py.File(path, "r") as f:
         arrays = {name: f[name][()] for name in PARTICLE_FIELD_UNITS}
         diagnostics = {name: f["diagnostics"][name][()] for name in f["diagnostics"]}
-        # files written before the initial-overlap report existed lack its two attributes
-        scalars = {name: f.attrs[name] for name in _SCALARS if name in f.attrs or name not in _OVERLAP_SCALARS}
-        for name in _OVERLAP_SCALARS:
-            scalars.setdefault(name, -1 if name == "initial_overlapping_pairs" else float("nan"))
+        scalars = {name: f.attrs[name] for name in _SCALARS if name in f.attrs or name not in _LATER_SCALARS}
+        for name, missing in _LATER_SCALARS.items():
+            scalars.setdefault(name, missing)
     for name in ("status", "collision_model"):
         value = scalars[name]
         scalars[name] = value.decode() if isinstance(value, bytes) else str(value)
-    scalars["initial_overlapping_pairs"] = int(scalars["initial_overlapping_pairs"])
+    for name in ("initial_overlapping_pairs", "steps", "particle_steps"):
+        scalars[name] = int(scalars[name])
     for name in ("time", "dynamical_time", "time_step", "initial_overlap_energy"):
         scalars[name] = float(scalars[name])
     return NBodyResult(**arrays, diagnostics=diagnostics, **scalars)

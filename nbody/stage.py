@@ -1,7 +1,9 @@
 """The N-body stage of the pipeline: reaccumulate the hand-off particles, write nbody.h5.
 
 The REBOUND Simulationarchive ``nbody.bin`` is the checkpoint: an interrupted stage
-resumes from its last snapshot when the particles and settings are unchanged.
+resumes from its last snapshot when the particles and settings are unchanged, and starts
+over (replacing it) when they changed.  The summary's ``stages.nbody`` records the cost
+counters ``steps`` and ``particle_steps`` (see :func:`impactpipe.nbody.driver.reaccumulate`).
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from impactpipe.handoff.store import read_particles
 from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
-from .driver import reaccumulate
-from .result import write_result
+from .driver import ArchiveMismatch, reaccumulate
+from .result import NO_PARTICLES_LEFT, write_result
 
 log = logging.getLogger(__name__)
 
@@ -33,22 +35,28 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
     particles = read_particles(ctx.path("handoff"))
     nbody = config.nbody
     progress = ctx.progress("nbody", nbody.stop.max_time)
+    settings = dict(
+        bulk_density=values["target_reference_density"],
+        collision_model=nbody.collision_model,
+        restitution_normal=nbody.restitution.normal,
+        restitution_tangential=nbody.restitution.tangential,
+        opening_angle=nbody.opening_angle,
+        min_dynamical_times=nbody.stop.min_dynamical_times,
+        max_orbiting_fraction=nbody.stop.max_orbiting_fraction,
+        max_sim_time=nbody.stop.max_time,
+        max_wall_seconds=nbody.stop.max_wall_seconds,
+        archive_path=ctx.run_dir / ARCHIVE_FILE,
+        seed=nbody.seed,
+        progress=progress,
+        steps_per_dynamical_time=nbody.steps_per_dynamical_time,
+        collision_step_fraction=nbody.collision_step_fraction,
+    )
     try:
-        result = reaccumulate(
-            particles,
-            bulk_density=values["target_reference_density"],
-            collision_model=nbody.collision_model,
-            restitution_normal=nbody.restitution.normal,
-            restitution_tangential=nbody.restitution.tangential,
-            opening_angle=nbody.opening_angle,
-            min_dynamical_times=nbody.stop.min_dynamical_times,
-            max_orbiting_fraction=nbody.stop.max_orbiting_fraction,
-            max_sim_time=nbody.stop.max_time,
-            max_wall_seconds=nbody.stop.max_wall_seconds,
-            archive_path=ctx.run_dir / ARCHIVE_FILE,
-            seed=nbody.seed,
-            progress=progress,
-        )
+        try:
+            result = reaccumulate(particles, **settings)
+        except ArchiveMismatch as exc:
+            log.info("nbody: %s: starting over", exc)
+            result = reaccumulate(particles, resume=False, **settings)
     finally:
         progress.close()
     wall = time.perf_counter() - t0
@@ -56,10 +64,15 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
     escaped_mass = float(result.escaped_mass.sum())
     final_mass = float(result.mass.sum())
     initial_mass = float(particles.mass.sum())
+    counters = {"steps": result.steps}
+    if result.particle_steps >= 0:  # -1: resumed from a checkpoint written before the counter existed
+        counters["particle_steps"] = result.particle_steps
     log.info("nbody: %s after %.4g s simulated (%.3g t_dyn); %d particles left, %d escaped",
              result.status, result.time, result.time / result.dynamical_time, len(result),
              len(result.escaped_id))
-    if result.status != "equilibrium":
+    if result.status == NO_PARTICLES_LEFT:
+        log.warning("nbody: no particle left at the end (all escaped or removed): no remnant")
+    elif result.status != "equilibrium":
         log.warning("nbody: stopped by %s before dynamical equilibrium", result.status)
     return {
         "nbody_status": result.status,
@@ -67,11 +80,11 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
             "mass_initial": initial_mass,
             "mass_final": final_mass,
             "mass_escaped": escaped_mass,
-            "mass_error": (final_mass + escaped_mass - initial_mass) / initial_mass,
+            "mass_error": (final_mass + escaped_mass - initial_mass) / initial_mass if initial_mass > 0 else 0.0,
             "momentum_escaped": np.asarray(result.escaped_momentum).sum(axis=0).tolist(),
             "initial_overlapping_pairs": result.initial_overlapping_pairs,
             "initial_overlap_energy": result.initial_overlap_energy,
         },
         "stage": {"simulated_time": result.time, "dynamical_times": result.time / result.dynamical_time,
-                  "particles_final": len(result), "particles_escaped": int(len(result.escaped_id))},
+                  "particles_final": len(result), "particles_escaped": int(len(result.escaped_id)), **counters},
     }

@@ -353,6 +353,12 @@ class NBody(Strict):
     collision_model: Literal["merge", "conditional_merge", "bounce"] = "merge"
     restitution: Restitution = Field(default_factory=Restitution)
     opening_angle: float = Field(0.5, gt=0, le=2.0)
+    steps_per_dynamical_time: float = Field(
+        100.0, gt=0, description="time-step rule, orbit term: dt <= t_dyn / steps_per_dynamical_time, "
+                                 "t_dyn = 1/sqrt(G rho_bulk) (s)")
+    collision_step_fraction: float = Field(
+        0.5, gt=0, le=1, description="time-step rule, collision term: dt <= collision_step_fraction r_min / "
+                                     "v_rel_max (m over m/s); <= 1 so a head-on pair cannot skip its overlap")
     stop: Stop = Field(default_factory=Stop)
     seed: int = 1
 

@@ -67,6 +67,12 @@ STEP_SIZE: dict[str, tuple[str, Any]] = {
     "hydro.cells_per_projectile_radius": ("1 / value (finest cell size in projectile radii)", lambda v: 1.0 / v),
     "hydro.cfl": ("value (Courant number: hydro time step)", lambda v: v),
     "nbody.opening_angle": ("value (Barnes-Hut opening angle, rad)", lambda v: v),
+    # the N-body time step is min(t_dyn / n, f r_min / v_rel_max) (docs/nbody.md): each key sets
+    # one term, which is the step size wherever that term is the smaller one
+    "nbody.steps_per_dynamical_time": ("1 / value (N-body time step in t_dyn where the orbit term binds)",
+                                       lambda v: 1.0 / v),
+    "nbody.collision_step_fraction": ("value (N-body time step in r_min / v_rel_max where the collision "
+                                      "term binds)", lambda v: v),
 }
 #: Default depths of the peak-pressure answers, in projectile radii below the impact point.
 DEFAULT_DEPTHS = (1.0, 2.0, 4.0)

@@ -87,3 +87,22 @@ def test_every_config_key_is_documented():
     missing = [p for p in key_paths()
                if p not in doc and p.split(".")[-1] not in words and not any(t.startswith(p + ".") for t in tokens)]
     assert not missing, f"undocumented config keys: {missing}"
+
+
+def test_nbody_time_step_keys_default_to_the_driver_rule_and_are_bounded():
+    import inspect
+
+    from impactpipe.nbody.driver import reaccumulate
+
+    text = "name: x\nscene:\n  problem: impact\n  target: {material: b, radius: 1.0e3}\n" \
+           "  projectile: {material: b, radius: 100}\n  impact: {velocity: 1.0e3}\n" \
+           "materials:\n  b: {eos: {model: tillotson, preset: basalt}}\n"
+    nbody = parse_config(text, source="c.yaml").nbody
+    rule = inspect.signature(reaccumulate).parameters
+    for key in ("steps_per_dynamical_time", "collision_step_fraction"):
+        assert getattr(nbody, key) == rule[key].default, key
+    bad = text + "nbody:\n  steps_per_dynamical_time: 0\n  collision_step_fraction: 1.5\n"
+    with pytest.raises(ConfigError) as info:
+        parse_config(bad, source="c.yaml")
+    assert info.value.messages == ["c.yaml:10: nbody.steps_per_dynamical_time: must be > 0 (got 0)",
+                                   "c.yaml:11: nbody.collision_step_fraction: must be <= 1 (got 1.5)"]

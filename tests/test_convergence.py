@@ -12,14 +12,17 @@ import pytest
 from click.testing import CliRunner
 
 from impactpipe.pipeline.cli import main
+from impactpipe.pipeline.config import load_yaml
 from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson, run_ladders)
 from impactpipe.pipeline.runstore import atomic_path
 
 HERE = Path(__file__).parent
 QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
 
-#: Stand-in answer: M_lr/M_T = CONVERGED + AMPLITUDE h^ORDER with h = 1 / cells_per_projectile_radius.
+#: Stand-in answer: M_lr/M_T = CONVERGED + AMPLITUDE h^ORDER with h = 1 / cells_per_projectile_radius,
+#: plus NBODY_SLOPE (1/n - 1/100) with n = nbody.steps_per_dynamical_time (0 at its default 100).
 CONVERGED, AMPLITUDE, ORDER = 0.7, 0.3, 2.0
+NBODY_SLOPE = 2.0
 
 
 def _finish(ctx, stage):
@@ -42,13 +45,16 @@ def handoff(ctx):
 
 def nbody(ctx):
     _finish(ctx, "nbody")
-    return {"stage": {"steps": 50, "particle_steps": int(5000 / ctx.config.nbody.opening_angle)}}
+    steps = int(ctx.config.nbody.steps_per_dynamical_time / 2)
+    return {"stage": {"steps": steps, "particle_steps": int(100 * steps / ctx.config.nbody.opening_angle)}}
 
 
 def analysis(ctx):
     h = 1.0 / ctx.config.hydro.cells_per_projectile_radius
+    h_nbody = 1.0 / ctx.config.nbody.steps_per_dynamical_time
     _finish(ctx, "analysis")
-    return {"M_lr_over_M_T": CONVERGED + AMPLITUDE * h ** ORDER, "N_lr": 100, "Q": 500.0}
+    return {"M_lr_over_M_T": CONVERGED + AMPLITUDE * h ** ORDER + NBODY_SLOPE * (h_nbody - 0.01), "N_lr": 100,
+            "Q": 500.0}
 
 
 STAGES = {s: f"test_convergence:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
@@ -184,6 +190,36 @@ def test_ladders_through_the_sweep_machinery(tmp_path):
         run_ladders(QUICKSTART, {"hydro.cells_per_projectile_radius": cells, "nbody.opening_angle": angles},
                     out, executor=pool, stage_functions=STAGES, show_progress=False)
     assert calls(out) == done, "rerunning a finished ladder does no work"
+
+
+def test_nbody_time_step_ladders(tmp_path):
+    out = tmp_path / "ladder"
+    steps = [50, 100, 200, 400]
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_ladders(QUICKSTART, {"nbody.steps_per_dynamical_time": steps}, out, executor=pool,
+                             stage_functions=STAGES, show_progress=False)
+    done = calls(out)
+    assert sum(n for (_, stage), n in done.items() if stage == "hydro") == 1, "an N-body key shares the hydro run"
+    assert sum(n for (_, stage), n in done.items() if stage == "nbody") == len(steps)
+    rungs = result["rungs"]
+    assert [r.step for r in rungs] == [1.0 / n for n in steps], "step size h = 1 / steps_per_dynamical_time"
+    assert [r.costs["nbody_steps"] for r in rungs] == [n / 2 for n in steps]
+    ext = result["richardson"]["nbody.steps_per_dynamical_time"]["M_lr_over_M_T"]
+    h_cells = 1.0 / config_value(QUICKSTART, "hydro", "cells_per_projectile_radius")
+    assert ext.ok and ext.order == pytest.approx(1.0, rel=1e-6)
+    assert ext.value == pytest.approx(CONVERGED + AMPLITUDE * h_cells ** ORDER - 0.01 * NBODY_SLOPE, abs=1e-9)
+    # the collision term of the rule is a ladder key too; its bound (0, 1] is checked before any work
+    runner = CliRunner()
+    result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                                  "--vary", "nbody.collision_step_fraction=0.5,2"])
+    assert result.exit_code == 2
+    assert result.output.startswith("--vary nbody.collision_step_fraction=2: ")
+    assert "nbody.collision_step_fraction: must be <= 1 (got 2)" in result.output
+    assert not (tmp_path / "bad").exists()
+
+
+def config_value(path, section, key):
+    return load_yaml(Path(path).read_text())[section][key]
 
 
 def test_handoff_time_ladder_shares_one_hydro_run_to_the_latest_time(tmp_path):

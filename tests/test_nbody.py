@@ -12,7 +12,9 @@ import pytest
 from impactpipe.handoff.particles import ParticleSet
 from impactpipe.nbody import (G, CollisionResolver, bound_mask, collision_time_step, read_result,
                               reaccumulate, write_result)
-from impactpipe.nbody.resolver import CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, particle_view
+from impactpipe.nbody import driver
+from impactpipe.nbody.resolver import CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, CTX_PARTICLE_STEPS, particle_view
+from impactpipe.nbody.result import ESCAPE_ORBIT
 from impactpipe.nbody.simulation import build_simulation
 
 RHO = 2000.0  # kg/m^3
@@ -377,6 +379,9 @@ def test_interrupted_run_resumes_to_the_same_final_state(tmp_path):
     assert resumed.status == full.status == "equilibrium"
     for a, b in zip(_final_state(full), _final_state(resumed)):
         np.testing.assert_array_equal(a, b)
+    # the cost counters continue across the resume: the same totals as the uninterrupted run
+    assert (resumed.steps, resumed.particle_steps) == (full.steps, full.particle_steps)
+    assert full.steps > 0 and len(full) * full.steps < full.particle_steps < len(ps) * full.steps
     assert full.diagnostics["n_merge"][-1] > 0 and full.diagnostics["n_bounce"][-1] > 0
     # wall cap: stops with its status after the first chunk, then resumes to the same end
     capped = reaccumulate(ps, archive_path=tmp_path / "wall.bin", max_wall_seconds=0.0, **kw)
@@ -384,7 +389,18 @@ def test_interrupted_run_resumes_to_the_same_final_state(tmp_path):
     again = reaccumulate(ps, archive_path=tmp_path / "wall.bin", **kw)
     for a, b in zip(_final_state(full), _final_state(again)):
         np.testing.assert_array_equal(a, b)
-    with pytest.raises(ValueError, match="resume=False"):
+    assert capped.steps < full.steps and (again.steps, again.particle_steps) == (full.steps, full.particle_steps)
+    # a sidecar written before the particle-step counter existed: that count is unknown (-1), steps are not
+    sidecar = tmp_path / "wall.bin.state.npz"
+    with np.load(sidecar) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    del meta["particle_steps"]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(sidecar, **arrays)
+    old = reaccumulate(ps, archive_path=tmp_path / "wall.bin", **kw)
+    assert (old.steps, old.particle_steps) == (full.steps, -1)
+    with pytest.raises(driver.ArchiveMismatch, match="resume=False"):
         reaccumulate(ps, archive_path=tmp_path / "full.bin", **{**kw, "seed": 12})
     # a sidecar of another format (an older version of the stage) is refused, not misread
     sidecar = tmp_path / "full.bin.state.npz"
@@ -394,7 +410,7 @@ def test_interrupted_run_resumes_to_the_same_final_state(tmp_path):
     del meta["format"]
     arrays["meta"] = np.array(json.dumps(meta))
     np.savez(sidecar, **arrays)
-    with pytest.raises(ValueError, match="another version"):
+    with pytest.raises(driver.ArchiveMismatch, match="another version"):
         reaccumulate(ps, archive_path=tmp_path / "full.bin", **kw)
 
 
@@ -416,3 +432,93 @@ def test_time_cap_status_and_result_roundtrip(tmp_path):
         assert f["position"].attrs["units"] == "m"
         assert f["diagnostics/energy"].attrs["units"] == "J"
         assert all("units" in f[k].attrs for k in f if isinstance(f[k], h5py.Dataset))
+
+
+# --- cost counters and runs that end without particles ----------------------------------
+
+def test_step_counter_counts_the_particles_each_step_integrated():
+    # the pair enters contact in its first step and merges at its end: 2 particles in step 1, then 1
+    sim, res, *_ = stepped_pair("merge", [-0.3, 0.2, 0.1], [1.0, 0.4, -0.3])
+    sim.steps(3)
+    assert sim.N == 1 and sim.steps_done == 3
+    assert res.ctx[CTX_PARTICLE_STEPS] == 2 + 1 + 1
+
+
+def test_particle_steps_match_an_independent_count_over_mergers_and_chunks(monkeypatch):
+    # reference: REBOUND's heartbeat (called between any two steps and after the last one of an
+    # integrate call) adds the particle count it saw last times the steps done since
+    reference = {"sum": 0, "n": 0, "steps": 0}
+
+    def heartbeat(sim_pointer):
+        sim = sim_pointer.contents
+        reference["sum"] += reference["n"] * (sim.steps_done - reference["steps"])
+        reference["n"], reference["steps"] = sim.N, sim.steps_done
+
+    def build_with_heartbeat(*args, **kwargs):
+        sim = build_simulation(*args, **kwargs)
+        reference["n"] = sim.N
+        sim.heartbeat = heartbeat
+        return sim
+
+    monkeypatch.setattr(driver, "build_simulation", build_with_heartbeat)
+    ps = cold_cloud(120, seed=7)
+    out = reaccumulate(ps, bulk_density=RHO, collision_model="merge", min_dynamical_times=2.0,
+                       output_interval=600.0)
+    assert out.merge_time.size > 50 and out.steps > 100  # N changed within many chunks
+    assert out.steps == reference["steps"]
+    assert out.particle_steps == reference["sum"]
+
+
+def _pair_flying_apart():
+    """Two equal bodies receding from their centre of mass at 30 m/s, far above v_esc (~0.04 m/s)."""
+    m = np.array([1e9, 1e9])
+    r = sphere_radius(m)
+    pos = np.array([[-3 * r[0], 0.0, 0.0], [3 * r[0], 0.0, 0.0]]) + [100.0, -50.0, 20.0]
+    vel = np.array([[-30.0, 0.0, 0.0], [30.0, 0.0, 0.0]]) + [1.0, 2.0, -3.0]
+    return ParticleSet.from_bodies(m, r, pos, vel)
+
+
+def test_run_whose_particles_all_escape_ends_with_no_particles_left(tmp_path):
+    ps = _pair_flying_apart()
+    out = reaccumulate(ps, bulk_density=RHO, min_dynamical_times=0.0, archive_path=tmp_path / "a.bin")
+    assert out.status == "no_particles_left"
+    assert len(out) == 0 and out.position.shape == (0, 3) and out.members_offset.tolist() == [0]
+    assert sorted(out.escaped_id.tolist()) == [1, 2] and out.escaped_reason.tolist() == [ESCAPE_ORBIT] * 2
+    assert out.escaped_mass.sum() == ps.mass.sum()
+    np.testing.assert_allclose(out.escaped_momentum.sum(axis=0), (ps.mass[:, None] * ps.velocity).sum(axis=0),
+                               rtol=1e-12)
+    assert_partition(out, ps.id)
+    d = out.diagnostics
+    assert d["n_particles"][-1] == 0 and d["remnant_mass"][-1] == 0.0 and d["largest_mass"][-1] == 0.0
+    assert d["escaped_mass"][-1] == ps.mass.sum() and d["time"][-1] == out.time > 0
+    # both integrated in every step until removed together
+    assert out.steps > 0 and out.particle_steps == 2 * out.steps
+    # the finished run resumes to itself without stepping, and the empty result round-trips
+    chunks = []
+    again = reaccumulate(ps, bulk_density=RHO, min_dynamical_times=0.0, archive_path=tmp_path / "a.bin",
+                         progress=chunks.append)
+    assert chunks == [] and again.status == "no_particles_left"
+    assert (again.time, again.steps, again.particle_steps) == (out.time, out.steps, out.particle_steps)
+    assert again.escaped_id.tolist() == out.escaped_id.tolist() and len(again) == 0
+    write_result(tmp_path / "nbody.h5", out, {})
+    back = read_result(tmp_path / "nbody.h5")
+    assert back.status == "no_particles_left" and back.position.shape == (0, 3)
+    assert (back.steps, back.particle_steps) == (out.steps, out.particle_steps)
+    np.testing.assert_array_equal(back.escaped_members, out.escaped_members)
+
+
+def test_single_particle_and_empty_handoffs(tmp_path):
+    one = ParticleSet.from_bodies([1e12], sphere_radius([1e12]), [[10.0, 20.0, 30.0]], [[1.0, -2.0, 0.5]])
+    out = reaccumulate(one, bulk_density=RHO, min_dynamical_times=1.0)
+    assert out.status == "equilibrium" and len(out) == 1 and out.escaped_id.size == 0
+    assert out.mass[0] == 1e12 and out.diagnostics["remnant_mass"][-1] == 1e12
+    np.testing.assert_allclose(out.position[0], one.position[0] + one.velocity[0] * out.time, rtol=1e-12)
+    np.testing.assert_array_equal(out.velocity[0], one.velocity[0])
+    assert out.steps > 0 and out.particle_steps == out.steps
+    empty = ParticleSet.from_bodies(np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+    out = reaccumulate(empty, bulk_density=RHO, archive_path=tmp_path / "e.bin")
+    assert out.status == "no_particles_left" and len(out) == 0 and out.escaped_id.size == 0
+    assert (out.time, out.steps, out.particle_steps, out.diagnostics) == (0.0, 0, 0, {})
+    write_result(tmp_path / "nbody.h5", out, {})
+    back = read_result(tmp_path / "nbody.h5")
+    assert back.status == "no_particles_left" and back.members_offset.tolist() == [0] and back.diagnostics == {}
