@@ -10,7 +10,7 @@ from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.mesh import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
-from impactpipe.hydro.strength.update import WK_SOLID, update_stress
+from impactpipe.hydro.strength.update import WK_PHI, update_stress
 from impactpipe.pipeline.presets import resolve_strength
 
 STRONG = resolve_strength("geo", "strong", {})
@@ -74,7 +74,7 @@ def _rotation_kernel_run(steps_per_revolution):
         x, y = np.meshgrid(xs, xs, indexing="ij")
         strength.work[0, 0, :, :, 0] = -omega * y
         strength.work[0, 1, :, :, 0] = omega * x
-        strength.work[0, WK_SOLID] = 1.0
+        strength.work[0, WK_PHI] = 1.0
         update_stress(dt, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
                       mesh.block_dx, eos.kind, eos.params, eos.table, arrays.model, arrays.params, arrays.shear,
                       arrays.tensile_strength, strength.work, strength.counts, strength.amounts)

@@ -68,7 +68,7 @@ class MaterialStrength:
         for axis in range(ndim):
             for arr, flip in ((state.alpha, -1), (state.arho, -1), (state.momentum, axis)):
                 fill_ghosts(arr, mesh.neighbor, axis, GHOST, flip)
-        cell_velocities(state.alpha, state.arho, state.momentum, self.work)
+        cell_velocities(state.alpha, state.arho, state.momentum, eos.kind, eos.params, eos.table, self.work)
         a = self.arrays
         update_stress(dt, mesh.geometry_code, ndim, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
                       mesh.block_dx, eos.kind, eos.params, eos.table, a.model, a.params, a.shear,
@@ -102,7 +102,7 @@ class MaterialStrength:
 
     @property
     def amount_totals(self) -> dict[str, float]:
-        """Void volume opened by tensile failure (m^3) and stress work into internal energy (J)."""
+        """Stress work put into internal energy, sum of dt alpha_k S_k : D V (J)."""
         return {name: float(v) for name, v in zip(AMOUNT_NAMES, self.amounts.sum(axis=0))}
 
     def cell_fields(self, state: HydroState) -> dict[str, np.ndarray]:

@@ -13,12 +13,15 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
 
 1. G_k = G_const + (G/K) rho_k c_K,k^2 (:mod:`impactpipe.hydro.strength.parameters`);
 2. tensile failure: when the EOS pressure p_k < -Y_T (1 - D) the material fails (D = 1,
-   counted once as ``tensile_failure``); failed material carries no tension: at p_k < 0 its
-   volume fraction shrinks by the acoustic estimate alpha_k p_k / K_k (at most by half per
-   step) so p_k returns to about zero and the cell opens void (mass, momentum and energy
-   unchanged; ``tension_relaxed``, volume opened in ``void_opened_by_tensile_failure``);
+   counted once as ``tensile_failure``); from then on its yield strength in tension is zero
+   (the tensile taper of :mod:`impactpipe.hydro.strength.yield_strength` with Y_T (1 - D)).
+   Its mean stress stays limited to -Y_T by the sweeps, which open void instead of
+   stretching it (docs/hydro.md, "Tensile limit"); see docs/strength.md for why the
+   failed material is not relaxed to zero tension here;
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
-4. Y = yield_strength(p_k, T_k, D) with T_k from the EOS; radial return to sqrt(3 J2) <= Y
+4. Y = yield_strength(p_k, T_k, D) with T_k from the EOS, and Y = 0 for material expanded
+   below STRENGTH_MIN_DENSITY_FRACTION of its reference density (fragmented or vapour: a
+   deviatoric stress held by it would put S:D / rho_k of work into very little mass); radial return to sqrt(3 J2) <= Y
    (``yield_return``), equivalent plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_k);
 5. internal energy alpha_k rho_k e_k += dt alpha_k S_k : D_rate (stress power; elastic and
    plastic work, so total energy stays consistent with the conservative stress fluxes).
@@ -31,7 +34,7 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed, temperature
+from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
@@ -41,24 +44,23 @@ from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID
 
 # work array slots (``work[NB, NWORK, NX, NY, NZ]``)
 WK_V = 0            # + axis: cell velocity (m/s)
-WK_SOLID = 3        # 1 where the cell holds material (phi >= PHI_VOID and rho > 0), else 0
+WK_PHI = 3          # material fill of a cell holding material (phi >= PHI_VOID and rho > 0):
+                    # min(sum_k alpha_k, sum_k alpha_k rho_k / rho0_k); 0 in void cells
 WK_S = 4            # + slot: mixture deviatoric stress (xx, yy, zz, xy, xz, yz) (Pa)
 NWORK = 10
 
 # counter slots (``counts[NB, NCOUNT]``) and amount slots (``amounts[NB, NSAMOUNT]``)
 CNT_YIELD = 0
 CNT_TENSILE_FAILURE = 1
-CNT_TENSION_RELAXED = 2
-CNT_RELAX_CAPPED = 3
-NCOUNT = 4
-COUNT_NAMES = ("yield_return", "tensile_failure", "tension_relaxed", "tension_relax_capped")
-AMT_VOID_OPENED = 0
-AMT_PLASTIC_WORK = 1
-NSAMOUNT = 2
-AMOUNT_NAMES = ("void_opened_by_tensile_failure", "stress_work")
+CNT_LOW_DENSITY = 2
+NCOUNT = 3
+COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density")
+AMT_PLASTIC_WORK = 0
+NSAMOUNT = 1
+AMOUNT_NAMES = ("stress_work",)
 
-#: Most a failed material's volume fraction may shrink in one step when its tension relaxes.
-RELAX_MAX_FRACTION = 0.5
+#: Material below this fraction of its reference density carries no deviatoric stress.
+STRENGTH_MIN_DENSITY_FRACTION = 0.5
 
 
 def stress_slots(ndim: int) -> int:
@@ -67,8 +69,13 @@ def stress_slots(ndim: int) -> int:
 
 
 @njit(cache=True, parallel=True)
-def cell_velocities(alpha, arho, mom, work):
-    """Velocity and the solid flag of every padded cell (ghosts filled beforehand) into ``work``."""
+def cell_velocities(alpha, arho, mom, eos_kind, eos_params, eos_table, work):
+    """Velocity and material fill of every padded cell (ghosts filled beforehand) into ``work``.
+
+    The fill is min(phi, sum_k alpha_k rho_k / rho0_k) (materials without a reference
+    density count by volume): material expanded far below rho0 fills a cell by volume but
+    is as light as a spray, and the stress tractions scale with it.
+    """
     nb, nmat, nx, ny, nz = alpha.shape
     for b in prange(nb):
         for ix in range(nx):
@@ -76,17 +83,21 @@ def cell_velocities(alpha, arho, mom, work):
                 for iz in range(nz):
                     rho = 0.0
                     phi = 0.0
+                    solid = 0.0
                     for k in range(nmat):
-                        rho += arho[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        rho += ar
                         phi += alpha[b, k, ix, iy, iz]
+                        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
+                        solid += ar / rho0 if rho0 > 0.0 else alpha[b, k, ix, iy, iz]
                     if rho > 0.0 and phi >= PHI_VOID:
                         for d in range(3):
                             work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
-                        work[b, WK_SOLID, ix, iy, iz] = 1.0
+                        work[b, WK_PHI, ix, iy, iz] = max(min(phi, solid), PHI_VOID)
                     else:
                         for d in range(3):
                             work[b, WK_V + d, ix, iy, iz] = 0.0
-                        work[b, WK_SOLID, ix, iy, iz] = 0.0
+                        work[b, WK_PHI, ix, iy, iz] = 0.0
 
 
 @njit(cache=True, inline="always")
@@ -103,8 +114,8 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
     else:
         jz0 -= 1
         jz1 += 1
-    lo = work[b, WK_SOLID, jx0, jy0, jz0] > 0.0
-    hi = work[b, WK_SOLID, jx1, jy1, jz1] > 0.0
+    lo = work[b, WK_PHI, jx0, jy0, jz0] > 0.0
+    hi = work[b, WK_PHI, jx1, jy1, jz1] > 0.0
     if lo and hi:
         return (work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, jx0, jy0, jz0]) / (2.0 * dx)
     if hi:
@@ -119,7 +130,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                   eos_table, model, params, shear, tensile_strength, work, counts, amounts):
     """One strength step of ``dt`` (s) for every interior cell; see the module docstring.
 
-    ``work`` holds the velocities and solid flags with ghosts (:func:`cell_velocities`);
+    ``work`` holds the velocities and fills with ghosts (:func:`cell_velocities`);
     its stress slots are written for the interior cells.  Counters accumulate per block.
     """
     nb, nmat, nx, ny, nz = alpha.shape
@@ -136,7 +147,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                 for iz in range(gz, nz - gz):
                     for c in range(6):
                         work[b, WK_S + c, ix, iy, iz] = 0.0
-                    if work[b, WK_SOLID, ix, iy, iz] <= 0.0:
+                    if work[b, WK_PHI, ix, iy, iz] <= 0.0:
                         for q in range(nmat * nq):
                             arhoq[b, q, ix, iy, iz] = 0.0
                         continue
@@ -183,21 +194,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         ek = arhoe[b, k, ix, iy, iz] * inv
                         pk, c2b, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
                         # tensile failure and relaxation of tension in failed material
-                        if pk < -tensile_strength[k] * (1.0 - min(dmg, 1.0)):
+                        if pk < -tensile_strength[k] * (1.0 - dmg):
                             if dmg < 1.0:
                                 counts[b, CNT_TENSILE_FAILURE] += 1
                                 dmg = 1.0
-                        if dmg >= 1.0 and pk < 0.0 and c2b > 0.0:
-                            shrink = -pk / (rk * c2b)
-                            if shrink > RELAX_MAX_FRACTION:
-                                shrink = RELAX_MAX_FRACTION
-                                counts[b, CNT_RELAX_CAPPED] += 1
-                            counts[b, CNT_TENSION_RELAXED] += 1
-                            amounts[b, AMT_VOID_OPENED] += a * shrink * vol
-                            a = a * (1.0 - shrink)
-                            alpha[b, k, ix, iy, iz] = a
-                            rk = ar / a
-                            pk, c2b, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
                         g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0)
                         sxx, syy, szz, sxy, sxz, syz = jaumann_update(
                             sxx, syy, szz, sxy, sxz, syz, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz, dt, g)
@@ -207,6 +207,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             sxy = 0.0
                         tk = temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
                         y = yield_strength(model[k], params[k], pk, tk, dmg)
+                        if rk < STRENGTH_MIN_DENSITY_FRACTION * reference_density(eos_kind[k], eos_params[k], eos_table):
+                            y = 0.0
+                            counts[b, CNT_LOW_DENSITY] += 1
                         sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz, y, g)
                         if returned:
                             counts[b, CNT_YIELD] += 1

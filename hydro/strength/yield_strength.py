@@ -6,8 +6,9 @@ T its temperature (K), D its damage (0 intact, 1 fully damaged).
 
 - intact (Lundborg):      Y_i = Y0 + mu_i P / (1 + mu_i P / (Y_M - Y0))      (P >= 0)
 - damaged (dry friction): Y_d = min(Y_c + mu_d P, Y_i)                        (P >= 0)
-- tension (P < 0):        both fall linearly to zero at the tensile limit P = -Y_T:
-                          Y(P) = Y(0) (1 + P / Y_T), 0 for P <= -Y_T
+- tension (P < 0):        both fall linearly to zero at the tensile limit P = -Y_T (1 - D):
+                          Y(P) = Y(0) (1 + P / (Y_T (1 - D))), 0 below (failed material,
+                          D = 1, has no strength in tension)
 - GEO:   Y = Y_i;  ROCK: Y = (1 - D) Y_i + D Y_d;  von Mises: Y = yield_strength
 - thermal softening (GEO, ROCK): Y -> Y tanh(xi (T_melt / T - 1)), zero at and above T_melt.
 
@@ -77,5 +78,5 @@ def yield_strength(model, params, pressure, temperature, damage):
     else:
         y = intact
     if pressure < 0.0:
-        y *= tensile_taper(pressure, params[Y_T])
+        y *= tensile_taper(pressure, params[Y_T] * (1.0 - min(max(damage, 0.0), 1.0)))
     return y * thermal_softening(temperature, params[T_MELT], params[XI])
