@@ -122,3 +122,25 @@ def test_checkpoint_with_strength_restarts_bit_for_bit(tmp_path):
     assert np.array_equal(sim.state.momentum, restarted.state.momentum)
     assert sim.floor_counts == restarted.floor_counts
     assert sim.floor_counts["yield_return"] > 0
+
+
+def test_strength_fields_in_snapshots_with_units(tmp_path):
+    import h5py
+
+    from impactpipe.hydro import append_snapshot, read_snapshot
+
+    materials = {"basalt": preset_material("basalt")}
+    materials["basalt"]["strength"] = resolve_strength("geo", "strong", {})
+    sim = PROBLEMS["planar_impact"].setup({"cells": 64, "flyer": {"material": "basalt", "velocity": 600.0}},
+                                          materials)
+    sim.run(1.0, max_steps=10)
+    with h5py.File(tmp_path / "h.h5", "w") as fh:
+        append_snapshot(fh, sim.snapshot())
+    back = read_snapshot(tmp_path / "h.h5", 0)
+    assert set(back.extra) == {"deviatoric_stress_xx", "deviatoric_stress_yy", "deviatoric_stress_zz",
+                               "von_mises_stress", "plastic_strain", "damage"}
+    assert back.extra["von_mises_stress"].max() > 0.0
+    with h5py.File(tmp_path / "h.h5") as fh:
+        group = fh["snapshots/0000/extra"]
+        assert group["von_mises_stress"].attrs["units"] == "Pa"
+        assert group["damage"].attrs["units"] == "dimensionless"
