@@ -65,13 +65,13 @@ def shear_ratio(poisson: float) -> float:
 
 
 def has_yield(spec: dict) -> bool:
-    """Whether a resolved strength spec has a non-zero yield strength anywhere."""
+    """Whether a strength spec has a non-zero yield strength anywhere (missing strengths count as 0)."""
     model = spec.get("model", "none")
     if model == "none":
         return False
     if model == "von_mises":
-        return spec["yield_strength"] > 0.0
-    return spec["Y0"] > 0.0 or spec["Y_M"] > 0.0
+        return spec.get("yield_strength", 0.0) > 0.0
+    return spec.get("Y0", 0.0) > 0.0 or spec.get("Y_M", 0.0) > 0.0
 
 
 def pack_strength(specs: list[dict | None]) -> StrengthArrays:
