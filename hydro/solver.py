@@ -360,8 +360,8 @@ class Simulation:
                     state_grp.create_dataset(name, data=getattr(self.state, name))
                 ctr = fh.create_group("counters")
                 ctr.create_dataset("boundary", data=self.boundary)
-                ctr.create_dataset("floors", data=self.floors)
-                ctr.create_dataset("amounts", data=self.amounts)
+                ctr.create_dataset("floors", data=self.floors).attrs["names"] = json.dumps(FLOOR_NAMES)
+                ctr.create_dataset("amounts", data=self.amounts).attrs["names"] = json.dumps(AMOUNT_NAMES)
                 ctr.create_dataset("shear_modulus", data=self.shear_modulus)
                 ctr.create_dataset("tensile_strength", data=self.tensile_strength)
                 if self.strength is not None:
@@ -390,8 +390,8 @@ class Simulation:
             dt_first = float(fh.attrs["dt_first"])
             sim.dt_first = None if dt_first < 0 else dt_first
             sim.boundary[:] = fh["counters/boundary"][()]
-            sim.floors[:] = fh["counters/floors"][()]
-            sim.amounts[:] = fh["counters/amounts"][()]
+            _load_named_columns(fh["counters/floors"], FLOOR_NAMES, sim.floors)
+            _load_named_columns(fh["counters/amounts"], AMOUNT_NAMES, sim.amounts)
             if sim.strength is not None:
                 sim.strength.counts[:] = fh["counters/strength_counts"][()]
                 sim.strength.amounts[:] = fh["counters/strength_amounts"][()]
@@ -400,3 +400,19 @@ class Simulation:
 
                 sim.tracers = Tracers.load(fh["tracers"])
         return sim
+
+
+def _load_named_columns(dataset, names: tuple[str, ...], out: np.ndarray) -> None:
+    """Copy the counter columns of ``dataset`` into ``out`` by name.
+
+    A checkpoint written before a counter existed leaves that counter at 0.  One without
+    column names (the first format) holds the leading columns of the current list, since
+    counters are only ever appended.
+    """
+    values = dataset[()]
+    stored = json.loads(dataset.attrs["names"]) if "names" in dataset.attrs else list(names[:values.shape[1]])
+    if values.shape[1] != len(stored):
+        raise ValueError(f"checkpoint counters {dataset.name}: {values.shape[1]} columns, expected {len(stored)}")
+    for column, name in enumerate(stored):
+        if name in names:
+            out[:, names.index(name)] = values[:, column]

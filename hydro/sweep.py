@@ -19,9 +19,11 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
 
 1. Gather: mixture density rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k
    (equal-strain mixture; void counts as a zero-pressure component), bulk modulus
-   K = sum alpha_k rho_k c_k^2, signal speed c = max_k c_k over the materials present
-   (``timestep.signal_speed_squared``).  A partly filled cell keeps the wave speed of its
-   material (K / rho = c_k^2), so it needs no smaller time step than a full one.
+   K = sum alpha_k rho_k c_k^2 (c_k the longitudinal signal speed,
+   ``timestep.signal_speed_squared``), signal speed c = sqrt(K / rho), the sound speed of the
+   equal-strain mixture.  A partly filled cell keeps the wave speed of its material
+   (K / rho = c_k^2), and a trace of a material (a volume fraction of 1e-10 holding a
+   round-off share of the energy, hence an enormous c_k) does not set the time step.
 2. MUSCL-Hancock: MC-limited slopes of (u_n, u_t1, u_t2, p) and per material
    (alpha_k, rho_k, e_k); half-step predictor with the primitive equations
    u_t = -u u_x - p_x / rho, p_t = -u p_x - K u_x, alpha_t = -u alpha_x,
@@ -71,6 +73,11 @@ from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, material_state
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
 TENSION_TOLERANCE = 1.0e-3
+#: Cells filled below PHI_SECOND_ORDER, and their neighbours, reconstruct at first order: the
+#: limited slope of a volume fraction next to void can take the face density to zero while
+#: the face pressure keeps the cell's, and that face state (p > 0 on a vanishing density)
+#: would give an unbounded face velocity p / (rho c).  Free surfaces are first order.
+PHI_SECOND_ORDER = 1.0 - 1.0e-3
 #: A cell whose materials fill more than 1 - FULL_TOLERANCE of it has no void.
 FULL_TOLERANCE = 1.0e-8
 #: A mixture density below -FAIL_NEGATIVE_FRACTION * (previous density) is a failure.
@@ -84,6 +91,11 @@ EMPTIED_FRACTION = 1.0e-8
 #: the fluxes would otherwise give the small mass an unbounded velocity.  The momentum
 #: and kinetic energy removed are counted.
 PHI_SMALL = 1.0e-3
+#: In the same small cells the specific total energy E / rho may not exceed the largest
+#: specific total enthalpy (E + max(p, 0)) / rho of the cell and its pencil neighbours before
+#: the sweep: mixing cannot exceed it, so only the face work p* s of a full neighbour
+#: concentrated into a vanishing mass can, and that is the path by which spray and vapour
+#: reached 1e9 - 1e14 J/kg in case 8c.  The energy removed is counted.
 #: Material thinner than DISCARD_FRACTION of its reference density rho0 is discarded from
 #: the cell (as CTH's discard density does): its mass, momentum share and energy are
 #: counted with the void cleanup.  Materials without a reference density (gases) are kept.
@@ -98,10 +110,11 @@ FLOOR_FIRST_ORDER = 4
 FLOOR_EOS_CLAMP = 5
 FLOOR_VELOCITY_LIMIT = 6
 FLOOR_TENSILE_LIMIT = 7
-NFLOOR = 8
+FLOOR_ENERGY_LIMIT = 8
+NFLOOR = 9
 FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
                "void_cleanup", "first_order_fallback", "eos_clamp", "small_cell_velocity_limit",
-               "tensile_limit")
+               "tensile_limit", "small_cell_energy_limit")
 # Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
 AMOUNT_MASS_FLOOR = 0
 AMOUNT_ENERGY_FLOOR = 1
@@ -111,11 +124,12 @@ AMOUNT_MASS_VOID = 4
 AMOUNT_MOMENTUM_VOID = 5
 AMOUNT_MOMENTUM_LIMITER = 6
 AMOUNT_ENERGY_LIMITER = 7
-NAMOUNT = 8
+AMOUNT_ENERGY_CAP = 8
+NAMOUNT = 9
 AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
                 "energy_removed_by_void_cleanup", "mass_removed_by_void_cleanup",
                 "momentum_removed_by_void_cleanup", "momentum_removed_by_velocity_limit",
-                "energy_removed_by_velocity_limit")
+                "energy_removed_by_velocity_limit", "energy_removed_by_energy_limit")
 # Boundary counter slots (``boundary[NB, 5 + M]``): what left the domain (kg, kg m/s, J).
 BND_MASS = 0
 BND_MOMENTUM = 1
@@ -230,7 +244,6 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     rho = 0.0
                     p = 0.0
                     kmod = 0.0
-                    c2max = 0.0
                     phi = 0.0
                     for k in range(nmat):
                         a = alpha[b, k, ix, iy, iz]
@@ -250,8 +263,6 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         if present:
                             p += a * pk
                             kmod += ar * c2k
-                            if c2k > c2max:
-                                c2max = c2k
                         sc[row, i] = a
                         sc[row + 1, i] = rk
                         sc[row + 2, i] = ek
@@ -259,7 +270,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         for j in range(nq):
                             sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] / ar if ar > 0.0 else 0.0
                     sc[W_PHI, i] = phi
-                    sc[W_C, i] = np.sqrt(c2max)
+                    sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
                     if rho > 0.0 and phi >= PHI_VOID:
                         sc[W_RHO, i] = rho
                         sc[W_P, i] = p
@@ -277,7 +288,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         sc[W_UT2, i] = 0.0
                 # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                 for i in range(1, ncell - 1):
-                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
+                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n,
+                                      tensile_strength)
                 # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
                 for f in range(g, g + n + 1):
                     _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
@@ -305,10 +317,17 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
 
 
 @njit(cache=True, inline="always")
-def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
-    """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i."""
-    first_order = (sc[W_PHI, i - 1] < PHI_VOID or sc[W_PHI, i] < PHI_VOID or sc[W_PHI, i + 1] < PHI_VOID
-                   or sc[W_RHO, i] <= 0.0)
+def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior, tensile_strength):
+    """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i.
+
+    The face pressures must stay admissible: not below the most tension the cell's materials
+    hold, p_min = -sum_k alpha_k Y_T,k (Pa), and not from p > 0 to below -TENSION_TOLERANCE K.
+    A predictor that leaves that range (the Hancock term K du/dx of a cell at its tensile
+    limit can predict tens of MPa of tension, which would pull a light neighbour to many
+    km/s) falls back to the cell values (first order, counted).
+    """
+    first_order = (sc[W_PHI, i - 1] < PHI_SECOND_ORDER or sc[W_PHI, i] < PHI_SECOND_ORDER
+                   or sc[W_PHI, i + 1] < PHI_SECOND_ORDER or sc[W_RHO, i] <= 0.0)
     if not first_order:
         rho = sc[W_RHO, i]
         un = sc[W_UN, i]
@@ -328,7 +347,13 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
         ph = p - half * (un * dp + sc[W_K, i] * dun)
         sc[qm_row + Q_P, i] = ph - 0.5 * dp
         sc[qp_row + Q_P, i] = ph + 0.5 * dp
-        if p > 0.0 and ph - 0.5 * abs(dp) < -TENSION_TOLERANCE * sc[W_K, i]:
+        p_face = ph - 0.5 * abs(dp)
+        if p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i]:
+            first_order = True
+        p_min = 0.0
+        for k in range(nmat):
+            p_min -= sc[W_MAT + W_STRIDE * k, i] * tensile_strength[k]
+        if p_face < p_min and p_face < p:
             first_order = True
         for k in range(nmat):
             row = W_MAT + W_STRIDE * k
@@ -552,9 +577,15 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
     for k in range(nmat):
         ar = arho[b, k, ix, iy, iz]
         if ar < 0.0:
+            # the floored material keeps no internal energy of its own (a remnant energy on no
+            # mass would give the next arrival an unbounded e_k); the cell's total energy is
+            # unchanged and the reconciliation below hands it to the materials present
             amounts[b, AMOUNT_MASS_FLOOR] -= ar * vol
             floors[b, FLOOR_PARTIAL_DENSITY] += 1
             arho[b, k, ix, iy, iz] = 0.0
+            arhoe[b, k, ix, iy, iz] = 0.0
+            for j in range(nq):
+                arhoq[b, nq * k + j, ix, iy, iz] = 0.0
             ar = 0.0
         rho += ar
     for k in range(nmat):
@@ -629,6 +660,22 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             amounts[b, AMOUNT_MOMENTUM_LIMITER] += m_abs * (1.0 - scale) * vol
             amounts[b, AMOUNT_ENERGY_LIMITER] += (e_tot - e_new) * vol
             e_tot = e_new
+        h_max = 0.0
+        for j in range(i - 1, i + 2):
+            rho_j = sc[W_RHO, j]
+            if rho_j > 0.0:
+                e_j = 0.0
+                for k in range(nmat):
+                    row = W_MAT + W_STRIDE * k
+                    e_j += sc[row, j] * sc[row + 1, j] * sc[row + 2, j]
+                h_j = ((e_j + max(sc[W_P, j], 0.0)) / rho_j
+                       + 0.5 * (sc[W_UN, j] ** 2 + sc[W_UT1, j] ** 2 + sc[W_UT2, j] ** 2))
+                if h_j > h_max:
+                    h_max = h_j
+        if e_tot > rho * h_max:
+            floors[b, FLOOR_ENERGY_LIMIT] += 1
+            amounts[b, AMOUNT_ENERGY_CAP] += (e_tot - rho * h_max) * vol
+            e_tot = rho * h_max
     # reconcile material internal energies with the conserved total energy
     kinetic = 0.5 * (mn * mn + m1 * m1 + m2 * m2) / rho
     e_int = e_tot - kinetic

@@ -20,13 +20,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed, temperature
+from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
 from impactpipe.hydro.mesh import GHOST
 
 #: Volume fraction below which a material is left out of a cell's thermodynamics.
 ALPHA_MIN = 1.0e-10
 #: Material volume fraction below which a cell counts as void (no signal, no Riemann state).
 PHI_VOID = 1.0e-6
+#: Material expanded below DISTENDED_FRACTION of its reference density rho0 is fragments or
+#: vapour and holds no tension (p_k >= 0): its tensile strength Y_T belongs to the intact
+#: solid.  Without this, a spray at 1e-6 rho0 held -Y_T = -0.1 MPa, a tension of 3e7 J/kg
+#: per unit mass that flung it to 25 km/s.
+DISTENDED_FRACTION = 0.5
 
 
 @njit(cache=True, inline="always")
@@ -50,9 +55,9 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
     a = alpha_k (-), ar = alpha_k rho_k (kg/m^3), are = alpha_k rho_k e_k (J/m^3).
     Returns (present, rho_k, e_k, p_k, c2_bulk, c2_signal, eos_flag, tension_limited):
     rho_k = ar / a, e_k = are / ar, p_k = max(P(rho_k, e_k), -Y_T) with Y_T =
-    ``tensile_strength`` (Pa), c2_bulk the EOS bulk sound speed squared and c2_signal the
-    time-step signal speed squared (:func:`signal_speed_squared` with the shear-table row
-    ``shear``).  A material below
+    ``tensile_strength`` (Pa) for rho_k >= DISTENDED_FRACTION rho0, else max(P, 0); c2_bulk
+    the EOS bulk sound speed squared and c2_signal the time-step signal speed squared
+    (:func:`signal_speed_squared` with the shear-table row ``shear``).  A material below
     ALPHA_MIN or without mass is absent (present False, zeros).
     """
     if not (a > ALPHA_MIN and ar > 0.0):
@@ -60,9 +65,12 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
     rk = ar / a
     ek = are / ar
     pk, c2k, flag = pressure_sound_speed(kind, params, table, rk, ek)
-    limited = pk < -tensile_strength
+    p_min = -tensile_strength
+    if rk < DISTENDED_FRACTION * reference_density(kind, params, table):
+        p_min = 0.0
+    limited = pk < p_min
     if limited:
-        pk = -tensile_strength
+        pk = p_min
     return True, rk, ek, pk, c2k, signal_speed_squared(c2k, rk, shear), flag, limited
 
 
@@ -80,7 +88,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                 for iz in range(gz, nz - gz):
                     rho = 0.0
                     phi = 0.0
-                    c2max = 0.0
+                    kmod = 0.0
                     for k in range(nmat):
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
@@ -89,11 +97,11 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
                             a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
                             shear_modulus[k], 0.0)
-                        if present and c2k > c2max:
-                            c2max = c2k
+                        if present:
+                            kmod += ar * c2k
                     if rho <= 0.0 or phi < PHI_VOID:
                         continue
-                    c = np.sqrt(c2max)
+                    c = np.sqrt(kmod / rho)
                     for d in range(ndim):
                         r = (abs(mom[b, d, ix, iy, iz]) / rho + c) / block_dx[b, d]
                         if r > rate:
@@ -107,7 +115,8 @@ def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, she
     """Interior-cell mixture thermodynamics into ``(NB, nx, ny, nz)`` outputs.
 
     pressure = sum_k alpha_k max(p_k, -Y_T,k) (Pa), the material pressures limited by the
-    tensile strengths as in the sweeps; sound_speed = max_k c_k (m/s);
+    tensile strengths as in the sweeps; sound_speed = sqrt(sum_k alpha_k rho_k c_k^2 / rho) (m/s),
+    the equal-strain mixture's;
     specific_energy = sum_k alpha_k rho_k e_k / rho (J/kg); temp = sum_k alpha_k rho_k T_k / rho (K).
     Void cells get zeros.
     """
@@ -121,7 +130,7 @@ def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, she
                 for iz in range(gz, nz - gz):
                     rho = 0.0
                     p = 0.0
-                    c2max = 0.0
+                    kmod = 0.0
                     esum = 0.0
                     tsum = 0.0
                     for k in range(nmat):
@@ -133,14 +142,13 @@ def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, she
                             shear_modulus[k], tensile_strength[k])
                         if present:
                             p += a * pk
-                            if c2k > c2max:
-                                c2max = c2k
+                            kmod += ar * c2k
                             esum += ar * ek
                             tsum += ar * temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
                     jx = ix - gx
                     jy = iy - gy
                     jz = iz - gz
                     pressure[b, jx, jy, jz] = p
-                    sound_speed[b, jx, jy, jz] = np.sqrt(c2max)
+                    sound_speed[b, jx, jy, jz] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
                     specific_energy[b, jx, jy, jz] = esum / rho if rho > 0.0 else 0.0
                     temp[b, jx, jy, jz] = tsum / rho if rho > 0.0 else 0.0

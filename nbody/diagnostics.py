@@ -67,6 +67,26 @@ def conserved_quantities(position, velocity, mass, radius, spin) -> dict[str, np
     }
 
 
+def overlaps(position: np.ndarray, radius: np.ndarray, mass: np.ndarray) -> tuple[int, float, float]:
+    """Overlapping pairs, |x_i - x_j| < r_i + r_j: (count, deepest 1 - |x_i - x_j| / (r_i + r_j),
+    sum of G m_i m_j (1 / |x_i - x_j| - 1 / (r_i + r_j)) in J, the potential energy that
+    pushing every pair apart to contact, each on its own, would cost)."""
+    if radius.shape[0] < 2:
+        return 0, 0.0, 0.0
+    pairs = cKDTree(position).query_pairs(r=2.0 * float(radius.max()), output_type="ndarray")
+    if pairs.size == 0:
+        return 0, 0.0, 0.0
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.linalg.norm(position[i] - position[j], axis=1)
+    contact = radius[i] + radius[j]
+    over = d < contact
+    if not over.any():
+        return 0, 0.0, 0.0
+    depth = 1.0 - d[over] / contact[over]
+    energy = G * mass[i[over]] * mass[j[over]] * (1.0 / d[over] - 1.0 / contact[over])
+    return int(over.sum()), float(depth.max()), float(energy.sum())
+
+
 def contact_groups(position: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Component label per particle of the contact graph (see module doc)."""
     n = radius.shape[0]

@@ -51,7 +51,7 @@ from impactpipe.handoff.particles import ParticleSet
 from impactpipe.pipeline.runstore import atomic_path
 
 from . import diagnostics as dg
-from .resolver import (CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_SEPARATING, MODEL_CODES, CollisionResolver,
+from .resolver import (CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, MODEL_CODES, CollisionResolver,
                        particle_view)
 from .result import ESCAPE_ORBIT, LEFT_BOX, LOST, NBodyResult
 from .simulation import G, build_simulation, collision_time_step, dynamical_time, weighted_mean
@@ -61,6 +61,7 @@ log = logging.getLogger(__name__)
 ESCAPE_RADIUS_FACTOR = 2.0    # escape test beyond this many initial cloud extents from the centre of mass
 BOX_GUARD_FRACTION = 0.9      # particles beyond this fraction are removed (left_box)
 CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
+SIDECAR_FORMAT = 2            # 2: contact-time bounces, kinetic-energy accumulator, initial-overlap report
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
                        "escaped_momentum", "escaped_angular_momentum")
 
@@ -229,12 +230,19 @@ class _Run:
         self.resolver.attach(self.sim)
         self.next_output = self.params["output_interval"]
         self.next_archive = self.params["archive_interval"]
+        self.initial_overlaps = dg.overlaps(x, r, m)
+        if self.initial_overlaps[0]:
+            log.warning("%d particle pairs overlap at t = 0 (deepest %.3f of the radii sum); separating them "
+                        "costs up to %.4g J of potential energy", *self.initial_overlaps)
         self._remember_state()
 
     def load(self, archive: Path, sidecar: Path) -> None:
         with np.load(sidecar, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             arrays = {k: z[k] for k in z.files if k != "meta"}
+        if meta.get("format") != SIDECAR_FORMAT:
+            raise ValueError(f"{sidecar} was written by another version of the N-body stage (sidecar format "
+                             f"{meta.get('format', 1)}, this one writes {SIDECAR_FORMAT}); pass resume=False to start over")
         if meta["fingerprint"] != self.fingerprint:
             raise ValueError(f"{archive} holds a run of other particles or parameters; pass resume=False to start over")
         self._read_snapshot(archive, meta["t"], arrays["snapshot_slots"])
@@ -242,13 +250,15 @@ class _Run:
         self.resolver.ctx[CTX_N_MERGE] = meta["n_merge"]
         self.resolver.ctx[CTX_N_BOUNCE] = meta["n_bounce"]
         self.resolver.ctx[CTX_N_SEPARATING] = meta["n_separating"]
-        self.resolver.params[3] = meta["contact_energy_added"]
+        self.resolver.params[3] = meta["collision_kinetic_energy_change"]
+        self.resolver.ctx[CTX_N_OVERLAP] = meta["n_overlap_push"]
         self.parent[:] = arrays["parent"]
         self.box_half_width = meta["box_half_width"]
         self.escape_radius = meta["escape_radius"]
         self.origin_ref = np.array(meta["origin_ref"])
         self.frame_velocity = np.array(meta["frame_velocity"])
         self.t_ref = meta["t_ref"]
+        self.initial_overlaps = tuple(meta["initial_overlaps"])
         self.next_output = meta["next_output"]
         self.next_archive = meta["next_archive"]
         self.status = meta["status"] if meta["status"] == "equilibrium" else None
@@ -283,13 +293,15 @@ class _Run:
         snapshot_slots = particle_view(self.sim)["ap"] - 1
         self.sim.save_to_file(str(archive), delete_file=first)
         meta = {
-            "fingerprint": self.fingerprint, "t": self.sim.t, "status": self.status,
+            "format": SIDECAR_FORMAT, "fingerprint": self.fingerprint, "t": self.sim.t, "status": self.status,
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
             "n_separating": int(self.resolver.ctx[CTX_N_SEPARATING]),
-            "contact_energy_added": float(self.resolver.params[3]),
+            "collision_kinetic_energy_change": float(self.resolver.params[3]),
+            "n_overlap_push": int(self.resolver.ctx[CTX_N_OVERLAP]),
             "box_half_width": self.box_half_width, "escape_radius": self.escape_radius,
             "origin_ref": self.origin_ref.tolist(),
             "frame_velocity": self.frame_velocity.tolist(), "t_ref": self.t_ref,
+            "initial_overlaps": list(self.initial_overlaps),
             "next_output": self.next_output, "next_archive": self.next_archive,
         }
         arrays = {"meta": np.array(json.dumps(meta)), "spin": self.resolver.spin, "parent": self.parent,
@@ -410,6 +422,7 @@ class _Run:
         vo = v + self.frame_velocity
         q = dg.conserved_quantities(xo, vo, m, r, self.resolver.spin[slots])
         m_lr, m_orb, _ = dg.remnant_and_orbiting(x, v, m, r)
+        n_over, deepest, _ = dg.overlaps(x, r, m)
         esc = self._escaped_arrays()
         l_esc = (np.cross(esc["position"], esc["momentum"]).sum(axis=0) + esc["spin"].sum(axis=0))
         row = {
@@ -418,7 +431,10 @@ class _Run:
             "escaped_angular_momentum": l_esc,
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
             "largest_mass": float(m.max()), "remnant_mass": m_lr, "orbiting_mass": m_orb,
-            "time_step": self.sim.dt, "contact_energy_added": float(self.resolver.params[3]),
+            "time_step": self.sim.dt,
+            "collision_kinetic_energy_change": float(self.resolver.params[3]),
+            "n_overlap_push": int(self.resolver.ctx[CTX_N_OVERLAP]),
+            "overlapping_pairs": n_over, "max_overlap": deepest,
         }
         for k, val in row.items():
             self.diag.setdefault(k, []).append(val)
@@ -469,6 +485,8 @@ class _Run:
             diagnostics=self._diag_arrays(), status=self.status, time=float(t),
             dynamical_time=self.t_dyn, time_step=float(self.sim.dt),
             collision_model=self.params["collision_model"],
+            initial_overlapping_pairs=int(self.initial_overlaps[0]),
+            initial_overlap_energy=float(self.initial_overlaps[2]),
         )
 
 

@@ -31,23 +31,37 @@ v_t = v - v_n):
   more massive particle (the lower slot on a tie) survives and keeps its identity, as in
   pkdgrav.  Every merger is written to the event buffer as (survivor slot, absorbed
   slot, time).
-* bounce (only for an approaching pair, v . n < 0; the mirrored report of a pair already
-  bounced is separating and its velocities are left alone): v' = -eps_n v_n + eps_t v_t,
-  applied as equal and opposite impulses J = mu (v' - v) on particle 2 and -J on
-  particle 1.  With eps_t < 1 the tangential impulse changes the orbital angular momentum
-  by d n x J; the opposite amount goes into the spins, shared in proportion r1 : r2 as
-  the contact torques are (spin does not feed back into the contact velocity).
-  An overlapping pair (d < r1 + r2; approaching and bounced, or already separating) is
-  pushed apart along n to contact, s = r1 + r2 - d (centre of mass fixed), so overlaps
-  never accumulate (resting contacts would otherwise sink towards the point-mass
-  singularity).  The push raises the pair's potential energy by
-  dU = G m1 m2 (1/d - 1/(r1 + r2)).  It is paid first from the incoming normal kinetic
-  energy mu v_n^2 / 2 (the energy the pair gained by moving into the overlap during the
-  step, which an exact hard-sphere contact would not have had), then from the outgoing
-  normal kinetic energy; only what is left over (resting contacts) adds energy, and it is
-  accumulated in ``params[3]`` and reported as the diagnostic ``contact_energy_added``.
-  The tangential relative velocity is scaled by d / (r1 + r2), which keeps the pair's
-  orbital angular momentum about its centre of mass and only removes energy.
+* bounce, v' = -eps_n v_n + eps_t v_t, applied as equal and opposite impulses
+  J = mu (v' - v) on particle 2 and -J on particle 1 (h = length of the last step, read
+  from ``sim->dt_last_done``; s = time since the pair's straight relative path
+  r(t') = r - v (t - t') entered contact, the larger root of |r - v s| = r1 + r2):
+
+  - contact entered during the step (0 <= s <= h; REBOUND's line search reports such a
+    pair even if it has passed through the contact and separates at the step end): the
+    pair is bounced at its contact point, normal n_c = (r - v s) / (r1 + r2), if it
+    approaches there (v . n_c < 0), and both particles are moved on from the contact
+    with their new velocities, x_k -> x_k + s dv_k.  This is the exact hard-sphere free
+    flight over the step in the straight-line approximation of the drift: no position
+    change beyond the drift, the kinetic energy changes only by the restitution,
+    mu (v_n'^2 - v_n^2) / 2 <= 0, and linear and (for eps_t = 1) angular momentum are
+    conserved exactly; with eps_t < 1 the pair's orbital angular momentum changes by
+    r_c x J (r_c = r - v s) and the spins take the opposite, shared r1 : r2 as the
+    contact torques are (spin does not feed back into the contact velocity);
+  - overlap older than the step (s > h: a pair pushed into overlap by another pair's
+    resolution, a resting contact, an overlap present at the start) and approaching
+    (v . n < 0, n = r / d): bounced about n and pushed apart along n to contact,
+    s_p = r1 + r2 - d, centre of mass fixed, so overlaps never accumulate (resting
+    contacts would otherwise sink towards the point-mass singularity).  The pair's
+    potential rise G m1 m2 (1/d - 1/(r1 + r2)) is paid from its incoming normal kinetic
+    energy, then from the outgoing one (what remains is not paid by the pair; the total
+    energy is checked in the tests and measured in docs/nbody.md); the tangential
+    relative velocity is scaled by d / (r1 + r2), which keeps the pair's orbital angular
+    momentum about its centre of mass;
+  - otherwise (separating, or no contact in the step) the pair is left alone, so the
+    mirrored report of a pair just bounced changes nothing.
+
+  ``params[3]`` accumulates the exact change of the translational kinetic energy made by
+  the resolver (bounces and mergers, J), the diagnostic ``collision_kinetic_energy_change``.
 * conditional merge: merge if |v| < v_esc = sqrt(2 G M / (r1 + r2)), else bounce.
 """
 
@@ -73,10 +87,11 @@ P_M, P_R, P_AP = 9, 10, 12
 S_T = rebound.Simulation.t.offset // 8
 S_N = rebound.Simulation.N.offset // 8
 S_PARTICLES = rebound.Simulation._particles.offset // 8
+S_DT_LAST = rebound.Simulation.dt_last_done.offset // 8
 S_WORDS = S_PARTICLES + 1
 
 # Context (int64 array) layout.
-CTX_PARAMS = 0        # address of float64 params [G, eps_n, eps_t, contact energy added (J)]
+CTX_PARAMS = 0        # address of float64 params [G, eps_n, eps_t, kinetic energy change (J)]
 CTX_SPIN = 1          # address of float64 spin (n_slots, 3), kg m^2/s
 CTX_EVENTS = 2        # address of int64 merge events (capacity, 2): survivor, absorbed slot
 CTX_EVENT_TIME = 3    # address of float64 merge event times (capacity,), s
@@ -85,9 +100,10 @@ CTX_N_EVENTS = 5      # merge events written since the last drain
 CTX_MODEL = 6         # MODEL_CODES value
 CTX_N_MERGE = 7       # cumulative mergers
 CTX_N_BOUNCE = 8      # cumulative bounces
-CTX_N_SEPARATING = 9  # cumulative reports of separating pairs left alone
+CTX_N_SEPARATING = 9  # cumulative reports of pairs left alone (separating or no contact in the step)
 CTX_OVERFLOW = 10     # 1 if a merger found the event buffer full (it was not performed)
-CTX_LEN = 11
+CTX_N_OVERLAP = 11    # cumulative bounces of pairs overlapping since before the step (pushed apart)
+CTX_LEN = 12
 
 PARTICLE_DTYPE = np.dtype(
     {
@@ -170,7 +186,7 @@ def _spin_kick(spin, s1, s2, r1, r2, lx, ly, lz):
 
 
 @njit(cache=True)
-def merge_pair(pf, pw, i, j, spin, t, ctx, events, event_time):
+def merge_pair(pf, pw, i, j, spin, params, t, ctx, events, event_time):
     """Merge particles i and j (indices into the particle words) into the more massive one.
 
     Writes the merged state (centre of mass, summed mass and volume, spin including the
@@ -200,6 +216,7 @@ def merge_pair(pf, pw, i, j, spin, t, ctx, events, event_time):
     ux = pf[b1 + P_VX] - pf[b2 + P_VX]
     uy = pf[b1 + P_VY] - pf[b2 + P_VY]
     uz = pf[b1 + P_VZ] - pf[b2 + P_VZ]
+    params[3] -= 0.5 * mu * (ux * ux + uy * uy + uz * uz)
     lx = mu * (ry * uz - rz * uy)
     ly = mu * (rz * ux - rx * uz)
     lz = mu * (rx * uy - ry * ux)
@@ -223,13 +240,70 @@ def merge_pair(pf, pw, i, j, spin, t, ctx, events, event_time):
     return 2 if keep_first else 1
 
 
-@njit(cache=True)
-def bounce_pair(pf, pw, i, j, spin, params, ctx):
-    """Inelastic bounce of particles i and j: v' = -eps_n v_n + eps_t v_t (see module doc).
+NO_CONTACT = -2.0   # contact_geometry: the pair is left alone
+OLD_OVERLAP = -1.0  # contact_geometry: overlapping since before the step
 
-    ``params`` = [G, eps_n, eps_t, contact energy added (J, accumulated)].  An approaching
-    pair (v . n < 0) bounces; a separating pair keeps its velocities (counted in
-    ``ctx[CTX_N_SEPARATING]``).  Either way an overlapping pair is then pushed to contact.
+
+@njit(cache=True)
+def contact_geometry(pf, i, j, h):
+    """Where and when particles i and j touched in the last step of length h (s).
+
+    With r = x_j - x_i and v = v_j - v_i, s is the time since the straight relative path
+    r - v s' entered contact, the larger root of |r - v s| = r_i + r_j.  Returns
+    (s, c, nx, ny, nz): s in [0, h] with c = r_i + r_j and n the unit vector of r - v s
+    if the pair entered contact during the step and approached there; s = OLD_OVERLAP with
+    c = |r| and n = r / |r| if the pair overlapped before the step and approaches now;
+    s = NO_CONTACT otherwise (separating, or no contact within the step).
+    """
+    b1 = i * P_STRIDE
+    b2 = j * P_STRIDE
+    dx = pf[b2 + P_X] - pf[b1 + P_X]
+    dy = pf[b2 + P_Y] - pf[b1 + P_Y]
+    dz = pf[b2 + P_Z] - pf[b1 + P_Z]
+    vx = pf[b2 + P_VX] - pf[b1 + P_VX]
+    vy = pf[b2 + P_VY] - pf[b1 + P_VY]
+    vz = pf[b2 + P_VZ] - pf[b1 + P_VZ]
+    contact = pf[b1 + P_R] + pf[b2 + P_R]
+    d2 = dx * dx + dy * dy + dz * dz
+    uu = vx * vx + vy * vy + vz * vz
+    ru = dx * vx + dy * vy + dz * vz
+    overlap = d2 < contact * contact
+    s = NO_CONTACT
+    if uu > 0.0 and (overlap or ru > 0.0):
+        disc = ru * ru - uu * (d2 - contact * contact)
+        if disc >= 0.0:
+            s_in = (ru + math.sqrt(disc)) / uu
+            if s_in <= h:
+                s = max(s_in, 0.0)
+    if s >= 0.0:
+        cx = dx - vx * s
+        cy = dy - vy * s
+        cz = dz - vz * s
+    elif overlap:
+        s = OLD_OVERLAP
+        cx = dx
+        cy = dy
+        cz = dz
+    else:
+        return NO_CONTACT, 0.0, 0.0, 0.0, 0.0
+    c = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if not c > 0.0:
+        return NO_CONTACT, 0.0, 0.0, 0.0, 0.0
+    if cx * vx + cy * vy + cz * vz >= 0.0:
+        return NO_CONTACT, 0.0, 0.0, 0.0, 0.0
+    return s, c, cx / c, cy / c, cz / c
+
+
+@njit(cache=True)
+def bounce_pair(pf, pw, i, j, spin, params, ctx, h):
+    """Bounce of particles i and j, v' = -eps_n v_n + eps_t v_t (the three cases of the module doc).
+
+    ``params`` = [G, eps_n, eps_t, kinetic energy change (J, accumulated)]; ``h`` is the
+    length of the last step (s).  Contact entered within the step (time s <= h ago along the
+    straight relative path): bounce at the contact point, then x_k += s dv_k.  Overlap older
+    than the step and approaching: bounce about the current normal and push to contact,
+    paid from the normal kinetic energy as far as it goes.  Otherwise nothing.  Counters:
+    ``ctx[CTX_N_BOUNCE]``, ``ctx[CTX_N_OVERLAP]`` (the pushed ones), ``ctx[CTX_N_SEPARATING]``.
     Returns 0 (both particles stay).
     """
     g = params[0]
@@ -241,52 +315,48 @@ def bounce_pair(pf, pw, i, j, spin, params, ctx):
     m2 = pf[b2 + P_M]
     r1 = pf[b1 + P_R]
     r2 = pf[b2 + P_R]
-    dx = pf[b2 + P_X] - pf[b1 + P_X]
-    dy = pf[b2 + P_Y] - pf[b1 + P_Y]
-    dz = pf[b2 + P_Z] - pf[b1 + P_Z]
-    d = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if not d > 0.0:
-        return 0
     vx = pf[b2 + P_VX] - pf[b1 + P_VX]
     vy = pf[b2 + P_VY] - pf[b1 + P_VY]
     vz = pf[b2 + P_VZ] - pf[b1 + P_VZ]
-    nx = dx / d
-    ny = dy / d
-    nz = dz / d
+    contact = r1 + r2
+    s, c, nx, ny, nz = contact_geometry(pf, i, j, h)
     un = vx * nx + vy * ny + vz * nz
+    if s == NO_CONTACT:
+        ctx[CTX_N_SEPARATING] += 1
+        return 0
+    uu = vx * vx + vy * vy + vz * vz
+    cx = c * nx
+    cy = c * ny
+    cz = c * nz
     mt = m1 + m2
     mu = m1 * m2 / mt
-    contact = r1 + r2
-    shift = contact - d if d < contact else 0.0
-    # Potential-energy rise of pushing the pair to contact (J), paid from normal kinetic energy.
-    du = g * m1 * m2 * (1.0 / d - 1.0 / contact) if shift > 0.0 else 0.0
-    # Relative velocity after the contact: normal speed along +n and tangential part.
-    if un < 0.0:
+    un_new = -eps_n * un
+    tx = eps_t * (vx - un * nx)
+    ty = eps_t * (vy - un * ny)
+    tz = eps_t * (vz - un * nz)
+    shift = 0.0
+    if s < 0.0:
+        # Overlap older than the step: pushed apart along n to contact (centre of mass fixed).
+        # The potential rise G m1 m2 (1/c - 1/(r1 + r2)) is paid from the pair's normal kinetic
+        # energy, incoming, then outgoing.
+        ctx[CTX_N_OVERLAP] += 1
+        shift = contact - c
+        du = g * m1 * m2 * (1.0 / c - 1.0 / contact)
         paid = min(du, 0.5 * mu * un * un)
         du -= paid
         un_new = eps_n * math.sqrt(max(un * un - 2.0 * paid / mu, 0.0))
-        tx = eps_t * (vx - un * nx)
-        ty = eps_t * (vy - un * ny)
-        tz = eps_t * (vz - un * nz)
-        ctx[CTX_N_BOUNCE] += 1
-    else:
-        un_new = un
-        tx = vx - un * nx
-        ty = vy - un * ny
-        tz = vz - un * nz
-        ctx[CTX_N_SEPARATING] += 1
-    if shift > 0.0:
         paid = min(du, 0.5 * mu * un_new * un_new)
         un_new = math.sqrt(max(un_new * un_new - 2.0 * paid / mu, 0.0))
-        params[3] += du - paid
-        # Keep the pair's orbital angular momentum mu d n x v_t: v_t -> v_t d / (d + s).
-        f = d / contact
+        # Keep the pair's orbital angular momentum mu c n x v_t: v_t -> v_t c / (c + shift).
+        f = c / (c + shift)
         tx *= f
         ty *= f
         tz *= f
+    ctx[CTX_N_BOUNCE] += 1
     wx = un_new * nx + tx
     wy = un_new * ny + ty
     wz = un_new * nz + tz
+    params[3] += 0.5 * mu * (wx * wx + wy * wy + wz * wz - uu)
     # Impulse on particle 2 (kg m/s); -J on particle 1.
     jx = mu * (wx - vx)
     jy = mu * (wy - vy)
@@ -297,19 +367,33 @@ def bounce_pair(pf, pw, i, j, spin, params, ctx):
     pf[b2 + P_VX] += jx / m2
     pf[b2 + P_VY] += jy / m2
     pf[b2 + P_VZ] += jz / m2
-    if shift > 0.0:
+    if s > 0.0:
+        # Moved forward from the contact with the new velocities: x_k += s dv_k.
+        pf[b1 + P_X] -= s * jx / m1
+        pf[b1 + P_Y] -= s * jy / m1
+        pf[b1 + P_Z] -= s * jz / m1
+        pf[b2 + P_X] += s * jx / m2
+        pf[b2 + P_Y] += s * jy / m2
+        pf[b2 + P_Z] += s * jz / m2
+    elif shift > 0.0:
         pf[b1 + P_X] -= m2 / mt * shift * nx
         pf[b1 + P_Y] -= m2 / mt * shift * ny
         pf[b1 + P_Z] -= m2 / mt * shift * nz
         pf[b2 + P_X] += m1 / mt * shift * nx
         pf[b2 + P_Y] += m1 / mt * shift * ny
         pf[b2 + P_Z] += m1 / mt * shift * nz
-    # Change of the pair's orbital angular momentum mu (d + s) n x w - mu d n x v, non-zero only
-    # through tangential restitution (eps_t < 1); the spins take the opposite.
-    lx = mu * ((d + shift) * (ny * wz - nz * wy) - d * (ny * vz - nz * vy))
-    ly = mu * ((d + shift) * (nz * wx - nx * wz) - d * (nz * vx - nx * vz))
-    lz = mu * ((d + shift) * (nx * wy - ny * wx) - d * (nx * vy - ny * vx))
-    if lx != 0.0 or ly != 0.0 or lz != 0.0:
+    # Change of the pair's orbital angular momentum, non-zero only through tangential
+    # restitution (eps_t < 1): c n x J at the contact (fresh), mu ((c + shift) n x w - c n x v)
+    # (old overlap); the spins take the opposite.
+    if s >= 0.0:
+        lx = cy * jz - cz * jy
+        ly = cz * jx - cx * jz
+        lz = cx * jy - cy * jx
+    else:
+        lx = mu * ((c + shift) * (ny * wz - nz * wy) - c * (ny * vz - nz * vy))
+        ly = mu * ((c + shift) * (nz * wx - nx * wz) - c * (nz * vx - nx * vz))
+        lz = mu * ((c + shift) * (nx * wy - ny * wx) - c * (nx * vy - ny * vx))
+    if eps_t < 1.0:
         _spin_kick(spin, pw[b1 + P_AP] - 1, pw[b2 + P_AP] - 1, r1, r2, -lx, -ly, -lz)
     return 0
 
@@ -317,7 +401,9 @@ def bounce_pair(pf, pw, i, j, spin, params, ctx):
 @cfunc(types.int32(types.voidptr, types.voidptr, types.voidptr), cache=True)
 def _resolve(simp, collp, ctxp):
     sim_words = carray(_void_as_i64(simp), S_WORDS)
-    t = carray(_void_as_f64(simp), S_T + 1)[S_T]
+    sim_f = carray(_void_as_f64(simp), max(S_T, S_DT_LAST) + 1)
+    t = sim_f[S_T]
+    h = sim_f[S_DT_LAST]
     n = sim_words[S_N]
     addr = sim_words[S_PARTICLES]
     pf = carray(_addr_as_f64(addr), n * P_STRIDE)
@@ -334,8 +420,11 @@ def _resolve(simp, collp, ctxp):
     model = ctx[CTX_MODEL]
     g = params[0]
     if model == 0:
-        return merge_pair(pf, pw, i, j, spin, t, ctx, events, event_time)
+        return merge_pair(pf, pw, i, j, spin, params, t, ctx, events, event_time)
     if model == 1:
+        if contact_geometry(pf, i, j, h)[0] == NO_CONTACT:
+            ctx[CTX_N_SEPARATING] += 1
+            return 0
         b1 = i * P_STRIDE
         b2 = j * P_STRIDE
         vx = pf[b2 + P_VX] - pf[b1 + P_VX]
@@ -343,8 +432,8 @@ def _resolve(simp, collp, ctxp):
         vz = pf[b2 + P_VZ] - pf[b1 + P_VZ]
         v_esc2 = 2.0 * g * (pf[b1 + P_M] + pf[b2 + P_M]) / (pf[b1 + P_R] + pf[b2 + P_R])
         if vx * vx + vy * vy + vz * vz < v_esc2:
-            return merge_pair(pf, pw, i, j, spin, t, ctx, events, event_time)
-    return bounce_pair(pf, pw, i, j, spin, params, ctx)
+            return merge_pair(pf, pw, i, j, spin, params, t, ctx, events, event_time)
+    return bounce_pair(pf, pw, i, j, spin, params, ctx, h)
 
 
 _COLLISION_IR = "{i64, i64, [6 x double], i64}"
@@ -367,7 +456,8 @@ class CollisionResolver:
         events: (n_slots, 2) merge events (survivor slot, absorbed slot) since the last
             :meth:`drain_events`; event_time: (n_slots,) their times (s).
         ctx: the int64 context array (counters at ``CTX_N_MERGE``, ``CTX_N_BOUNCE``,
-            ``CTX_N_SEPARATING``).
+            ``CTX_N_OVERLAP``, ``CTX_N_SEPARATING``).
+        params: float64 [G, eps_n, eps_t, cumulative kinetic-energy change by the resolver (J)].
         address: the C function address to assign to ``sim.collision_resolve``.
     """
 
@@ -402,7 +492,10 @@ class CollisionResolver:
         return out
 
     def resolve(self, sim: rebound.Simulation, p1: int, p2: int) -> int:
-        """Call the compiled resolver on the pair (p1, p2) of ``sim`` now (tests, diagnostics)."""
+        """Call the compiled resolver on the pair (p1, p2) of ``sim`` now (tests, diagnostics).
+
+        The step length it uses is ``sim.dt_last_done`` (0 before the first step).
+        """
         fn = rebound.simulation.COLRFF(self.address)
         coll = rebound.simulation.CollisionS()
         coll.p1 = p1

@@ -60,7 +60,10 @@ DIAGNOSTIC_UNITS = {
     "remnant_mass": "kg",
     "orbiting_mass": "kg",
     "time_step": "s",
-    "contact_energy_added": "J",
+    "collision_kinetic_energy_change": "J",
+    "overlapping_pairs": "dimensionless",
+    "max_overlap": "dimensionless",
+    "n_overlap_push": "dimensionless",
 }
 
 DIAGNOSTIC_DESCRIPTIONS = {
@@ -75,8 +78,11 @@ DIAGNOSTIC_DESCRIPTIONS = {
     "largest_mass": "mass of the most massive particle",
     "remnant_mass": "mass of the contact group of the most massive particle (M_lr)",
     "orbiting_mass": "mass outside the largest remnant bound to it",
-    "contact_energy_added": "cumulative energy added by pushing overlapping bouncing pairs to contact "
-                            "beyond what their normal kinetic energy paid for",
+    "collision_kinetic_energy_change": "cumulative change of the translational kinetic energy made by the "
+                                       "collision resolver (bounces, pushes paid from kinetic energy, mergers)",
+    "n_overlap_push": "cumulative bounces of pairs overlapping since before the step, pushed apart to contact",
+    "overlapping_pairs": "pairs with |x_i - x_j| < r_i + r_j",
+    "max_overlap": "largest 1 - |x_i - x_j| / (r_i + r_j) over the overlapping pairs (0 if none)",
 }
 
 
@@ -100,6 +106,10 @@ class NBodyResult:
         time: simulated time reached (s).
         dynamical_time: 1 / sqrt(G rho_bulk) (s).  time_step: final leapfrog step (s).
         collision_model: 'merge', 'conditional_merge' or 'bounce'.
+        initial_overlapping_pairs: hand-off particle pairs overlapping at t = 0.
+        initial_overlap_energy: J, sum over them of G m_i m_j (1/d_ij - 1/(r_i + r_j)): the
+            potential energy their separation costs, which the collision resolution can add
+            in a cold start (docs/nbody.md).
     """
 
     id: np.ndarray
@@ -129,6 +139,8 @@ class NBodyResult:
     dynamical_time: float = 0.0
     time_step: float = 0.0
     collision_model: str = "merge"
+    initial_overlapping_pairs: int = 0
+    initial_overlap_energy: float = 0.0
 
     def __len__(self) -> int:
         return int(self.id.shape[0])
@@ -138,7 +150,9 @@ class NBodyResult:
         return self.members[self.members_offset[k]:self.members_offset[k + 1]]
 
 
-_SCALARS = ("status", "time", "dynamical_time", "time_step", "collision_model")
+_SCALARS = ("status", "time", "dynamical_time", "time_step", "collision_model", "initial_overlapping_pairs",
+            "initial_overlap_energy")
+_OVERLAP_SCALARS = ("initial_overlapping_pairs", "initial_overlap_energy")
 
 
 def write_result(path: str | os.PathLike, result: NBodyResult, attrs: dict) -> None:
@@ -163,10 +177,14 @@ def read_result(path: str | os.PathLike) -> NBodyResult:
     with h5py.File(path, "r") as f:
         arrays = {name: f[name][()] for name in PARTICLE_FIELD_UNITS}
         diagnostics = {name: f["diagnostics"][name][()] for name in f["diagnostics"]}
-        scalars = {name: f.attrs[name] for name in _SCALARS}
+        # files written before the initial-overlap report existed lack its two attributes
+        scalars = {name: f.attrs[name] for name in _SCALARS if name in f.attrs or name not in _OVERLAP_SCALARS}
+        for name in _OVERLAP_SCALARS:
+            scalars.setdefault(name, -1 if name == "initial_overlapping_pairs" else float("nan"))
     for name in ("status", "collision_model"):
         value = scalars[name]
         scalars[name] = value.decode() if isinstance(value, bytes) else str(value)
-    for name in ("time", "dynamical_time", "time_step"):
+    scalars["initial_overlapping_pairs"] = int(scalars["initial_overlapping_pairs"])
+    for name in ("time", "dynamical_time", "time_step", "initial_overlap_energy"):
         scalars[name] = float(scalars[name])
     return NBodyResult(**arrays, diagnostics=diagnostics, **scalars)

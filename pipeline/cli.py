@@ -337,3 +337,55 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
         click.echo(f"t = {t:g} s: M_lr/M_T = {m:.4g}")
     click.echo(f"slope over t >= {result['late_from']:.4g} s: {result['slope']:.4g} +- {result['slope_err']:.2g} /s")
     click.echo(f"wrote {out / 'handoff_scan.csv'} and {out / 'handoff_scan.png'}")
+
+
+@main.command("convergence")
+@click.argument("config_path", metavar="CONFIG", type=click.Path(dir_okay=False))
+@click.option("--vary", "varies", multiple=True, required=True, metavar="KEY=V1,V2,...",
+              help="One ladder: a config key and its values (e.g. hydro.cells_per_projectile_radius=5,10,20,40); "
+                   "repeat for more ladders, each run with the other keys at the config's values.")
+@click.option("--depths", default="1,2,4", show_default=True,
+              help="Depths of the peak-pressure answers, in projectile radii below the impact point.")
+@click.option("--tolerance", type=float, default=0.05, show_default=True,
+              help="Report the cheapest rung within this of the extrapolated M_lr/M_T.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), help="Directory (default runs/<name>-convergence).")
+@click.option("--backend", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+              help="Execution backend of the sweep machinery.")
+@click.option("--scheduler", help="Dask scheduler address (implies --backend dask).")
+@click.option("--workers", type=int, help="Parallel runs (default: cores). Wall times are shared-machine times.")
+@click.option("-v", "--verbose", count=True, help="More log output.")
+@click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
+def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tolerance: float, out_dir: str | None,
+                    backend: str, scheduler: str | None, workers: int | None, verbose: int, quiet: bool) -> None:
+    """Run convergence ladders of CONFIG: answers (M_lr/M_T, N_lr, peak pressures at fixed depths) against
+    cost (wall seconds, cell-updates, particle-steps), with a Richardson estimate of the converged value."""
+    from .convergence import LadderError, format_table, parse_floats, parse_vary, run_ladders
+
+    _setup_logging(verbose, quiet)
+    config, _ = _load_or_exit(config_path)
+    if not tolerance > 0:
+        click.echo(f"--tolerance: must be > 0 (got {tolerance})", err=True)
+        sys.exit(2)
+    if workers is not None and workers < 1:
+        click.echo(f"--workers: must be >= 1 (got {workers})", err=True)
+        sys.exit(2)
+    execution = {"backend": "dask" if scheduler else backend, "scheduler": scheduler, "workers": workers}
+    out = Path(out_dir or Path("runs") / f"{config.name}-convergence")
+    try:
+        ladders = parse_vary(varies)
+        depth_values = parse_floats(depths, "--depths")
+        result = run_ladders(config_path, ladders, out, depths=depth_values, tolerance=tolerance,
+                             execution={k: v for k, v in execution.items() if v is not None},
+                             show_progress=not quiet)
+    except LadderError as exc:
+        for message in exc.messages:
+            click.echo(message, err=True)
+        sys.exit(2)
+    for line in format_table(result, depth_values, tolerance):
+        click.echo(line)
+    click.echo(f"wrote {', '.join(str(p) for p in result['files'])}")
+    failed = [r for r in result["rungs"] if r.status != "complete"]
+    for rung in failed:
+        click.echo(f"rung {rung.ladder}={rung.value} failed: {rung.error}", err=True)
+    if failed:
+        sys.exit(1)

@@ -23,6 +23,7 @@ import math
 import multiprocessing
 import os
 import re
+import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -277,7 +278,18 @@ def _set_threads(threads: int) -> None:
 
 
 def _init_worker(threads: int) -> None:
+    """Pool-worker initializer: give numba ``threads`` threads.
+
+    Unpickling this function imports numba (through this module), which reads
+    NUMBA_NUM_THREADS (default: all cores) at import; the config is re-read here so the
+    threads numba later starts match the value that its next compile will read again
+    (otherwise that compile raises "Cannot set NUMBA_NUM_THREADS to a different value").
+    """
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    if "numba" in sys.modules:
+        from numba.core import config
+
+        config.reload_config()
 
 
 # --------------------------------------------------------------------------- coordinator

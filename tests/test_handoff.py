@@ -205,6 +205,9 @@ def test_3d_mass_and_momentum_conserved():
     cell_mass = snap.partial_density.sum(axis=1) * snap.block_cell_volumes()
     com = (cell_mass[:, None] * snap.block_cell_centers()).sum(axis=(2, 3, 4))[index] / particles.mass[:, None]
     np.testing.assert_allclose(particles.position, com, rtol=0, atol=1e-12 * 400.0)
+    block_momentum = (cell_mass[:, None] * snap.velocity).sum(axis=(2, 3, 4))[index]
+    np.testing.assert_allclose(particles.mass[:, None] * particles.velocity, block_momentum,
+                               rtol=0, atol=1e-12 * momentum_scale)
     # Radius: inscribed in the cube of the smallest edge, shrunk to the density floor if lighter.
     inscribed = 0.5 * (snap.block_hi - snap.block_lo)[index].min(axis=1)
     floor_radius = np.cbrt(3.0 * particles.mass / (4.0 * np.pi * 0.75 * RHO))
@@ -312,6 +315,21 @@ def test_uniform_sphere_mass_centre_and_gyration(geometry):
     if geometry == "3d":
         np.testing.assert_allclose(density[full[index]], 6.0 / np.pi * RHO, rtol=1e-12)
     assert np.all(particles.radius <= 0.5 * (snap.block_hi - snap.block_lo)[index, : snap.ndim].min(axis=1))
+
+
+def test_uniform_sphere_2d_and_3d_agree():
+    """The same ball handed off from 2d-cylindrical and from 3d: mass, centre, gyration within 2 %."""
+    radius = 1000.0
+    centre = np.array([0.0, 0.0, 150.0])
+    results = []
+    for geometry in ("2d-cylindrical", "3d"):
+        snap = uniform_sphere(geometry, radius, centre)
+        particles, _ = handoff(snap, total_mass=4.0 / 3.0 * np.pi * radius**3 * RHO)
+        results.append(mass_moments(particles))
+    (m2, c2, g2), (m3, c3, g3) = results
+    assert m2 == pytest.approx(m3, rel=0.02)
+    assert np.linalg.norm(c2 - c3) < 0.02 * radius
+    assert g2 == pytest.approx(g3, rel=0.02)
 
 
 def test_ring_sphere_count_rule():

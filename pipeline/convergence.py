@@ -1,0 +1,631 @@
+"""Convergence ladders: the answers of a run against what they cost, with a Richardson estimate.
+
+A *ladder* varies one config key over a list of values (``--vary KEY=V1,V2,...``) with
+every other key at its value in the base config; several ladders run together.  The
+rungs go through the sweep machinery (:class:`impactpipe.pipeline.sweep.SweepRunner`),
+so they run on a process pool or a Dask cluster, resume after a kill, share the hydro
+run between rungs that differ only downstream (an opening-angle or hand-off-time
+ladder runs the hydro once) and run a rung common to two ladders once.
+
+For each rung the answers are
+
+- M_lr/M_T and N_lr (``summary.json`` of the analysis stage),
+- the peak shock pressure (Pa) at fixed depths below the impact point, in projectile
+  radii, read from the tracers of the ray next to the symmetry axis in ``hydro.h5``
+  (interpolated linearly in log P against log distance; NaN outside the ray),
+
+and the costs are the wall seconds of each stage, the hydro steps and cell-updates
+(``summary.json``) and the N-body steps and particle-steps when the N-body stage
+records them (``stages.nbody.steps``, ``stages.nbody.particle_steps``; blank otherwise).
+A rung that adopted another rung's hydro run reports that run's hydro cost: the cost of
+the rung run on its own.
+
+Richardson extrapolation (:func:`richardson`) applies to keys with a known step size h
+(h -> 0 is the converged limit, :data:`STEP_SIZE`): with the three finest rungs
+h1 < h2 < h3 and answers f1, f2, f3, the model f = f* + C h^p gives
+
+    (f3 - f2) / (f2 - f1) = r21^p (r32^p - 1) / (r21^p - 1),   r21 = h2/h1, r32 = h3/h2,
+
+solved for the observed order p (p = ln((f3 - f2)/(f2 - f1)) / ln r for a constant
+ratio r), then f* = f1 + (f1 - f2) / (r21^p - 1), and each rung's error estimate is
+f_i - f*.  With fewer than three rungs, answers that do not change monotonically, or
+differences that do not shrink with refinement, no value is extrapolated and the
+table says why.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import csv
+import io
+import logging
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import yaml
+from scipy import optimize
+
+from . import derived, runstore
+from .config import ConfigError, key_paths
+from .stages import STAGES, read_records, stage_hashes
+from .sweep import Sweep, SweepRunner, SweepSpec, make_executor, write_results
+
+log = logging.getLogger(__name__)
+
+SPEC_FILE = "convergence.yaml"
+TABLE_FILE = "convergence.csv"
+RICHARDSON_FILE = "richardson.csv"
+JSON_FILE = "convergence.json"
+
+#: Keys with a known discretisation step size h(value); h -> 0 is the converged limit.
+STEP_SIZE: dict[str, tuple[str, Any]] = {
+    "hydro.cells_per_projectile_radius": ("1 / value (finest cell size in projectile radii)", lambda v: 1.0 / v),
+    "hydro.cfl": ("value (Courant number: hydro time step)", lambda v: v),
+    "nbody.opening_angle": ("value (Barnes-Hut opening angle, rad)", lambda v: v),
+}
+#: Default depths of the peak-pressure answers, in projectile radii below the impact point.
+DEFAULT_DEPTHS = (1.0, 2.0, 4.0)
+#: Default tolerance on M_lr/M_T for the cheapest acceptable rung.
+DEFAULT_TOLERANCE = 0.05
+#: Cost columns: name -> (units, how to read it from a summary).
+COSTS = {
+    "wall_total": "s",
+    "wall_hydro": "s",
+    "wall_handoff": "s",
+    "wall_nbody": "s",
+    "wall_analysis": "s",
+    "hydro_steps": "steps",
+    "cell_updates": "cell-updates",
+    "nbody_steps": "steps",
+    "particle_steps": "particle-steps",
+}
+#: The costs drawn against the answers in the figures (when a ladder records them).
+FIGURE_COSTS = ("wall_total", "cell_updates", "particle_steps")
+
+
+class LadderError(ValueError):
+    """Invalid ladder arguments; ``messages`` holds one line per problem (nothing has run)."""
+
+    def __init__(self, messages: list[str]):
+        self.messages = messages
+        super().__init__("\n".join(messages))
+
+
+# --------------------------------------------------------------------------- arguments
+
+
+def parse_vary(texts: list[str] | tuple[str, ...]) -> dict[str, list[Any]]:
+    """``["KEY=V1,V2,..."]`` -> ``{KEY: [V1, V2, ...]}``; values are YAML scalars (1, 0.5, auto).
+
+    Raises LadderError for a malformed argument, a repeated key or a ladder of fewer than
+    two distinct values.
+    """
+    ladders: dict[str, list[Any]] = {}
+    messages = []
+    for text in texts:
+        key, sep, values_text = text.partition("=")
+        key = key.strip()
+        if not sep or not key or not values_text.strip():
+            messages.append(f"--vary: expected KEY=V1,V2,... (got {text!r})")
+            continue
+        try:
+            values = [yaml.safe_load(v.strip()) for v in values_text.split(",") if v.strip()]
+        except yaml.YAMLError:
+            messages.append(f"--vary {key}: cannot read the values {values_text!r}")
+            continue
+        if key in ladders:
+            messages.append(f"--vary {key}: given twice")
+        elif len(set(map(repr, values))) < 2 or len(set(map(repr, values))) != len(values):
+            messages.append(f"--vary {key}: a ladder needs at least two distinct values (got {values_text!r})")
+        else:
+            ladders[key] = values
+    if messages:
+        raise LadderError(messages)
+    return ladders
+
+
+def parse_floats(text: str, option: str) -> list[float]:
+    """``"1,2,4"`` -> ``[1.0, 2.0, 4.0]`` (all > 0), or LadderError naming ``option``."""
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise LadderError([f"{option}: expected comma-separated numbers (got {text!r})"]) from None
+    if not values or any(not (v > 0 and math.isfinite(v)) for v in values):
+        raise LadderError([f"{option}: expected numbers > 0 (got {text!r})"])
+    return values
+
+
+# --------------------------------------------------------------------------- Richardson
+
+
+@dataclass
+class Extrapolation:
+    """Richardson estimate of one answer over one ladder.
+
+    Attributes:
+        status: "extrapolated", or why no value was extrapolated.
+        order: observed order p (NaN unless extrapolated).
+        ratios: (r21, r32), the step-size ratios of the three finest rungs (NaN if fewer).
+        value: extrapolated answer f* (NaN unless extrapolated).
+        errors: f_i - f* per rung, in the order of the input (NaN unless extrapolated).
+    """
+
+    status: str
+    order: float = float("nan")
+    ratios: tuple[float, float] = (float("nan"), float("nan"))
+    value: float = float("nan")
+    errors: np.ndarray = field(default_factory=lambda: np.array([]))
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "extrapolated"
+
+
+def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0) -> Extrapolation:
+    """Richardson extrapolation of answers ``f`` at step sizes ``h`` from the three finest rungs.
+
+    Model f(h) = f* + C h^p.  With h1 < h2 < h3 the three smallest step sizes (finite
+    answers only), e21 = f2 - f1, e32 = f3 - f2, the observed order p solves
+    e32 / e21 = r21^p (r32^p - 1) / (r21^p - 1) (r21 = h2/h1, r32 = h3/h2; for
+    r21 = r32 = r, p = ln(e32/e21) / ln r), and f* = f1 + (f1 - f2) / (r21^p - 1).
+    Needs e32 / e21 > 1 (the answers change monotonically and the change shrinks with
+    refinement) and 0 < p <= ``max_order``; otherwise the status says which failed and
+    nothing is extrapolated.
+    """
+    h = np.asarray(h, dtype=float)
+    f = np.asarray(f, dtype=float)
+    nan_errors = np.full(h.shape, np.nan)
+    good = np.flatnonzero(np.isfinite(f) & np.isfinite(h))
+    if good.size < 3:
+        return Extrapolation(f"{good.size} rung(s) with an answer: Richardson needs 3", errors=nan_errors)
+    finest = good[np.argsort(h[good])[:3]]
+    (h1, h2, h3), (f1, f2, f3) = h[finest], f[finest]
+    if not 0 < h1 < h2 < h3:
+        return Extrapolation("step sizes of the three finest rungs are not distinct and positive", errors=nan_errors)
+    r21, r32 = h2 / h1, h3 / h2
+    e21, e32 = f2 - f1, f3 - f2
+    if e21 == 0.0 and e32 == 0.0:
+        return Extrapolation("the three finest rungs agree exactly: no order to estimate", ratios=(r21, r32),
+                             errors=nan_errors)
+    if e21 == 0.0 or e32 / e21 < 0.0:
+        return Extrapolation("non-monotone: the answers of the three finest rungs do not change in one direction",
+                             ratios=(r21, r32), errors=nan_errors)
+    ratio = e32 / e21
+    if ratio <= 1.0:
+        return Extrapolation(f"not converging: the change does not shrink with refinement "
+                             f"((f3 - f2)/(f2 - f1) = {ratio:.3g})", ratios=(r21, r32), errors=nan_errors)
+
+    def mismatch(p: float) -> float:
+        return math.log(r21 ** p * (r32 ** p - 1.0) / (r21 ** p - 1.0)) - math.log(ratio)
+
+    low = 1e-6
+    if mismatch(low) > 0.0:
+        return Extrapolation(f"no positive order fits (f3 - f2)/(f2 - f1) = {ratio:.3g} with ratios "
+                             f"{r21:.3g}, {r32:.3g}", ratios=(r21, r32), errors=nan_errors)
+    if mismatch(max_order) < 0.0:
+        return Extrapolation(f"observed order above {max_order:g}: not in the asymptotic range",
+                             ratios=(r21, r32), errors=nan_errors)
+    p = float(optimize.brentq(mismatch, low, max_order, xtol=1e-12))
+    value = float(f1 + (f1 - f2) / (r21 ** p - 1.0))
+    return Extrapolation("extrapolated", order=p, ratios=(r21, r32), value=value, errors=f - value)
+
+
+def cheapest_within(h: np.ndarray, f: np.ndarray, reference: float, tolerance: float) -> int | None:
+    """Index of the coarsest rung (largest h) such that it and every finer rung lie within
+    ``tolerance`` of ``reference``; None when there is none or the reference is not finite."""
+    h = np.asarray(h, dtype=float)
+    f = np.asarray(f, dtype=float)
+    if not math.isfinite(reference):
+        return None
+    order = [i for i in np.argsort(h) if math.isfinite(f[i])]
+    best = None
+    for i in order:  # finest first
+        if abs(f[i] - reference) > tolerance:
+            break
+        best = int(i)
+    return best
+
+
+# --------------------------------------------------------------------------- answers
+
+
+def peak_pressure_at_depths(hydro_path: str | Path, target_radius: float, depths_m: list[float]) -> np.ndarray:
+    """Peak pressure (Pa) at distances ``depths_m`` (m) below the impact point (0, R_T) along the
+    tracer ray next to the symmetry axis; log-log interpolation between tracers, NaN outside
+    the ray, without tracers, or when ``hydro_path`` is not an HDF5 file (stand-in stages)."""
+    from impactpipe.hydro.io import read_tracers
+    from impactpipe.hydro.plots import axis_ray
+
+    out = np.full(len(depths_m), np.nan)
+    if not h5py.is_hdf5(hydro_path):
+        return out
+    tracers = read_tracers(hydro_path)
+    if tracers is None:
+        return out
+    try:
+        distance, peak = axis_ray(tracers, impact_point=(0.0, target_radius))
+    except ValueError:
+        return out
+    ok = (distance > 0) & (peak > 0)
+    if ok.sum() < 2:
+        return out
+    x, y = np.log(distance[ok]), np.log(peak[ok])
+    for k, depth in enumerate(depths_m):
+        if x[0] <= math.log(depth) <= x[-1]:
+            out[k] = math.exp(np.interp(math.log(depth), x, y))
+    return out
+
+
+def costs_of(summary: dict[str, Any]) -> dict[str, float]:
+    """The cost columns of :data:`COSTS` from a run's summary (NaN where not recorded)."""
+    stages = summary.get("stages", {})
+    walls = {s: float(stages.get(s, {}).get("wall_seconds", np.nan)) for s in STAGES}
+    out = {f"wall_{s}": walls[s] for s in STAGES}
+    out["wall_total"] = float(sum(walls.values()))
+    out["hydro_steps"] = float(stages.get("hydro", {}).get("steps", np.nan))
+    out["cell_updates"] = float(stages.get("hydro", {}).get("cell_updates", np.nan))
+    out["nbody_steps"] = float(stages.get("nbody", {}).get("steps", np.nan))
+    out["particle_steps"] = float(stages.get("nbody", {}).get("particle_steps", np.nan))
+    return out
+
+
+# --------------------------------------------------------------------------- the ladder
+
+
+@dataclass
+class Rung:
+    ladder: str
+    value: Any
+    name: str
+    params: dict[str, Any]
+    step: float = float("nan")
+    status: str = "pending"
+    error: str = ""
+    hydro_from: str = ""
+    answers: dict[str, float] = field(default_factory=dict)
+    costs: dict[str, float] = field(default_factory=dict)
+
+
+def _answer_names(depths: list[float]) -> list[str]:
+    return ["M_lr_over_M_T", "N_lr", *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
+
+
+def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
+    """Config overrides of one rung; a hand-off-time ladder also runs the hydro to its latest
+    time with a snapshot at every rung (the hydro run is then shared by the whole ladder)."""
+    params = {key: value}
+    if key == "handoff.time":
+        times = sorted(float(v) for v in values)
+        params.update({"hydro.end_time": times[-1], "hydro.output_times": times})
+    return params
+
+
+def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
+                 execution: dict[str, Any] | None = None,
+                 stage_functions: dict[str, str] | None = None) -> tuple[Sweep, list[Rung]]:
+    """Validate every rung's config (before any work) and return the sweep and its rungs.
+
+    Raises LadderError naming the key, the value and what is allowed.
+    """
+    config_path = Path(config_path).resolve()
+    out = Path(out_dir)
+    try:
+        base_text = config_path.read_text()
+    except OSError as exc:
+        raise LadderError([f"{config_path}: cannot read config: {exc.strerror}"]) from None
+    spec = SweepSpec.model_validate({
+        "name": f"{config_path.stem}-convergence", "base": str(config_path), "output": str(out),
+        "execution": execution or {}, "stage_functions": stage_functions or {},
+    })
+    sweep = Sweep(spec=spec, base_text=base_text, base_path=config_path, directory=out, source=out / SPEC_FILE)
+    try:
+        problem = sweep.config_for({}).scene.problem
+    except ConfigError as exc:
+        raise LadderError(exc.messages) from None
+    if problem != "impact":
+        raise LadderError([f"{config_path}: scene.problem must be impact for a convergence ladder (got {problem})"])
+    known = set(key_paths())
+    messages: list[str] = []
+    rungs: list[Rung] = []
+    for key, values in ladders.items():
+        pattern = re.sub(r"^materials\.[^.]+\.", "materials.<name>.", key)
+        if key not in known and pattern not in known:
+            messages.append(f"--vary {key}: not a config key (see docs/config.md)")
+            continue
+        if key in STEP_SIZE and not all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
+                                        for v in values):
+            messages.append(f"--vary {key}: values must be numbers > 0 (got {values})")
+            continue
+        for value in values:
+            params = _rung_params(key, value, values)
+            try:
+                config = sweep.config_for(params)
+            except ConfigError as exc:
+                messages += [f"--vary {key}={value}: {m}" for m in exc.messages]
+                continue
+            errors = derived.capability_errors(config, derived.derive(config))
+            messages += [f"--vary {key}={value}: {m}" for m in errors]
+            step = float(STEP_SIZE[key][1](value)) if key in STEP_SIZE else float("nan")
+            rungs.append(Rung(ladder=key, value=value, name="", params=params, step=step))
+    if messages:
+        raise LadderError(messages)
+    return sweep, rungs
+
+
+def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
+                depths: list[float] = DEFAULT_DEPTHS, tolerance: float = DEFAULT_TOLERANCE,
+                executor: cf.Executor | None = None, execution: dict[str, Any] | None = None,
+                stage_functions: dict[str, str] | None = None, show_progress: bool = True) -> dict[str, Any]:
+    """Run the ladders and write the table, the Richardson table, a JSON record and one figure per ladder.
+
+    Args:
+        config_path: base config (an impact).
+        ladders: {config key: values}; each ladder varies its key with the others at the base values.
+        out_dir: directory of the sweep (``runs/``, ``points.json``, ``results.csv``) and the outputs.
+        depths: depths of the peak-pressure answers, in projectile radii below the impact point.
+        tolerance: the cheapest rung within this of the extrapolated M_lr/M_T is reported.
+        executor: a concurrent.futures executor; default from ``execution`` (sweep ``execution`` keys).
+        stage_functions: replace stage functions (``{"nbody": "pkg.mod:func"}``; for tests).
+
+    Returns:
+        {"rungs": [Rung], "richardson": {ladder: {answer: Extrapolation}}, "cheapest": {ladder: rung index or
+        None}, "files": [paths written]}.
+    """
+    sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions)
+    out = sweep.directory
+    out.mkdir(parents=True, exist_ok=True)
+    runstore.write_text_atomic(sweep.source, yaml.safe_dump(
+        {**sweep.spec.model_dump(mode="json", exclude_none=True), "ladders": ladders,
+         "depths_in_projectile_radii": list(depths)}, sort_keys=False))
+    close = None
+    if executor is None:
+        executor, close = make_executor(sweep.spec.execution)
+    from tqdm import tqdm
+
+    bar = tqdm(total=0, desc=f"convergence {sweep.spec.name}", unit="run", disable=None if show_progress else True)
+    runner = SweepRunner(sweep, executor, bar)
+    try:
+        by_digest: dict[str, str] = {}
+        for rung in rungs:
+            config = sweep.config_for(rung.params)
+            digest = stage_hashes(config)[STAGES[-1]]
+            if digest not in by_digest:
+                by_digest[digest] = runner.add_point(rung.params, group=rung.ladder)
+            rung.name = by_digest[digest]
+        results = runner.run_points(sorted(set(by_digest.values())))
+    finally:
+        bar.close()
+        write_results(sweep, runner.points)
+        if close is not None:
+            close()
+    base = sweep.config_for({})
+    for rung in rungs:
+        _fill(rung, results[rung.name], runner.points[rung.name], sweep, depths)
+    answers = _answer_names(depths)
+    extrapolations: dict[str, dict[str, Extrapolation]] = {}
+    cheapest: dict[str, int | None] = {}
+    for key in ladders:
+        ladder = [r for r in rungs if r.ladder == key]
+        h = np.array([r.step for r in ladder])
+        extrapolations[key] = {}
+        for name in answers:
+            if name == "N_lr":
+                continue  # the particle count grows with resolution; it measures resolution, not an answer to converge
+            f = np.array([r.answers.get(name, np.nan) for r in ladder])
+            if key in STEP_SIZE:
+                extrapolations[key][name] = richardson(h, f)
+            else:
+                extrapolations[key][name] = Extrapolation(
+                    f"{key} has no step size: no extrapolation (changes between rungs are listed)",
+                    errors=np.full(len(ladder), np.nan))
+        mlr = extrapolations[key]["M_lr_over_M_T"]
+        index = cheapest_within(h, [r.answers.get("M_lr_over_M_T", np.nan) for r in ladder], mlr.value, tolerance)
+        cheapest[key] = index
+    files = _write_outputs(out, rungs, ladders, extrapolations, cheapest, answers, tolerance, base)
+    return {"rungs": rungs, "richardson": extrapolations, "cheapest": cheapest, "files": files}
+
+
+def _fill(rung: Rung, result: Any, point: dict[str, Any], sweep: Sweep, depths: list[float]) -> None:
+    """Status, answers and costs of one rung from its finished (or failed) run."""
+    rung.status = result.status
+    rung.error = result.error or ""
+    run_dir = Path(point["run_dir"])
+    if result.status != "complete":
+        return
+    summary = result.summary
+    config = sweep.config_for(rung.params)
+    r_p, r_t = config.scene.projectile.radius, config.scene.target.radius
+    rung.answers["M_lr_over_M_T"] = float(summary.get("M_lr_over_M_T", np.nan))
+    rung.answers["N_lr"] = float(summary.get("N_lr", np.nan))
+    pressures = peak_pressure_at_depths(run_dir / "hydro.h5", r_t, [d * r_p for d in depths])
+    for d, p in zip(depths, pressures):
+        rung.answers[f"peak_pressure_at_{d:g}Rp"] = float(p)
+    rung.costs = costs_of(summary)
+    reused = read_records(run_dir).get("hydro", {}).get("reused_from")
+    rung.hydro_from = Path(reused).name if reused else ""
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return "" if not math.isfinite(value) else f"{value:.6g}"
+    return str(value)
+
+
+def _csv(columns: list[str], rows: list[dict[str, Any]], comments: list[str]) -> str:
+    buffer = io.StringIO()
+    for line in comments:
+        buffer.write(f"# {line}\n")
+    writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows([{k: _fmt(v) for k, v in row.items()} for row in rows])
+    return buffer.getvalue()
+
+
+def rung_rows(rungs: list[Rung], extrapolations: dict[str, dict[str, Extrapolation]],
+              answers: list[str]) -> list[dict[str, Any]]:
+    """One table row per rung: value, step size, status, answers, error estimates, changes, costs."""
+    rows = []
+    for key in dict.fromkeys(r.ladder for r in rungs):
+        ladder = [r for r in rungs if r.ladder == key]
+        order = np.argsort([r.step for r in ladder]) if key in STEP_SIZE else np.arange(len(ladder))
+        for position, i in enumerate(order):
+            rung = ladder[i]
+            row: dict[str, Any] = {"ladder": key, "value": rung.value, "step_size": rung.step, "status": rung.status,
+                                   "run": rung.name, "hydro_from": rung.hydro_from, "error": rung.error}
+            for name in answers:
+                row[name] = rung.answers.get(name, float("nan"))
+                ext = extrapolations[key].get(name)
+                if ext is not None:
+                    row[f"{name}_error_estimate"] = float(ext.errors[i]) if ext.ok else float("nan")
+                    finer = ladder[order[position - 1]] if position > 0 else None
+                    row[f"{name}_change_from_previous"] = (row[name] - finer.answers.get(name, float("nan"))
+                                                           if finer is not None else float("nan"))
+            row.update({c: rung.costs.get(c, float("nan")) for c in COSTS})
+            rows.append(row)
+    return rows
+
+
+def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
+                   extrapolations: dict[str, dict[str, Extrapolation]], cheapest: dict[str, int | None],
+                   answers: list[str], tolerance: float, base: Any) -> list[Path]:
+    rows = rung_rows(rungs, extrapolations, answers)
+    extra = [f"{a}_{s}" for a in answers if a != "N_lr" for s in ("error_estimate", "change_from_previous")]
+    columns = ["ladder", "value", "step_size", "status", *answers, *extra, *COSTS, "run", "hydro_from", "error"]
+    comments = [f"convergence ladders of {base.name}; answers in SI (pressures Pa), costs: "
+                 + ", ".join(f"{c} ({u})" for c, u in COSTS.items()),
+                 "rows of a ladder with a step size run from the finest rung; *_error_estimate = answer - "
+                 "Richardson value; *_change_from_previous = answer - answer of the row above",
+                 "a rung that reused another rung's hydro run (hydro_from) reports that run's hydro cost"]
+    for key, index in cheapest.items():
+        ladder = [r for r in rungs if r.ladder == key]
+        mlr = extrapolations[key]["M_lr_over_M_T"]
+        if index is None:
+            comments.append(f"{key}: no rung shown within +-{tolerance:g} of a converged M_lr/M_T ({mlr.status})")
+        else:
+            comments.append(f"{key}: cheapest rung within +-{tolerance:g} of the extrapolated M_lr/M_T "
+                            f"{mlr.value:.4g}: {key} = {ladder[index].value}")
+    files = [out / TABLE_FILE, out / RICHARDSON_FILE, out / JSON_FILE]
+    runstore.write_text_atomic(out / TABLE_FILE, _csv(columns, rows, comments))
+    rich_rows = []
+    for key, by_answer in extrapolations.items():
+        for name, ext in by_answer.items():
+            rich_rows.append({"ladder": key, "answer": name, "status": ext.status, "order": ext.order,
+                              "ratio_r21": ext.ratios[0], "ratio_r32": ext.ratios[1], "extrapolated": ext.value,
+                              "step_size": STEP_SIZE[key][0] if key in STEP_SIZE else ""})
+    runstore.write_text_atomic(out / RICHARDSON_FILE, _csv(
+        ["ladder", "answer", "status", "order", "ratio_r21", "ratio_r32", "extrapolated", "step_size"], rich_rows,
+        ["Richardson estimate f = f* + C h^p from the three finest rungs of each ladder"]))
+    runstore.write_json_atomic(out / JSON_FILE, {
+        "base": base.name, "ladders": ladders, "tolerance": tolerance,
+        "rows": rows, "richardson": rich_rows,
+        "cheapest_within_tolerance": {k: (None if i is None else [r for r in rungs if r.ladder == k][i].value)
+                                      for k, i in cheapest.items()},
+    })
+    for key in ladders:
+        path = out / f"convergence_{key.split('.')[-1]}.png"
+        _figure(path, [r for r in rows if r["ladder"] == key], key, answers, extrapolations[key], tolerance)
+        files.append(path)
+    return files
+
+
+def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str],
+            extrapolations: dict[str, Extrapolation], tolerance: float) -> None:
+    """Answers (rows: M_lr/M_T, peak pressures, N_lr) against the ladder value (first column) and
+    each recorded cost (further columns); rungs are joined in the order of the ladder value."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    numeric = all(isinstance(r["value"], (int, float)) and not isinstance(r["value"], bool) for r in rows)
+    if numeric:
+        rows = sorted(rows, key=lambda r: r["value"])
+    costs = [c for c in FIGURE_COSTS if any(math.isfinite(r[c]) and r[c] > 0 for r in rows)]
+    columns = ["value", *costs]
+    pressures = [a for a in answers if a.startswith("peak_pressure")]
+    fig, axes = plt.subplots(3, len(columns), figsize=(4.2 * len(columns), 9.0), squeeze=False,
+                             constrained_layout=True)
+    for col, column in enumerate(columns):
+        if column == "value":
+            x = np.array([r["value"] if numeric else i for i, r in enumerate(rows)], dtype=float)
+        else:
+            x = np.array([r[column] for r in rows], dtype=float)
+        shown = np.isfinite(x) & ((x > 0) | (column == "value"))
+        ax = axes[0, col]
+        y = np.array([r["M_lr_over_M_T"] for r in rows], dtype=float)
+        ax.plot(x[shown], y[shown], "o-", label="rungs")
+        ext = extrapolations["M_lr_over_M_T"]
+        if ext.ok:
+            ax.axhline(ext.value, color="k", ls="--", lw=1, label=f"Richardson {ext.value:.4g} (p = {ext.order:.2g})")
+            ax.axhspan(ext.value - tolerance, ext.value + tolerance, color="grey", alpha=0.2,
+                       label=f"+-{tolerance:g}")
+        if column != "value":
+            for xi, yi, r, s in zip(x, y, rows, shown):
+                if s and math.isfinite(yi):
+                    ax.annotate(_fmt(r["value"]), (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        ax.set_ylabel("M_lr / M_T")
+        ax.legend(fontsize=7)
+        ax = axes[1, col]
+        for name in pressures:
+            yp = np.array([r[name] for r in rows], dtype=float)
+            ok = shown & np.isfinite(yp) & (yp > 0)
+            if ok.any():
+                (line,) = ax.plot(x[ok], yp[ok], "o-", label=name.replace("peak_pressure_at_", "depth "))
+                if extrapolations[name].ok and extrapolations[name].value > 0:
+                    ax.axhline(extrapolations[name].value, color=line.get_color(), ls="--", lw=1)
+        if ax.lines:
+            ax.set_yscale("log")
+            ax.legend(fontsize=7)
+        ax.set_ylabel("peak pressure (Pa)")
+        ax = axes[2, col]
+        yn = np.array([r["N_lr"] for r in rows], dtype=float)
+        ax.plot(x[shown], yn[shown], "o-")
+        if np.any(yn[shown] > 0):
+            ax.set_yscale("log")
+        ax.set_ylabel("N_lr")
+        ax.set_xlabel(key if column == "value" else f"{column} ({COSTS[column]})")
+        for row_axes in axes[:, col]:
+            if column != "value":
+                row_axes.set_xscale("log")
+                row_axes.xaxis.set_minor_formatter(NullFormatter())
+            elif not numeric:
+                row_axes.set_xticks(x, [str(r["value"]) for r in rows])
+            elif key in STEP_SIZE:
+                row_axes.set_xscale("log")
+    fig.suptitle(f"ladder in {key}: answers against the value and the cost of each rung", fontsize=10)
+    with runstore.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=150, format="png")
+    plt.close(fig)
+
+
+def format_table(result: dict[str, Any], depths: list[float], tolerance: float) -> list[str]:
+    """Lines of a terminal summary: per ladder, each rung's answers and costs, then the Richardson lines."""
+    lines = []
+    answers = _answer_names(depths)
+    rows = rung_rows(result["rungs"], result["richardson"], answers)
+    for key, by_answer in result["richardson"].items():
+        lines.append(f"{key}:")
+        head = f"  {'value':>8} {'M_lr/M_T':>9} {'N_lr':>7} " + " ".join(
+            f"{'P(' + format(d, 'g') + 'Rp) Pa':>13}" for d in depths) + f" {'wall s':>8} {'cell-upd':>10} {'status'}"
+        lines.append(head)
+        for row in (r for r in rows if r["ladder"] == key):
+            lines.append(f"  {_fmt(row['value']):>8} {_fmt(row['M_lr_over_M_T']):>9} {_fmt(row['N_lr']):>7} "
+                         + " ".join(f"{_fmt(row[f'peak_pressure_at_{d:g}Rp']):>13}" for d in depths)
+                         + f" {_fmt(row['wall_total']):>8} {_fmt(row['cell_updates']):>10} {row['status']}")
+        for name, ext in by_answer.items():
+            text = (f"{ext.value:.4g} (order {ext.order:.3g})" if ext.ok else ext.status)
+            lines.append(f"  Richardson {name}: {text}")
+        index = result["cheapest"][key]
+        ladder = [r for r in result["rungs"] if r.ladder == key]
+        lines.append(f"  cheapest within +-{tolerance:g} of the extrapolated M_lr/M_T: "
+                     + ("none shown" if index is None else f"{key} = {ladder[index].value}"))
+    return lines

@@ -1,0 +1,252 @@
+"""Convergence ladders: Richardson extrapolation, argument checks, and ladders run through the sweep
+machinery with instant stand-in stages whose answer converges as a known power of the cell size."""
+
+import collections
+import concurrent.futures as cf
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from impactpipe.pipeline.cli import main
+from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson, run_ladders)
+from impactpipe.pipeline.runstore import atomic_path
+
+HERE = Path(__file__).parent
+QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
+
+#: Stand-in answer: M_lr/M_T = CONVERGED + AMPLITUDE h^ORDER with h = 1 / cells_per_projectile_radius.
+CONVERGED, AMPLITUDE, ORDER = 0.7, 0.3, 2.0
+
+
+def _finish(ctx, stage):
+    with atomic_path(ctx.path(stage)) as tmp:
+        tmp.write_text(stage)
+    with open(ctx.run_dir.parent / "calls.log", "a") as log:
+        log.write(f"{ctx.run_dir.name} {stage}\n")
+
+
+def hydro(ctx):
+    cells = ctx.config.hydro.cells_per_projectile_radius
+    _finish(ctx, "hydro")
+    return {"stage": {"steps": int(100 * cells), "cell_updates": int(1000 * cells ** 3)}}
+
+
+def handoff(ctx):
+    _finish(ctx, "handoff")
+    return {}
+
+
+def nbody(ctx):
+    _finish(ctx, "nbody")
+    return {"stage": {"steps": 50, "particle_steps": int(5000 / ctx.config.nbody.opening_angle)}}
+
+
+def analysis(ctx):
+    h = 1.0 / ctx.config.hydro.cells_per_projectile_radius
+    _finish(ctx, "analysis")
+    return {"M_lr_over_M_T": CONVERGED + AMPLITUDE * h ** ORDER, "N_lr": 100, "Q": 500.0}
+
+
+STAGES = {s: f"test_convergence:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
+
+
+def calls(out):
+    log = out / "runs" / "calls.log"
+    lines = log.read_text().split("\n") if log.is_file() else []
+    return collections.Counter(tuple(line.split()) for line in lines if line)
+
+
+# --------------------------------------------------------------------------- Richardson
+
+
+def test_richardson_recovers_order_and_limit_for_constant_and_varying_ratios():
+    for cells in ([5, 10, 20, 40], [4, 6, 10], [3, 4, 7, 12]):
+        h = 1.0 / np.array(cells, dtype=float)
+        f = CONVERGED + AMPLITUDE * h ** ORDER
+        ext = richardson(h, f)
+        assert ext.ok, ext.status
+        assert ext.order == pytest.approx(ORDER, rel=1e-8)
+        assert ext.value == pytest.approx(CONVERGED, abs=1e-12)
+        assert np.allclose(ext.errors, AMPLITUDE * h ** ORDER)
+
+
+def test_richardson_uses_the_three_finest_rungs_in_any_order():
+    h = np.array([0.1, 0.4, 0.05, 0.2, 0.8])
+    f = 1.0 - 2.0 * h ** 1.5
+    f[4] = 7.0  # the coarsest rung is off the power law; it must not enter the estimate
+    ext = richardson(h, f)
+    assert ext.order == pytest.approx(1.5, rel=1e-8) and ext.value == pytest.approx(1.0, abs=1e-12)
+
+
+def test_richardson_refuses_to_invent_a_number():
+    h = np.array([0.05, 0.1, 0.2])
+    assert "needs 3" in richardson(h[:2], np.array([0.5, 0.6])).status
+    assert "needs 3" in richardson(h, np.array([0.5, np.nan, 0.7])).status
+    assert richardson(h, np.array([0.5, 0.6, 0.55])).status.startswith("non-monotone")
+    assert richardson(h, np.array([0.5, 0.6, 0.65])).status.startswith("not converging")
+    assert "agree exactly" in richardson(h, np.array([0.5, 0.5, 0.5])).status
+    for status in ("non-monotone", "not converging"):
+        ext = richardson(h, np.array([0.5, 0.6, 0.55 if status == "non-monotone" else 0.65]))
+        assert not ext.ok and np.isnan(ext.value) and np.all(np.isnan(ext.errors))
+
+
+def test_cheapest_within_needs_every_finer_rung_inside_the_band():
+    h = np.array([0.5, 0.25, 0.125, 0.0625])
+    f = np.array([0.80, 0.69, 0.74, 0.71])
+    assert cheapest_within(h, f, 0.72, 0.05) == 1
+    assert cheapest_within(h, f, 0.72, 0.015) == 3
+    assert cheapest_within(h, f, 0.60, 0.05) is None
+    assert cheapest_within(h, f, float("nan"), 0.05) is None
+
+
+def test_parse_vary_errors_name_the_argument():
+    assert parse_vary(["hydro.max_levels=1,auto", "nbody.opening_angle=0.25,0.5"]) == {
+        "hydro.max_levels": [1, "auto"], "nbody.opening_angle": [0.25, 0.5]}
+    with pytest.raises(LadderError) as info:
+        parse_vary(["hydro.cfl", "nbody.opening_angle=0.5", "a=1,2", "a=3,4", "b=1,1"])
+    text = str(info.value)
+    assert "expected KEY=V1,V2,... (got 'hydro.cfl')" in text
+    assert "nbody.opening_angle: a ladder needs at least two distinct values" in text
+    assert "--vary a: given twice" in text and "--vary b: a ladder needs" in text
+
+
+def test_cli_rejects_bad_ladders_before_any_work(tmp_path):
+    out = tmp_path / "ladder"
+    runner = CliRunner()
+    result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
+                                  "--vary", "hydro.cells_per_projectile_radiu=2,4,8"])
+    assert result.exit_code == 2
+    assert "--vary hydro.cells_per_projectile_radiu: not a config key" in result.output
+    result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
+                                  "--vary", "hydro.cells_per_projectile_radius=2,-4,8"])
+    assert result.exit_code == 2 and "values must be numbers > 0 (got [2, -4, 8])" in result.output
+    result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
+                                  "--vary", "hydro.max_levels=1,3"])
+    assert result.exit_code == 2
+    assert "--vary hydro.max_levels=3: hydro.max_levels: 3 refinement levels are not available" in result.output
+    result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
+                                  "--vary", "hydro.cfl=0.2,0.4", "--depths", "1,x"])
+    assert result.exit_code == 2 and "--depths: expected comma-separated numbers (got '1,x')" in result.output
+    assert not out.exists(), "nothing may be written for bad arguments"
+
+
+# --------------------------------------------------------------------------- ladders on stand-ins
+
+
+def test_ladders_through_the_sweep_machinery(tmp_path):
+    out = tmp_path / "ladder"
+    cells = [2.0, 4.0, 8.0, 16.0]
+    angles = [0.25, 0.5, 1.0]  # the base config's 0.5 at its 4 cells is also a rung of the cells ladder
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_ladders(QUICKSTART, {"hydro.cells_per_projectile_radius": cells, "nbody.opening_angle": angles},
+                             out, executor=pool, stage_functions=STAGES, show_progress=False)
+    done = calls(out)
+    runs = {run for run, _ in done}
+    assert len(runs) == len(cells) + len(angles) - 1, "the rung common to both ladders runs once"
+    assert sum(n for (_, stage), n in done.items() if stage == "hydro") == len(cells), \
+        "the opening-angle ladder shares the hydro run of its cell size"
+    assert set(done.values()) == {1}
+    ext = result["richardson"]["hydro.cells_per_projectile_radius"]["M_lr_over_M_T"]
+    assert ext.ok and ext.order == pytest.approx(ORDER, rel=1e-6) and ext.value == pytest.approx(CONVERGED, abs=1e-9)
+    # 0.3 h^2 <= 0.05 from 4 cells per projectile radius on: the cheapest rung is 4
+    rungs = [r for r in result["rungs"] if r.ladder == "hydro.cells_per_projectile_radius"]
+    assert rungs[result["cheapest"]["hydro.cells_per_projectile_radius"]].value == 4.0
+    angle = result["richardson"]["nbody.opening_angle"]["M_lr_over_M_T"]
+    assert "agree exactly" in angle.status
+    with open(out / "convergence.csv") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    by_cells = {float(r["value"]): r for r in rows if r["ladder"] == "hydro.cells_per_projectile_radius"}
+    assert [float(r["value"]) for r in rows if r["ladder"] == "hydro.cells_per_projectile_radius"] == cells[::-1], \
+        "rows of a ladder with a step size run from the finest rung"
+    for c in cells:
+        row = by_cells[c]
+        assert float(row["cell_updates"]) == 1000 * c ** 3 and float(row["hydro_steps"]) == 100 * c
+        assert float(row["M_lr_over_M_T_error_estimate"]) == pytest.approx(AMPLITUDE / c ** 2, rel=1e-5)
+        assert row["peak_pressure_at_1Rp"] == "", "stand-in hydro files carry no tracers"
+    assert float(by_cells[4.0]["M_lr_over_M_T_change_from_previous"]) == pytest.approx(
+        AMPLITUDE / 16 - AMPLITUDE / 64, rel=1e-5)
+    by_angle = {float(r["value"]): r for r in rows if r["ladder"] == "nbody.opening_angle"}
+    assert float(by_angle[0.25]["particle_steps"]) == 20000
+    assert by_angle[0.25]["hydro_from"] or by_angle[1.0]["hydro_from"], "shared hydro runs are named"
+    table = (out / "convergence.csv").read_text()
+    assert "cheapest rung within +-0.05 of the extrapolated M_lr/M_T 0.7: hydro.cells_per_projectile_radius = 4.0" \
+        in table
+    assert json.loads((out / "convergence.json").read_text())["cheapest_within_tolerance"] == {
+        "hydro.cells_per_projectile_radius": 4.0, "nbody.opening_angle": None}
+    for name in ("convergence_cells_per_projectile_radius.png", "convergence_opening_angle.png"):
+        assert (out / name).stat().st_size > 0
+    assert (out / "points.json").is_file() and (out / "results.csv").is_file()
+    with cf.ThreadPoolExecutor(2) as pool:
+        run_ladders(QUICKSTART, {"hydro.cells_per_projectile_radius": cells, "nbody.opening_angle": angles},
+                    out, executor=pool, stage_functions=STAGES, show_progress=False)
+    assert calls(out) == done, "rerunning a finished ladder does no work"
+
+
+def test_handoff_time_ladder_shares_one_hydro_run_to_the_latest_time(tmp_path):
+    out = tmp_path / "ladder"
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_ladders(QUICKSTART, {"handoff.time": [0.4, 0.8, 1.2]}, out, executor=pool,
+                             stage_functions=STAGES, show_progress=False)
+    done = calls(out)
+    assert sum(n for (_, stage), n in done.items() if stage == "hydro") == 1
+    assert sum(n for (_, stage), n in done.items() if stage == "nbody") == 3
+    ext = result["richardson"]["handoff.time"]["M_lr_over_M_T"]
+    assert not ext.ok and "no step size" in ext.status
+
+
+@pytest.mark.validation
+def test_quickstart_resolution_ladder_real_stages(tmp_path):
+    """Three resolutions of the quickstart with the real stages: costs grow with resolution and the
+    peak pressures at fixed depths are measured (about 2 minutes on 2 cores)."""
+    result = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "ladder"), "-q",
+                                       "--workers", "1", "--vary", "hydro.cells_per_projectile_radius=1,2,4"])
+    assert result.exit_code == 0, result.output
+    with open(tmp_path / "ladder" / "convergence.csv") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    cost = [float(r["cell_updates"]) for r in rows]
+    assert cost == sorted(cost, reverse=True) and cost[-1] > 0
+    for row in rows:
+        assert 0 < float(row["M_lr_over_M_T"]) <= 1.01
+        assert float(row["peak_pressure_at_1Rp"]) > float(row["peak_pressure_at_4Rp"]) > 0
+    assert "Richardson M_lr_over_M_T" in result.output
+
+
+def _compile_after_a_parallel_region(_):
+    """In a pool worker: set the thread count as run_point does (this starts numba's threads), run a
+    parallel kernel, then compile a new function (which re-reads numba's config)."""
+    import numba
+    from numba import njit, prange
+
+    numba.set_num_threads(1)
+
+    @njit(parallel=True)
+    def total(a):
+        s = 0.0
+        for i in prange(a.size):
+            s += a[i]
+        return s
+
+    total(np.ones(8))
+
+    @njit
+    def plus_one(x):
+        return x + 1
+
+    return plus_one(1), numba.config.NUMBA_NUM_THREADS
+
+
+def test_pool_workers_take_their_thread_count_before_numba_starts_threads():
+    """Ladder rungs run in spawned pool workers; a worker imports numba while unpickling its initializer,
+    so the thread count must be re-read there, or the first compile after a parallel region raises
+    "Cannot set NUMBA_NUM_THREADS to a different value" (seen with a cold numba cache)."""
+    from impactpipe.pipeline.sweep import Execution, make_executor
+
+    pool, close = make_executor(Execution(backend="local", workers=1, threads_per_run=1))
+    try:
+        assert pool.submit(_compile_after_a_parallel_region, None).result(timeout=300) == (2, 1)
+    finally:
+        close()
