@@ -5,6 +5,9 @@ Cases:
   2d-cyl-tillotson   2d-cylindrical two-material Tillotson impact with void: the `impact`
                      problem (250 m basalt projectile at 2 km/s on a 1 km basalt target),
                      timed from first contact (~544 x 784 cells; --quick ~144 x 208)
+  2d-cyl-strength    the same impact with GEO 'strong' strength in both bodies (the cost of
+                     strength is the ratio of its rate to 2d-cyl-tillotson's; the ratio is
+                     reported as strength_cost_ratio)
   3d-two-material    3d periodic box, two ideal gases (a dense sphere), 128^3 (--quick 48^3)
 
 Each case runs with 1 and 2 numba threads after a warm-up step (kernels come from the
@@ -28,6 +31,7 @@ import numpy as np
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.problems.common import preset_material
+from impactpipe.pipeline.presets import resolve_strength
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
@@ -56,8 +60,10 @@ def build(case: str, quick: bool) -> Simulation:
     if case == "2d-ideal-gas":
         n = 256 if quick else 512
         return _smooth_box("2d-planar", [n, n], 16, 1)
-    if case == "2d-cyl-tillotson":
+    if case in ("2d-cyl-tillotson", "2d-cyl-strength"):
         materials = {"basalt": preset_material("basalt")}
+        if case == "2d-cyl-strength":
+            materials["basalt"]["strength"] = resolve_strength("geo", "strong", {})
         params = {"target": {"material": "basalt", "radius": 1000.0},
                   "projectile": {"material": "basalt", "radius": 250.0, "velocity": 2000.0},
                   "cells_per_projectile_radius": 25 if quick else 100}
@@ -99,7 +105,8 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.add_argument("--quick", action="store_true", help="smaller meshes")
     parser.add_argument("--steps", type=int, default=10, help="timed steps per case (default 10)")
-    parser.add_argument("--cases", nargs="*", default=["2d-ideal-gas", "2d-cyl-tillotson", "3d-two-material"])
+    parser.add_argument("--cases", nargs="*",
+                        default=["2d-ideal-gas", "2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material"])
     args = parser.parse_args()
     results = []
     for case in args.cases:
@@ -113,6 +120,10 @@ def main() -> None:
             for r in results:
                 if r["case"] == case and r["threads"] == 2:
                     r["speedup_2_threads"] = rates[2] / rates[1]
+    plain = {r["threads"]: r["cell_updates_per_s"] for r in results if r["case"] == "2d-cyl-tillotson"}
+    for r in results:
+        if r["case"] == "2d-cyl-strength" and r["threads"] in plain:
+            r["strength_cost_ratio"] = plain[r["threads"]] / r["cell_updates_per_s"]
     report = {"load_average": os.getloadavg(), "cpu_count": os.cpu_count(), "results": results}
     if args.json:
         print(json.dumps(report, indent=2))

@@ -88,7 +88,7 @@ def fill_state_ghosts(state, mesh, axis: int) -> None:
     g = int(mesh.ghost[axis])
     if g == 0:
         return
-    for arr in (state.alpha, state.arho, state.arhoe, state.energy):
+    for arr in (state.alpha, state.arho, state.arhoe, state.energy, state.arhoq):
         fill_ghosts(arr, mesh.neighbor, axis, g, -1)
     fill_ghosts(state.momentum, mesh.neighbor, axis, g, axis)
 

@@ -3,8 +3,8 @@
 Each snapshot group carries the attributes ``time`` (s), ``geometry`` and
 ``material_names`` (JSON list) and one dataset per :class:`~impactpipe.hydro.snapshot.Snapshot`
 array, each with a ``units`` attribute (:func:`impactpipe.pipeline.runstore.write_dataset`).
-Extra fields go to ``extra/<name>``; the snapshot contract gives them no units, so they
-are stored with ``units = "unspecified"``.
+Extra fields go to ``extra/<name>`` with the units and description of
+:data:`EXTRA_UNITS` (the material-strength fields), or ``units = "unspecified"`` for any other.
 
 Tracers go to the group ``/tracers``: one dataset per
 :class:`~impactpipe.hydro.snapshot.TracerSet` field and, when written from a
@@ -26,6 +26,16 @@ from impactpipe.pipeline.runstore import write_dataset
 
 SNAPSHOT_GROUP = "snapshots"
 TRACER_GROUP = "tracers"
+
+#: Extra snapshot fields written when material strength is on (hydro/strength/model.py).
+EXTRA_UNITS = {
+    **{f"deviatoric_stress_{c}": ("Pa", f"mixture deviatoric stress sum_k alpha_k S_k,{c} (2d-cylindrical: "
+                                        "xx = rr, yy = zz, zz = theta-theta, xy = rz)")
+       for c in ("xx", "yy", "zz", "xy", "xz", "yz")},
+    "von_mises_stress": ("Pa", "von Mises equivalent stress sqrt(3/2 S:S) of the mixture deviatoric stress"),
+    "plastic_strain": ("dimensionless", "mass-weighted equivalent plastic strain of the materials with strength"),
+    "damage": ("dimensionless", "mass-weighted damage D (0 intact, 1 failed) of the materials with strength"),
+}
 
 #: Snapshot array fields with their units and descriptions.
 FIELD_UNITS = {
@@ -58,7 +68,8 @@ def write_snapshot(group: h5py.Group, snapshot: Snapshot) -> None:
     if snapshot.extra:
         extra = group.create_group("extra")
         for name, arr in snapshot.extra.items():
-            write_dataset(extra, name, arr, "unspecified")
+            units, description = EXTRA_UNITS.get(name, ("unspecified", ""))
+            write_dataset(extra, name, arr, units, description)
 
 
 def append_snapshot(h5file: h5py.File, snapshot: Snapshot) -> int:

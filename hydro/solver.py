@@ -23,6 +23,7 @@ from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.mesh import BlockMesh
 from impactpipe.hydro.snapshot import Snapshot
 from impactpipe.hydro.state import FIELDS, HydroState
+from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
 from impactpipe.hydro.sweep import (
     AMOUNT_NAMES,
     BND_ENERGY,
@@ -70,10 +71,15 @@ class Simulation:
         eos_specs: resolved EOS dicts, one per material (see :func:`impactpipe.hydro.eos.pack_eos`).
         state: initial conserved state (interior cells set; ghosts are filled here).
         cfl: Courant number (0 < cfl <= 0.5 for the split scheme with HLLC, default 0.4).
-        shear_modulus: (M,) shear modulus per material (Pa) for the signal speed; zeros
-            for strengthless materials.
+        shear_modulus: (M,) constant shear modulus per material (Pa) for the signal speed of a
+            scene without ``strength``; zeros for strengthless materials.
         tensile_strength: (M,) tensile strength Y_T per material (Pa): the most tension a
-            material holds before it fails and opens void; zeros (no tension) by default.
+            material holds before it fails and opens void; by default the strength specs'
+            Y_T, zeros (no tension) without them.
+        strength: resolved strength specs, one per material (None or model "none" =
+            strengthless; :mod:`impactpipe.hydro.strength.parameters`).  When some material
+            has a yield model, the deviatoric stress is stored, transported and updated every
+            step and the signal speed is the longitudinal one (docs/strength.md).
         time: initial time (s).
         tracers: Lagrangian tracers carried with the flow, or None.  Any object with
             ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
@@ -82,7 +88,8 @@ class Simulation:
 
     def __init__(self, mesh: BlockMesh, material_names: list[str], eos_specs: list[dict], state: HydroState,
                  cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0,
-                 tracers=None, tensile_strength: Iterable[float] | None = None):
+                 tracers=None, tensile_strength: Iterable[float] | None = None,
+                 strength: list[dict | None] | None = None):
         if not 0.0 < cfl <= 1.0:
             raise ValueError(f"cfl must be in (0, 1], got {cfl}")
         if len(material_names) != state.nmat or len(eos_specs) != state.nmat:
@@ -93,9 +100,17 @@ class Simulation:
         self.eos = pack_eos(self.eos_specs)
         self.state = state
         self.cfl = float(cfl)
-        self.shear_modulus = np.zeros(state.nmat) if shear_modulus is None else np.asarray(shear_modulus, float)
-        self.tensile_strength = (np.zeros(state.nmat) if tensile_strength is None
-                                 else np.asarray(tensile_strength, float))
+        self.strength_specs = None if strength is None else [dict(s) if s else None for s in strength]
+        arrays: StrengthArrays = pack_strength(self.strength_specs or [None] * state.nmat)
+        if arrays.model.shape != (state.nmat,):
+            raise ValueError(f"strength needs {state.nmat} specs, one per material")
+        #: (M, 2) shear table: G = shear_modulus[k, 0] + shear_modulus[k, 1] K (Pa).
+        self.shear_modulus = arrays.shear.copy()
+        if shear_modulus is not None:
+            self.shear_modulus[:, 0] = np.asarray(shear_modulus, float)
+        if tensile_strength is None:
+            tensile_strength = arrays.tensile_strength
+        self.tensile_strength = np.asarray(tensile_strength, float)
         if self.tensile_strength.shape != (state.nmat,) or (self.tensile_strength < 0).any():
             raise ValueError(f"tensile_strength must be {state.nmat} values >= 0 (Pa)")
         self.time = float(time)
@@ -110,9 +125,15 @@ class Simulation:
         self.amounts = np.zeros((nb, NAMOUNT))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
-        self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape))
+        self.strength = MaterialStrength(arrays, mesh, state.nmat) if arrays.enabled else None
+        if self.strength is not None:
+            self.strength.prepare_state(state)
+        elif state.arhoq.shape[1]:
+            raise ValueError("the state carries per-material strength scalars but no material has strength")
+        nq = state.arhoq.shape[1] // state.nmat
+        self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape), nq)
         self._good = state.copy()
-        self._good_counters = (self.boundary.copy(), self.floors.copy(), self.amounts.copy())
+        self._good_counters = (self.boundary.copy(), self.floors.copy(), self.amounts.copy()) + self._strength_counters()
         self._good_clock = (self.time, self.step_count, self.cell_updates)
 
     # ------------------------------------------------------------------ stepping
@@ -148,13 +169,17 @@ class Simulation:
         st = self.state
         for axis in axes:
             fill_state_ghosts(st, self.mesh, axis)
-            sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.momentum, st.energy,
+            sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
                   self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.eos.kind, self.eos.params,
                   self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary,
                   self.floors, self.amounts,
                   self._failure)
             if self._failure[:, 0].any():
                 self._raise_sweep_failure()
+        if self.strength is not None:
+            self.strength.advance(st, dt, self.eos, self.boundary)
+            if not np.isfinite(st.momentum).all():
+                raise HydroFailure("NaN in the momentum after the strength step", self._good_clock[0], -1, None, {})
         self.time += dt
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
@@ -193,20 +218,33 @@ class Simulation:
     # ------------------------------------------------------------------ failure handling
 
     def _save_good(self) -> None:
+        if self._good.arhoq.shape != self.state.arhoq.shape:
+            self._good = self.state.copy()
         self._good.copy_from(self.state)
-        for dst, src in zip(self._good_counters, (self.boundary, self.floors, self.amounts)):
+        for dst, src in zip(self._good_counters, self._counter_arrays()):
             np.copyto(dst, src)
         self._good_clock = (self.time, self.step_count, self.cell_updates)
 
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step."""
         self.state.copy_from(self._good)
-        for dst, src in zip((self.boundary, self.floors, self.amounts), self._good_counters):
+        for dst, src in zip(self._counter_arrays(), self._good_counters):
             np.copyto(dst, src)
         self.time, self.step_count, self.cell_updates = self._good_clock
         self._failure[:] = 0
         if self.tracers is not None:
             self.tracers.restore_good()
+
+    def _strength_counters(self) -> tuple:
+        if self.strength is None:
+            return ()
+        return (self.strength.counts.copy(), self.strength.amounts.copy())
+
+    def _counter_arrays(self) -> tuple:
+        arrays = (self.boundary, self.floors, self.amounts)
+        if self.strength is not None:
+            arrays += (self.strength.counts, self.strength.amounts)
+        return arrays
 
     def _raise_sweep_failure(self) -> None:
         b = int(np.argmax(self._failure[:, 0] != 0))
@@ -223,13 +261,19 @@ class Simulation:
     def floor_counts(self) -> dict[str, int]:
         """How often each floor / fallback was applied since the start (cells x sweeps)."""
         totals = self.floors.sum(axis=0)
-        return {name: int(v) for name, v in zip(FLOOR_NAMES, totals)}
+        counts = {name: int(v) for name, v in zip(FLOOR_NAMES, totals)}
+        if self.strength is not None:
+            counts.update(self.strength.count_totals)
+        return counts
 
     @property
     def floor_amounts(self) -> dict[str, float]:
         """Mass (kg) and energy (J) added, reconciled or removed by the floors, since the start."""
         totals = self.amounts.sum(axis=0)
-        return {name: float(v) for name, v in zip(AMOUNT_NAMES, totals)}
+        amounts = {name: float(v) for name, v in zip(AMOUNT_NAMES, totals)}
+        if self.strength is not None:
+            amounts.update(self.strength.amount_totals)
+        return amounts
 
     def totals(self) -> dict:
         """Mesh totals and what left through the domain boundaries (SI).
@@ -291,6 +335,7 @@ class Simulation:
             pressure=pressure,
             temperature=temp,
             sound_speed=sound,
+            extra={} if self.strength is None else self.strength.cell_fields(st),
         )
 
     # ------------------------------------------------------------------ checkpoints
@@ -306,6 +351,7 @@ class Simulation:
                 fh.attrs["dt_first"] = -1.0 if self.dt_first is None else self.dt_first
                 fh.attrs["material_names"] = json.dumps(self.material_names)
                 fh.attrs["eos_specs"] = json.dumps(self.eos_specs)
+                fh.attrs["strength_specs"] = json.dumps(self.strength_specs)
                 mesh_grp = fh.create_group("mesh")
                 for key, value in self.mesh.to_arrays().items():
                     mesh_grp.attrs[key] = value if isinstance(value, (str, int)) else np.asarray(value)
@@ -318,6 +364,9 @@ class Simulation:
                 ctr.create_dataset("amounts", data=self.amounts).attrs["names"] = json.dumps(AMOUNT_NAMES)
                 ctr.create_dataset("shear_modulus", data=self.shear_modulus)
                 ctr.create_dataset("tensile_strength", data=self.tensile_strength)
+                if self.strength is not None:
+                    ctr.create_dataset("strength_counts", data=self.strength.counts)
+                    ctr.create_dataset("strength_amounts", data=self.strength.amounts)
                 if self.tracers is not None:
                     self.tracers.save(fh.create_group("tracers"))
 
@@ -326,11 +375,16 @@ class Simulation:
         """Rebuild a Simulation written by :meth:`save_checkpoint`; it continues bit for bit."""
         with h5py.File(path, "r") as fh:
             mesh = BlockMesh.from_arrays(dict(fh["mesh"].attrs))
-            state = HydroState(**{name: fh["state"][name][()] for name in FIELDS})
+            nmat = fh["state/alpha"].shape[1]
+            arrays = {name: fh["state"][name][()] for name in FIELDS if name in fh["state"]}
+            arrays.setdefault("arhoq", np.zeros((mesh.nblocks, 0) + mesh.padded_shape))
+            state = HydroState(**arrays)
+            strength = json.loads(fh.attrs.get("strength_specs", "null"))
+            shear = fh["counters/shear_modulus"][()]
             sim = cls(mesh, json.loads(fh.attrs["material_names"]), json.loads(fh.attrs["eos_specs"]), state,
-                      cfl=float(fh.attrs["cfl"]), shear_modulus=fh["counters/shear_modulus"][()],
+                      cfl=float(fh.attrs["cfl"]), shear_modulus=None if strength else shear.reshape(nmat, -1)[:, 0],
                       tensile_strength=fh["counters/tensile_strength"][()],
-                      time=float(fh.attrs["time"]))
+                      time=float(fh.attrs["time"]), strength=strength)
             sim.step_count = int(fh.attrs["step_count"])
             sim.cell_updates = int(fh.attrs["cell_updates"])
             dt_first = float(fh.attrs["dt_first"])
@@ -338,6 +392,9 @@ class Simulation:
             sim.boundary[:] = fh["counters/boundary"][()]
             _load_named_columns(fh["counters/floors"], FLOOR_NAMES, sim.floors)
             _load_named_columns(fh["counters/amounts"], AMOUNT_NAMES, sim.amounts)
+            if sim.strength is not None:
+                sim.strength.counts[:] = fh["counters/strength_counts"][()]
+                sim.strength.amounts[:] = fh["counters/strength_amounts"][()]
             if "tracers" in fh:
                 from impactpipe.hydro.tracers import Tracers
 

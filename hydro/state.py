@@ -10,7 +10,13 @@ arho       M       partial density alpha_k rho_k                 kg/m^3
 arhoe      M       material internal energy alpha_k rho_k e_k    J/m^3
 momentum   3       rho u (2d-cylindrical: (rho v_r, rho v_z, 0)) kg/(m^2 s)
 energy     1       total energy rho (e + |u|^2 / 2)              J/m^3
+arhoq      M NQ    mass-weighted per-material scalars            kg/m^3 x [q]
+                   alpha_k rho_k q_k,j (column k NQ + j)
 =========  ======  ============================================  ===========
+
+``arhoq`` carries what a material transports with its mass: with strength, the deviatoric
+stress components (Pa), the equivalent plastic strain and the damage (-) of each material
+(:mod:`impactpipe.hydro.strength.update`).  Without strength NQ = 0 and it holds nothing.
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import numpy as np
 from impactpipe.hydro.eos import energy_from_pressure
 from impactpipe.hydro.mesh import BlockMesh
 
-FIELDS = ("alpha", "arho", "arhoe", "momentum", "energy")
+FIELDS = ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq")
 
 
 @dataclass
@@ -34,10 +40,11 @@ class HydroState:
     arhoe: np.ndarray
     momentum: np.ndarray
     energy: np.ndarray
+    arhoq: np.ndarray
 
     @classmethod
-    def empty(cls, mesh: BlockMesh, nmat: int) -> "HydroState":
-        """All-void state (zeros) for ``nmat`` materials."""
+    def empty(cls, mesh: BlockMesh, nmat: int, nq: int = 0) -> "HydroState":
+        """All-void state (zeros) for ``nmat`` materials with ``nq`` transported scalars each."""
         shape = (mesh.nblocks,)
         pad = mesh.padded_shape
         return cls(
@@ -46,6 +53,7 @@ class HydroState:
             arhoe=np.zeros(shape + (nmat,) + pad),
             momentum=np.zeros(shape + (3,) + pad),
             energy=np.zeros(shape + (1,) + pad),
+            arhoq=np.zeros(shape + (nmat * nq,) + pad),
         )
 
     @property
@@ -100,6 +108,8 @@ class HydroState:
             alpha[:, k] *= keep
             arho[:, k] *= keep
             arhoe[:, k] *= keep
+        arhoq = mesh.interior(self.arhoq)
+        arhoq *= keep[:, None]
         alpha[:, material] += fraction
         arho[:, material] += fraction * density
         arhoe[:, material] += fraction * density * specific_energy

@@ -48,7 +48,12 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    -p_k (change of its volume fraction from the closure).  Total energy is conserved by
    the fluxes; the difference between E - |m|^2 / (2 rho) and sum alpha_k rho_k e_k is
    given to the materials in proportion to their mass (counted as reconciled energy).
-5. Floors (counted per block): negative alpha_k or partial density -> 0, negative material
+5. Transported per-material scalars (the generic hook for material strength): each column
+   j of ``arhoq[NB, M * NQ, ...]`` holds a mass-weighted amount alpha_k rho_k q_k,j of
+   material k = column // NQ; it moves with material k's mass flux at the donor cell's
+   specific value q_k,j (first order), and is removed with the material by the cleanups.
+   With NQ = 0 (no strength) the hook does no work.
+6. Floors (counted per block): negative alpha_k or partial density -> 0, negative material
    internal energy -> 0 with E raised to match, an emptied cell -> void.  NaN or a
    mixture density below -FAIL_NEGATIVE_FRACTION of the cell's previous density is a
    failure recorded in ``failure`` for the solver to raise.
@@ -145,14 +150,14 @@ F_MN, F_MT1, F_MT2, F_E, F_S = range(5)
 F_MAT = 5           # + 3 k: volume, mass, internal energy
 
 
-def scratch_rows(nmat: int) -> int:
-    """Number of scratch rows per thread for ``nmat`` materials."""
-    return (W_MAT + W_STRIDE * nmat) + 2 * (Q_MAT + 3 * nmat) + (F_MAT + 3 * nmat)
+def scratch_rows(nmat: int, nq: int = 0) -> int:
+    """Number of scratch rows per thread for ``nmat`` materials with ``nq`` transported scalars each."""
+    return (W_MAT + W_STRIDE * nmat) + 2 * (Q_MAT + 3 * nmat) + (F_MAT + 3 * nmat) + 2 * nmat * nq
 
 
-def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int) -> np.ndarray:
+def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int, nq: int = 0) -> np.ndarray:
     """Per-thread scratch ``(nthreads, rows, pencil_cells + 1)`` for :func:`sweep`."""
-    return np.zeros((nthreads, scratch_rows(nmat), pencil_cells + 1))
+    return np.zeros((nthreads, scratch_rows(nmat, nq), pencil_cells + 1))
 
 
 @njit(cache=True, inline="always")
@@ -165,7 +170,7 @@ def _cell_index(axis, i, j1, j2):
 
 
 @njit(cache=True, parallel=True)
-def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_dx, neighbor,
+def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary, floors, amounts,
           failure):
     """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
@@ -191,6 +196,9 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
     qm_row = q0
     qp_row = q0 + Q_MAT + 3 * nmat
     f_row = qp_row + Q_MAT + 3 * nmat
+    nq = arhoq.shape[1] // nmat
+    wq_row = f_row + F_MAT + 3 * nmat
+    fq_row = wq_row + nmat * nq
     radial = geometry == CYLINDRICAL and axis == 0
     axial = geometry == CYLINDRICAL and axis == 1
     for b in prange(nb):
@@ -259,6 +267,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                         sc[row + 1, i] = rk
                         sc[row + 2, i] = ek
                         sc[row + 3, i] = pk
+                        for j in range(nq):
+                            sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] / ar if ar > 0.0 else 0.0
                     sc[W_PHI, i] = phi
                     sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
                     if rho > 0.0 and phi >= PHI_VOID:
@@ -282,7 +292,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                                       tensile_strength)
                 # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
                 for f in range(g, g + n + 1):
-                    _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row)
+                    _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
                 # boundary counters: fluxes through domain faces (positive = leaving)
                 for side in range(2):
                     if neighbor[b, axis, side] < 0:
@@ -303,7 +313,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, mom, energy, block_lo, block_d
                     ix, iy, iz = _cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
-                                 tensile_strength, eos_kind, eos_params, eos_table)
+                                 tensile_strength, eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
 
 
 @njit(cache=True, inline="always")
@@ -399,7 +409,7 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior, te
 
 
 @njit(cache=True, inline="always")
-def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
+def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row):
     """Fluxes through face f (between cells f-1 and f), stored in column f of the F rows."""
     il = f - 1
     ir = f
@@ -441,6 +451,8 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
             sc[frow, f] = 0.0
             sc[frow + 1, f] = 0.0
             sc[frow + 2, f] = 0.0
+            for j in range(nq):
+                sc[fq_row + nq * k + j, f] = 0.0
             continue
         af = ultrabee_face(sc[row, up], a_donor, sc[row, down], nu)
         if af > 1.0:
@@ -467,6 +479,8 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
         sc[frow, f] = af * s
         sc[frow + 1, f] = mk
         sc[frow + 2, f] = mk * ek
+        for j in range(nq):
+            sc[fq_row + nq * k + j, f] = mk * sc[wq_row + nq * k + j, donor]
         mass += mk
         eint += mk * ek
     un = sc[krow + Q_UN, donor]
@@ -482,7 +496,7 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row):
 @njit(cache=True, inline="always")
 def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure, tensile_strength,
-                 eos_kind, eos_params, eos_table):
+                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row):
     """Flux-form update of cell i with volume closure, energy reconciliation and floors.
 
     A material at its tensile limit (pressure <= -Y_T, Y_T = ``tensile_strength[k]``) does
@@ -539,6 +553,9 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         alpha[b, k, ix, iy, iz] = a_new
         arho[b, k, ix, iy, iz] = ar
         arhoe[b, k, ix, iy, iz] = ae
+        for j in range(nq):
+            c = nq * k + j
+            arhoq[b, c, ix, iy, iz] -= wr * sc[fq_row + c, fr] - wl * sc[fq_row + c, fl]
     mn = mom[b, axis, ix, iy, iz] - (wr * sc[f_row + F_MN, fr] - wl * sc[f_row + F_MN, fl])
     if radial:
         p_half = 0.5 * (sc[qm_row + Q_P, i] + sc[qp_row + Q_P, i])
@@ -567,6 +584,8 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             floors[b, FLOOR_PARTIAL_DENSITY] += 1
             arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
+            for j in range(nq):
+                arhoq[b, nq * k + j, ix, iy, iz] = 0.0
             ar = 0.0
         rho += ar
     for k in range(nmat):
@@ -588,6 +607,8 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             alpha[b, k, ix, iy, iz] = 0.0
             arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
+            for j in range(nq):
+                arhoq[b, nq * k + j, ix, iy, iz] = 0.0
     phi_new = 0.0
     for k in range(nmat):
         phi_new += alpha[b, k, ix, iy, iz]
@@ -601,6 +622,8 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             alpha[b, k, ix, iy, iz] = 0.0
             arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
+        for c in range(nmat * nq):
+            arhoq[b, c, ix, iy, iz] = 0.0
         mom[b, axis, ix, iy, iz] = 0.0
         mom[b, t1, ix, iy, iz] = 0.0
         mom[b, t2, ix, iy, iz] = 0.0

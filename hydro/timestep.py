@@ -8,6 +8,9 @@ with the cell signal speed c = max_k c_k over the materials present, and per mat
 
     c_k^2 = c_K,k^2 + 4 G_k / (3 rho_k)        (:func:`signal_speed_squared`)
 
+(``shear_modulus`` arguments are the (M, 2) shear table of
+:mod:`impactpipe.hydro.strength.parameters`: G_k = shear[k, 0] + shear[k, 1] rho_k c_K,k^2.)
+
 the longitudinal speed: bulk sound speed from the EOS plus the shear modulus term of
 material strength (G_k = 0 for a strengthless material).
 """
@@ -32,26 +35,29 @@ DISTENDED_FRACTION = 0.5
 
 
 @njit(cache=True, inline="always")
-def signal_speed_squared(c2_bulk, rho, shear_modulus):
+def signal_speed_squared(c2_bulk, rho, shear):
     """Longitudinal signal speed squared c_K^2 + 4 G / (3 rho) (m^2/s^2).
 
     c2_bulk: bulk sound speed squared (m^2/s^2); rho: material density (kg/m^3);
-    shear_modulus: G (Pa), 0 without strength.
+    shear: the material's row of the shear table, G = shear[0] + shear[1] K (Pa) with the
+    bulk modulus K = rho c_K^2 (:mod:`impactpipe.hydro.strength.parameters`); zeros without strength.
     """
-    if shear_modulus > 0.0:
-        return c2_bulk + 4.0 * shear_modulus / (3.0 * rho)
+    g = shear[0] + shear[1] * rho * max(c2_bulk, 0.0)
+    if g > 0.0:
+        return c2_bulk + 4.0 * g / (3.0 * rho)
     return c2_bulk
 
 
 @njit(cache=True, inline="always")
-def material_state(a, ar, are, kind, params, table, shear_modulus, tensile_strength):
+def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
     """Thermodynamic state of one material in one cell from its conserved amounts.
 
     a = alpha_k (-), ar = alpha_k rho_k (kg/m^3), are = alpha_k rho_k e_k (J/m^3).
     Returns (present, rho_k, e_k, p_k, c2_bulk, c2_signal, eos_flag, tension_limited):
     rho_k = ar / a, e_k = are / ar, p_k = max(P(rho_k, e_k), -Y_T) with Y_T =
-    ``tensile_strength`` (Pa) for rho_k >= DISTENDED_FRACTION rho0, else max(P, 0), c2_bulk the EOS bulk sound speed squared and c2_signal the
-    time-step signal speed squared (:func:`signal_speed_squared`).  A material below
+    ``tensile_strength`` (Pa) for rho_k >= DISTENDED_FRACTION rho0, else max(P, 0); c2_bulk
+    the EOS bulk sound speed squared and c2_signal the time-step signal speed squared
+    (:func:`signal_speed_squared` with the shear-table row ``shear``).  A material below
     ALPHA_MIN or without mass is absent (present False, zeros).
     """
     if not (a > ALPHA_MIN and ar > 0.0):
@@ -65,7 +71,7 @@ def material_state(a, ar, are, kind, params, table, shear_modulus, tensile_stren
     limited = pk < p_min
     if limited:
         pk = p_min
-    return True, rk, ek, pk, c2k, signal_speed_squared(c2k, rk, shear_modulus), flag, limited
+    return True, rk, ek, pk, c2k, signal_speed_squared(c2k, rk, shear), flag, limited
 
 
 @njit(cache=True, parallel=True)

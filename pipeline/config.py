@@ -134,6 +134,7 @@ class StrengthSpec(Strict):
     xi: float | None = Field(None, ge=0, description="thermal softening parameter")
     P_bd: float | None = Field(None, ge=0, description="brittle-ductile transition pressure (Pa)")
     P_bp: float | None = Field(None, ge=0, description="brittle-plastic transition pressure (Pa)")
+    initial_damage: float | None = Field(None, ge=0, le=1, description="damage D at t = 0 (rock model)")
 
 
 class Material(Strict):

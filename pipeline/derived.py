@@ -109,11 +109,8 @@ def strength_choice(strength: dict[str, Any]) -> dict[str, Any]:
         enabled = strength["Y0"] > 0 or strength["Y_M"] > 0
     if not enabled:
         return {"enabled": False, "rule": f"{model} yield strength is zero everywhere (hydro preset): no strength kernel"}
-    return {"enabled": True, "rule": f"{model} model with non-zero yield strength",
-            "modelled": False,
-            "warning": (f"the {model} yield model is not implemented in the hydro stage of this version: the "
-                        f"material runs strengthless, with only its tensile strength Y_T = "
-                        f"{strength.get('Y_T', 0.0):.3g} Pa applied")}
+    return {"enabled": True, "rule": f"{model} model with non-zero yield strength: elastic-plastic stress, "
+                                     f"tensile failure at Y_T = {strength.get('Y_T', 0.0):.3g} Pa (docs/strength.md)"}
 
 
 def physics_warnings(values: dict[str, Any]) -> list[str]:

@@ -25,7 +25,7 @@ DEFAULT_CV = {"ideal_gas": 718.0, "tillotson": 840.0, "mie_gruneisen": 900.0}
 GEO_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi")
 ROCK_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "Y_c", "mu_d", "T_melt", "xi", "P_bd", "P_bp", "poisson")
 VON_MISES_KEYS = ("yield_strength", "poisson")
-OPTIONAL_STRENGTH_KEYS = ("shear_modulus", "Y_T")
+OPTIONAL_STRENGTH_KEYS = ("shear_modulus", "Y_T", "initial_damage")
 #: Thermal-softening exponent for GEO presets, which publish none (the ROCK presets use 1.2).
 GEO_DEFAULT_XI = 1.2
 

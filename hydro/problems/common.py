@@ -28,14 +28,19 @@ def material_list(materials: dict[str, dict], used: list[str]):
 
 
 def new_simulation(mesh: BlockMesh, names: list[str], specs: list[dict], state: HydroState, cfl: float,
-                   tensile_strength=None) -> Simulation:
-    """A :class:`Simulation` over ``state`` with the given materials."""
-    return Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strength)
+                   tensile_strength=None, strength=None) -> Simulation:
+    """A :class:`Simulation` over ``state`` with the given materials (``strength``: one resolved spec each)."""
+    return Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strength, strength=strength)
 
 
 def tensile_strengths(materials: dict[str, dict], used: list[str]) -> list[float]:
     """Tensile strength Y_T (Pa) of each material in ``used``: its strength model's Y_T, else 0."""
     return [float(materials[name].get("strength", {}).get("Y_T", 0.0)) for name in used]
+
+
+def strength_specs(materials: dict[str, dict], used: list[str]) -> list[dict | None]:
+    """Resolved strength spec of each material in ``used`` (None where it has none)."""
+    return [materials[name].get("strength") for name in used]
 
 
 def merged(defaults: dict, params: dict) -> dict:

@@ -17,7 +17,14 @@ import numpy as np
 
 from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS, BlockMesh
-from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation, tensile_strengths
+from impactpipe.hydro.problems.common import (
+    check_geometry,
+    material_list,
+    merged,
+    new_simulation,
+    strength_specs,
+    tensile_strengths,
+)
 from impactpipe.hydro.state import HydroState
 
 #: Geometries this problem runs in.
@@ -83,4 +90,5 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         frac = sphere_fraction(mesh, z_center, body["radius"], p["subsamples"])
         state.set_material(mesh, frac, k, eos, rho0, np.array([0.0, vz, 0.0]), specific_energy=0.0)
     strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
-    return new_simulation(mesh, names, specs, state, cfl, strengths)
+    return new_simulation(mesh, names, specs, state, cfl, strengths,
+                          strength_specs(materials, [tgt["material"], prj["material"]]))

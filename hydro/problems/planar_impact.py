@@ -14,7 +14,14 @@ import numpy as np
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation, tensile_strengths
+from impactpipe.hydro.problems.common import (
+    check_geometry,
+    material_list,
+    merged,
+    new_simulation,
+    strength_specs,
+    tensile_strengths,
+)
 from impactpipe.hydro.state import HydroState
 
 #: Geometries this problem runs in.
@@ -60,4 +67,5 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         k = names.index(plate["material"])
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         state.set_material(mesh, frac, k, eos, rho0, np.array([speed, 0.0, 0.0]), specific_energy=0.0)
-    return new_simulation(mesh, names, specs, state, cfl, tensile_strengths(materials, names))
+    return new_simulation(mesh, names, specs, state, cfl, tensile_strengths(materials, names),
+                          strength_specs(materials, names))

@@ -1,0 +1,140 @@
+"""Operator-split material strength for :class:`impactpipe.hydro.solver.Simulation`.
+
+:class:`MaterialStrength` owns the strength work arrays and counters and advances the
+deviatoric stress once per time step, after the hydro sweeps (which transport the stress
+with the material, ``arhoq``):
+
+1. ghosts of alpha, partial densities and momentum along every axis; cell velocities;
+2. :func:`impactpipe.hydro.strength.update.update_stress` (Jaumann update, tensile failure,
+   yield, damage, stress power);
+3. ghosts of the mixture stress (reflecting walls mirror it: shear components with one
+   index normal to the wall change sign);
+4. :func:`impactpipe.hydro.strength.divergence.apply_stress_divergence` (conservative fluxes).
+
+It exists only when some material has a yield model; a strengthless scene allocates none
+of its arrays and runs none of its kernels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impactpipe.hydro.boundary import fill_ghosts
+from impactpipe.hydro.mesh import GHOST, REFLECTING, BlockMesh
+from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.strength.divergence import apply_stress_divergence
+from impactpipe.hydro.strength.parameters import DAMAGE0, StrengthArrays
+from impactpipe.hydro.strength.update import (
+    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, stress_slots, update_stress,
+)
+
+#: Work slots whose sign flips in a reflecting ghost, per wall-normal axis (velocity and shear stress).
+_REFLECT_FLIP = {0: (WK_V, WK_S + 3, WK_S + 4), 1: (WK_V + 1, WK_S + 3, WK_S + 5), 2: (WK_V + 2, WK_S + 4, WK_S + 5)}
+
+
+class MaterialStrength:
+    """Stress update and stress divergence of the materials with a yield model.
+
+    Args:
+        arrays: packed strength parameters (:func:`impactpipe.hydro.strength.parameters.pack_strength`).
+        mesh: the block mesh.
+        nmat: number of materials M.
+    """
+
+    def __init__(self, arrays: StrengthArrays, mesh: BlockMesh, nmat: int):
+        self.arrays = arrays
+        self.mesh = mesh
+        self.nmat = nmat
+        self.ns = stress_slots(mesh.ndim)
+        self.nq = self.ns + 2
+        self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
+        self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
+        self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
+
+    def prepare_state(self, state: HydroState) -> None:
+        """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
+        initial damage from the parameters) unless it already has them (a checkpoint)."""
+        want = self.nmat * self.nq
+        if state.arhoq.shape[1] == want:
+            return
+        state.arhoq = np.zeros((self.mesh.nblocks, want) + self.mesh.padded_shape)
+        for k in range(self.nmat):
+            state.arhoq[:, k * self.nq + self.ns + 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
+
+    def advance(self, state: HydroState, dt: float, eos, boundary: np.ndarray) -> None:
+        """One strength step of ``dt`` (s) on ``state``; domain-face fluxes go to ``boundary``."""
+        mesh = self.mesh
+        ndim = mesh.ndim
+        for axis in range(ndim):
+            for arr, flip in ((state.alpha, -1), (state.arho, -1), (state.momentum, axis)):
+                fill_ghosts(arr, mesh.neighbor, axis, GHOST, flip)
+        cell_velocities(state.alpha, state.arho, state.momentum, eos.kind, eos.params, eos.table, self.work)
+        a = self.arrays
+        update_stress(dt, mesh.geometry_code, ndim, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
+                      mesh.block_dx, eos.kind, eos.params, eos.table, a.model, a.params, a.shear,
+                      a.tensile_strength, self.work, self.counts, self.amounts)
+        for axis in range(ndim):
+            self._fill_work_ghosts(axis)
+        apply_stress_divergence(dt, mesh.geometry_code, ndim, state.momentum, state.energy, mesh.block_lo,
+                                mesh.block_dx, mesh.neighbor, self.work, boundary)
+
+    def _fill_work_ghosts(self, axis: int) -> None:
+        mesh = self.mesh
+        fill_ghosts(self.work, mesh.neighbor, axis, GHOST, -1)
+        n = mesh.interior_shape[axis]
+        for side, slab in ((0, slice(0, GHOST)), (1, slice(GHOST + n, GHOST + n + GHOST))):
+            blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
+            if blocks.size == 0:
+                continue
+            index = [slice(None)] * 5
+            index[2 + axis] = slab
+            for comp in _REFLECT_FLIP[axis]:
+                index[0] = blocks
+                index[1] = comp
+                self.work[tuple(index)] *= -1.0
+
+    # ------------------------------------------------------------------ diagnostics
+
+    @property
+    def count_totals(self) -> dict[str, int]:
+        """Strength events since the start (cell-material-steps): yield returns, tensile failures..."""
+        return {name: int(v) for name, v in zip(COUNT_NAMES, self.counts.sum(axis=0))}
+
+    @property
+    def amount_totals(self) -> dict[str, float]:
+        """Stress work put into internal energy, sum of dt alpha_k S_k : D V (J)."""
+        return {name: float(v) for name, v in zip(AMOUNT_NAMES, self.amounts.sum(axis=0))}
+
+    def cell_fields(self, state: HydroState) -> dict[str, np.ndarray]:
+        """Interior block-shaped fields for snapshots (see :data:`impactpipe.hydro.io.EXTRA_UNITS`).
+
+        ``deviatoric_stress_<ij>``: mixture sum_k alpha_k S_k,ij (Pa); ``von_mises_stress``:
+        sqrt(3/2 S:S) of the mixture (Pa); ``plastic_strain``, ``damage``: mass-weighted
+        means over the materials with strength (-).
+        """
+        mesh = self.mesh
+        alpha = mesh.interior(state.alpha)
+        arho = mesh.interior(state.arho)
+        arhoq = mesh.interior(state.arhoq)
+        names = ("xx", "yy", "zz", "xy", "xz", "yz")[: self.ns]
+        stress = np.zeros((len(names),) + alpha[:, 0].shape)
+        eps = np.zeros(alpha[:, 0].shape)
+        dmg = np.zeros_like(eps)
+        mass = np.zeros_like(eps)
+        for k in range(self.nmat):
+            if self.arrays.model[k] == 0:
+                continue
+            ar = arho[:, k]
+            safe = np.where(ar > 0.0, ar, 1.0)
+            for j in range(self.ns):
+                stress[j] += np.where(ar > 0.0, alpha[:, k] * arhoq[:, k * self.nq + j] / safe, 0.0)
+            eps += arhoq[:, k * self.nq + self.ns]
+            dmg += arhoq[:, k * self.nq + self.ns + 1]
+            mass += ar
+        safe = np.where(mass > 0.0, mass, 1.0)
+        out = {f"deviatoric_stress_{n}": stress[j] for j, n in enumerate(names)}
+        ss = (stress[:3] ** 2).sum(axis=0) + 2.0 * (stress[3:] ** 2).sum(axis=0)
+        out["von_mises_stress"] = np.sqrt(1.5 * ss)
+        out["plastic_strain"] = np.where(mass > 0.0, eps / safe, 0.0)
+        out["damage"] = np.where(mass > 0.0, dmg / safe, 0.0)
+        return out

@@ -1,0 +1,104 @@
+"""Packing of resolved strength specs into the arrays the strength kernels read.
+
+A material's strength is a *resolved* spec dict (presets expanded by the config layer,
+:func:`impactpipe.pipeline.presets.resolve_strength`):
+
+    {"model": "none"}                                   (optional "Y_T")
+    {"model": "von_mises", "yield_strength", "poisson", optional "shear_modulus", "Y_T"}
+    {"model": "geo", "Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi", optional "shear_modulus"}
+    {"model": "rock", "Y0", "Y_M", "Y_T", "mu_i", "Y_c", "mu_d", "T_melt", "xi", "P_bd", "P_bp",
+     "poisson", optional "shear_modulus", "initial_damage"}
+
+:func:`pack_strength` gives one parameter row per material (SI: Pa, K, dimensionless) and
+the shear table ``shear[M, 2]`` the signal speed and the elastic update use:
+G = shear[k, 0] + shear[k, 1] K, with K = rho c_K^2 the EOS bulk modulus (Pa).  A constant
+``shear_modulus`` fills column 0; otherwise Poisson's ratio nu gives the ratio
+
+    G / K = 3 (1 - 2 nu) / (2 (1 + nu))
+
+A material whose yield strength is zero everywhere (model none, or the GEO ``hydro``
+preset) gets model code NONE: no stress is stored or updated for it, only its tensile
+strength Y_T limits its pressure in the sweeps.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+NONE = 0
+VON_MISES = 1
+GEO = 2
+ROCK = 3
+MODEL_CODES = {"none": NONE, "von_mises": VON_MISES, "geo": GEO, "rock": ROCK}
+
+# parameter row slots
+Y0, Y_M, MU_I, Y_C, MU_D, Y_T, T_MELT, XI, P_BD, P_BP, POISSON, YIELD_VM, DAMAGE0 = range(13)
+NPAR = 13
+_KEYS = {Y0: "Y0", Y_M: "Y_M", MU_I: "mu_i", Y_C: "Y_c", MU_D: "mu_d", Y_T: "Y_T", T_MELT: "T_melt",
+         XI: "xi", P_BD: "P_bd", P_BP: "P_bp", POISSON: "poisson", YIELD_VM: "yield_strength",
+         DAMAGE0: "initial_damage"}
+
+
+class StrengthArrays(NamedTuple):
+    """Strength parameters of M materials for the kernels.
+
+    model: (M,) int64 model codes; params: (M, NPAR) rows (slots above); shear: (M, 2)
+    constant shear modulus (Pa) and shear-to-bulk modulus ratio; tensile_strength: (M,) Y_T (Pa).
+    """
+
+    model: np.ndarray
+    params: np.ndarray
+    shear: np.ndarray
+    tensile_strength: np.ndarray
+
+    @property
+    def enabled(self) -> bool:
+        """True when at least one material has a yield model (stress is stored and updated)."""
+        return bool((self.model != NONE).any())
+
+
+def shear_ratio(poisson: float) -> float:
+    """Shear-to-bulk modulus ratio G / K = 3 (1 - 2 nu) / (2 (1 + nu)) for Poisson's ratio nu."""
+    return 3.0 * (1.0 - 2.0 * poisson) / (2.0 * (1.0 + poisson))
+
+
+def has_yield(spec: dict) -> bool:
+    """Whether a strength spec has a non-zero yield strength anywhere (missing strengths count as 0)."""
+    model = spec.get("model", "none")
+    if model == "none":
+        return False
+    if model == "von_mises":
+        return spec.get("yield_strength", 0.0) > 0.0
+    return spec.get("Y0", 0.0) > 0.0 or spec.get("Y_M", 0.0) > 0.0
+
+
+def pack_strength(specs: list[dict | None]) -> StrengthArrays:
+    """Pack resolved strength specs (one per material, None = strengthless) into :class:`StrengthArrays`."""
+    m = len(specs)
+    model = np.zeros(m, dtype=np.int64)
+    params = np.zeros((m, NPAR))
+    shear = np.zeros((m, 2))
+    tensile = np.zeros(m)
+    for k, spec in enumerate(specs):
+        spec = spec or {"model": "none"}
+        name = spec.get("model", "none")
+        if name not in MODEL_CODES:
+            raise ValueError(f"material {k}: unknown strength model {name!r} (allowed: {', '.join(MODEL_CODES)})")
+        tensile[k] = float(spec.get("Y_T", 0.0))
+        if tensile[k] < 0.0:
+            raise ValueError(f"material {k}: Y_T must be >= 0 (got {tensile[k]:g})")
+        for slot, key in _KEYS.items():
+            if key in spec:
+                params[k, slot] = float(spec[key])
+        if not has_yield(spec):
+            continue
+        model[k] = MODEL_CODES[name]
+        if name != "von_mises" and params[k, Y_M] < params[k, Y0]:
+            raise ValueError(f"material {k}: Y_M ({params[k, Y_M]:g}) must be >= Y0 ({params[k, Y0]:g})")
+        if "shear_modulus" in spec:
+            shear[k, 0] = float(spec["shear_modulus"])
+        else:
+            shear[k, 1] = shear_ratio(float(spec["poisson"]))
+    return StrengthArrays(model, params, shear, tensile)

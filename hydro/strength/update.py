@@ -1,0 +1,239 @@
+"""The per-cell strength update: velocity gradient, Jaumann elastic update, tensile failure,
+yield and damage, for every material with a yield model (one operator-split step of dt).
+
+Per-material scalars live in the state's ``arhoq[NB, M * NQ, ...]`` as mass-weighted amounts
+alpha_k rho_k q_k,j (transported by the sweeps with the material's mass flux), slot j of
+material k at ``k * NQ + j``: the deviatoric stress components (Pa; NS = 3, 4 or 6 of
+(xx, yy, zz, xy, xz, yz) in 1, 2 or 3 dimensions; in 2d-cylindrical slot 2 is the hoop
+component S_thth), the equivalent plastic strain (-) at ``NS`` and the damage D (-) at ``NS + 1``.
+
+Velocity gradient L_ij = d v_i / d x_j (1/s) from the cell velocities: central differences,
+one-sided next to a void cell, zero between two void cells; in 2d-cylindrical the hoop
+rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
+
+1. G_k = G_const + (G/K) rho_k c_K,k^2 (:mod:`impactpipe.hydro.strength.parameters`);
+2. tensile failure: when the EOS pressure p_k < -Y_T (1 - D) the material fails (D = 1,
+   counted once as ``tensile_failure``); from then on its yield strength in tension is zero
+   (the tensile taper of :mod:`impactpipe.hydro.strength.yield_strength` with Y_T (1 - D)).
+   Its mean stress stays limited to -Y_T by the sweeps, which open void instead of
+   stretching it (docs/hydro.md, "Tensile limit"); see docs/strength.md for why the
+   failed material is not relaxed to zero tension here;
+3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
+4. Y = yield_strength(p_k, T_k, D) with T_k from the EOS, and Y = 0 for material expanded
+   below STRENGTH_MIN_DENSITY_FRACTION of its reference density (fragmented or vapour: a
+   deviatoric stress held by it would put S:D / rho_k of work into very little mass); radial return to sqrt(3 J2) <= Y
+   (``yield_return``), equivalent plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_k);
+5. internal energy alpha_k rho_k e_k += dt alpha_k S_k : D_rate (stress power; elastic and
+   plastic work, so total energy stays consistent with the conservative stress fluxes).
+
+The cell's mixture deviatoric stress S = sum_k alpha_k S_k (void and strengthless materials
+carry none) goes to ``work`` for the stress-divergence fluxes.
+"""
+
+from __future__ import annotations
+
+from numba import njit, prange
+
+from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
+from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
+from impactpipe.hydro.strength.damage import shear_damage_increment
+from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
+from impactpipe.hydro.strength.parameters import NONE, P_BD, P_BP, ROCK
+from impactpipe.hydro.strength.yield_strength import yield_strength
+from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID
+
+# work array slots (``work[NB, NWORK, NX, NY, NZ]``)
+WK_V = 0            # + axis: cell velocity (m/s)
+WK_PHI = 3          # material fill of a cell holding material (phi >= PHI_VOID and rho > 0):
+                    # min(sum_k alpha_k, sum_k alpha_k rho_k / rho0_k); 0 in void cells
+WK_S = 4            # + slot: mixture deviatoric stress (xx, yy, zz, xy, xz, yz) (Pa)
+NWORK = 10
+
+# counter slots (``counts[NB, NCOUNT]``) and amount slots (``amounts[NB, NSAMOUNT]``)
+CNT_YIELD = 0
+CNT_TENSILE_FAILURE = 1
+CNT_LOW_DENSITY = 2
+NCOUNT = 3
+COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density")
+AMT_PLASTIC_WORK = 0
+NSAMOUNT = 1
+AMOUNT_NAMES = ("stress_work",)
+
+#: Material below this fraction of its reference density carries no deviatoric stress.
+STRENGTH_MIN_DENSITY_FRACTION = 0.5
+
+
+def stress_slots(ndim: int) -> int:
+    """Number of stored deviatoric stress components NS in ``ndim`` dimensions."""
+    return {1: 3, 2: 4, 3: 6}[ndim]
+
+
+@njit(cache=True, parallel=True)
+def cell_velocities(alpha, arho, mom, eos_kind, eos_params, eos_table, work):
+    """Velocity and material fill of every padded cell (ghosts filled beforehand) into ``work``.
+
+    The fill is min(phi, sum_k alpha_k rho_k / rho0_k) (materials without a reference
+    density count by volume): material expanded far below rho0 fills a cell by volume but
+    is as light as a spray, and the stress tractions scale with it.
+    """
+    nb, nmat, nx, ny, nz = alpha.shape
+    for b in prange(nb):
+        for ix in range(nx):
+            for iy in range(ny):
+                for iz in range(nz):
+                    rho = 0.0
+                    phi = 0.0
+                    solid = 0.0
+                    for k in range(nmat):
+                        ar = arho[b, k, ix, iy, iz]
+                        rho += ar
+                        phi += alpha[b, k, ix, iy, iz]
+                        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
+                        solid += ar / rho0 if rho0 > 0.0 else alpha[b, k, ix, iy, iz]
+                    if rho > 0.0 and phi >= PHI_VOID:
+                        for d in range(3):
+                            work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
+                        work[b, WK_PHI, ix, iy, iz] = max(min(phi, solid), PHI_VOID)
+                    else:
+                        for d in range(3):
+                            work[b, WK_V + d, ix, iy, iz] = 0.0
+                        work[b, WK_PHI, ix, iy, iz] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _derivative(work, b, comp, ix, iy, iz, axis, dx):
+    """d v_comp / d x_axis at a cell: central, one-sided next to void, 0 between void cells (1/s)."""
+    jx0, jy0, jz0 = ix, iy, iz
+    jx1, jy1, jz1 = ix, iy, iz
+    if axis == 0:
+        jx0 -= 1
+        jx1 += 1
+    elif axis == 1:
+        jy0 -= 1
+        jy1 += 1
+    else:
+        jz0 -= 1
+        jz1 += 1
+    lo = work[b, WK_PHI, jx0, jy0, jz0] > 0.0
+    hi = work[b, WK_PHI, jx1, jy1, jz1] > 0.0
+    if lo and hi:
+        return (work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, jx0, jy0, jz0]) / (2.0 * dx)
+    if hi:
+        return (work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, ix, iy, iz]) / dx
+    if lo:
+        return (work[b, WK_V + comp, ix, iy, iz] - work[b, WK_V + comp, jx0, jy0, jz0]) / dx
+    return 0.0
+
+
+@njit(cache=True, parallel=True)
+def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
+                  eos_table, model, params, shear, tensile_strength, work, counts, amounts):
+    """One strength step of ``dt`` (s) for every interior cell; see the module docstring.
+
+    ``work`` holds the velocities and fills with ghosts (:func:`cell_velocities`);
+    its stress slots are written for the interior cells.  Counters accumulate per block.
+    """
+    nb, nmat, nx, ny, nz = alpha.shape
+    nq = arhoq.shape[1] // nmat
+    ns = nq - 2
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    cylindrical = geometry == CYLINDRICAL
+    for b in prange(nb):
+        dxs = (block_dx[b, 0], block_dx[b, 1], block_dx[b, 2])
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    for c in range(6):
+                        work[b, WK_S + c, ix, iy, iz] = 0.0
+                    if work[b, WK_PHI, ix, iy, iz] <= 0.0:
+                        for q in range(nmat * nq):
+                            arhoq[b, q, ix, iy, iz] = 0.0
+                        continue
+                    # velocity gradient L[i][j] = d v_i / d x_j
+                    lxx = lxy = lxz = lyx = lyy = lyz = lzx = lzy = lzz = 0.0
+                    lxx = _derivative(work, b, 0, ix, iy, iz, 0, dxs[0])
+                    lyx = _derivative(work, b, 1, ix, iy, iz, 0, dxs[0])
+                    lzx = _derivative(work, b, 2, ix, iy, iz, 0, dxs[0])
+                    if ndim > 1:
+                        lxy = _derivative(work, b, 0, ix, iy, iz, 1, dxs[1])
+                        lyy = _derivative(work, b, 1, ix, iy, iz, 1, dxs[1])
+                        lzy = _derivative(work, b, 2, ix, iy, iz, 1, dxs[1])
+                    if ndim > 2:
+                        lxz = _derivative(work, b, 0, ix, iy, iz, 2, dxs[2])
+                        lyz = _derivative(work, b, 1, ix, iy, iz, 2, dxs[2])
+                        lzz = _derivative(work, b, 2, ix, iy, iz, 2, dxs[2])
+                    vol = dxs[0] * (dxs[1] if ndim > 1 else 1.0) * (dxs[2] if ndim > 2 else 1.0)
+                    if cylindrical:
+                        r = block_lo[b, 0] + (ix - gx + 0.5) * dxs[0]
+                        lzz = work[b, WK_V, ix, iy, iz] / r
+                        # no theta velocity, no theta derivatives
+                        lzx = lzy = lxz = lyz = 0.0
+                        vol *= 2.0 * 3.141592653589793 * r
+                    for k in range(nmat):
+                        if model[k] == NONE:
+                            continue
+                        base = k * nq
+                        a = alpha[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        if not (a > ALPHA_MIN and ar > 0.0):
+                            for j in range(nq):
+                                arhoq[b, base + j, ix, iy, iz] = 0.0
+                            continue
+                        inv = 1.0 / ar
+                        sxx = arhoq[b, base, ix, iy, iz] * inv
+                        syy = arhoq[b, base + 1, ix, iy, iz] * inv
+                        szz = arhoq[b, base + 2, ix, iy, iz] * inv
+                        sxy = arhoq[b, base + 3, ix, iy, iz] * inv if ns > 3 else 0.0
+                        sxz = arhoq[b, base + 4, ix, iy, iz] * inv if ns > 4 else 0.0
+                        syz = arhoq[b, base + 5, ix, iy, iz] * inv if ns > 5 else 0.0
+                        eps_p = arhoq[b, base + ns, ix, iy, iz] * inv
+                        dmg = arhoq[b, base + ns + 1, ix, iy, iz] * inv
+                        rk = ar / a
+                        ek = arhoe[b, k, ix, iy, iz] * inv
+                        pk, c2b, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                        # tensile failure and relaxation of tension in failed material
+                        if pk < -tensile_strength[k] * (1.0 - dmg):
+                            if dmg < 1.0:
+                                counts[b, CNT_TENSILE_FAILURE] += 1
+                                dmg = 1.0
+                        g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0)
+                        sxx, syy, szz, sxy, sxz, syz = jaumann_update(
+                            sxx, syy, szz, sxy, sxz, syz, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz, dt, g)
+                        if ns < 6:
+                            sxz = syz = 0.0
+                        if ns < 4:
+                            sxy = 0.0
+                        tk = temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                        y = yield_strength(model[k], params[k], pk, tk, dmg)
+                        if rk < STRENGTH_MIN_DENSITY_FRACTION * reference_density(eos_kind[k], eos_params[k], eos_table):
+                            y = 0.0
+                            counts[b, CNT_LOW_DENSITY] += 1
+                        sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz, y, g)
+                        if returned:
+                            counts[b, CNT_YIELD] += 1
+                            eps_p += dep
+                            if model[k] == ROCK and dmg < 1.0:
+                                dmg = min(1.0, dmg + shear_damage_increment(dep, pk, params[k, P_BD], params[k, P_BP]))
+                        power = (sxx * lxx + syy * lyy + szz * lzz + sxy * (lxy + lyx) + sxz * (lxz + lzx)
+                                 + syz * (lyz + lzy))
+                        work_done = dt * a * power
+                        arhoe[b, k, ix, iy, iz] += work_done
+                        amounts[b, AMT_PLASTIC_WORK] += work_done * vol
+                        arhoq[b, base, ix, iy, iz] = ar * sxx
+                        arhoq[b, base + 1, ix, iy, iz] = ar * syy
+                        arhoq[b, base + 2, ix, iy, iz] = ar * szz
+                        if ns > 3:
+                            arhoq[b, base + 3, ix, iy, iz] = ar * sxy
+                        if ns > 4:
+                            arhoq[b, base + 4, ix, iy, iz] = ar * sxz
+                            arhoq[b, base + 5, ix, iy, iz] = ar * syz
+                        arhoq[b, base + ns, ix, iy, iz] = ar * eps_p
+                        arhoq[b, base + ns + 1, ix, iy, iz] = ar * dmg
+                        work[b, WK_S, ix, iy, iz] += a * sxx
+                        work[b, WK_S + 1, ix, iy, iz] += a * syy
+                        work[b, WK_S + 2, ix, iy, iz] += a * szz
+                        work[b, WK_S + 3, ix, iy, iz] += a * sxy
+                        work[b, WK_S + 4, ix, iy, iz] += a * sxz
+                        work[b, WK_S + 5, ix, iy, iz] += a * syz

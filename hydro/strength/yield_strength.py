@@ -1,0 +1,82 @@
+"""Yield strength Y(P, T, D) of the von Mises, GEO and ROCK models (Collins, Melosh & Ivanov 2004 form).
+
+Y is the von Mises equivalent stress at yield, sqrt(3 J2) = sqrt(3/2 S:S) (Pa); see
+docs/strength.md for the convention.  P is the material pressure (Pa, compression > 0),
+T its temperature (K), D its damage (0 intact, 1 fully damaged).
+
+- intact (Lundborg):      Y_i = Y0 + mu_i P / (1 + mu_i P / (Y_M - Y0))      (P >= 0)
+- damaged (dry friction): Y_d = min(Y_c + mu_d P, Y_i)                        (P >= 0)
+- tension (P < 0):        both fall linearly to zero at the tensile limit P = -Y_T (1 - D):
+                          Y(P) = Y(0) (1 + P / (Y_T (1 - D))), 0 below (failed material,
+                          D = 1, has no strength in tension)
+- GEO:   Y = Y_i;  ROCK: Y = (1 - D) Y_i + D Y_d;  von Mises: Y = yield_strength
+- thermal softening (GEO, ROCK): Y -> Y tanh(xi (T_melt / T - 1)), zero at and above T_melt.
+
+The parameter row is :mod:`impactpipe.hydro.strength.parameters`' ``params[k]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from impactpipe.hydro.strength.parameters import (
+    GEO, MU_D, MU_I, ROCK, T_MELT, VON_MISES, XI, Y0, Y_C, Y_M, Y_T, YIELD_VM,
+)
+
+
+@njit(cache=True, inline="always")
+def lundborg_intact(pressure, y0, y_m, mu_i):
+    """Intact yield strength Y_i = Y0 + mu_i P / (1 + mu_i P / (Y_M - Y0)) (Pa) for P >= 0.
+
+    Y_M <= Y0 gives the constant Y_M (a cap below the cohesion); P < 0 gives Y0.
+    """
+    if y_m <= y0:
+        return y_m
+    if pressure <= 0.0:
+        return y0
+    return y0 + mu_i * pressure / (1.0 + mu_i * pressure / (y_m - y0))
+
+
+@njit(cache=True, inline="always")
+def damaged_friction(pressure, y_c, mu_d, intact):
+    """Damaged yield strength Y_d = min(Y_c + mu_d max(P, 0), Y_i) (Pa)."""
+    y = y_c + mu_d * max(pressure, 0.0)
+    return min(y, intact)
+
+
+@njit(cache=True, inline="always")
+def tensile_taper(pressure, tensile_strength):
+    """Factor of the zero-pressure strength left in tension: 1 + P / Y_T for -Y_T < P < 0, 0 below, 1 for P >= 0."""
+    if pressure >= 0.0:
+        return 1.0
+    if tensile_strength <= 0.0 or pressure <= -tensile_strength:
+        return 0.0
+    return 1.0 + pressure / tensile_strength
+
+
+@njit(cache=True, inline="always")
+def thermal_softening(temperature, t_melt, xi):
+    """Softening factor tanh(xi (T_melt / T - 1)) for T < T_melt, 0 at and above T_melt."""
+    if temperature >= t_melt or temperature <= 0.0:
+        return 0.0
+    return np.tanh(xi * (t_melt / temperature - 1.0))
+
+
+@njit(cache=True)
+def yield_strength(model, params, pressure, temperature, damage):
+    """Yield strength Y(P, T, D) (Pa, von Mises equivalent stress) of one material; see the module docstring."""
+    if model == VON_MISES:
+        return params[YIELD_VM]
+    if model != GEO and model != ROCK:
+        return 0.0
+    intact = lundborg_intact(pressure, params[Y0], params[Y_M], params[MU_I])
+    if model == ROCK:
+        damaged = damaged_friction(pressure, params[Y_C], params[MU_D], intact)
+        d = min(max(damage, 0.0), 1.0)
+        y = (1.0 - d) * intact + d * damaged
+    else:
+        y = intact
+    if pressure < 0.0:
+        y *= tensile_taper(pressure, params[Y_T] * (1.0 - min(max(damage, 0.0), 1.0)))
+    return y * thermal_softening(temperature, params[T_MELT], params[XI])
