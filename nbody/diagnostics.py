@@ -142,6 +142,26 @@ def bound_mask(position, velocity, mass, max_iterations: int = 100) -> np.ndarra
     raise RuntimeError("bound_mask did not converge")
 
 
+def unbound_mass(position, velocity, mass) -> float:
+    """Mass (kg) on escape orbits from all the other particles, without collisions.
+
+    Particle i with the others' mass M - m_i (M the total), centre-of-mass velocity V of all
+    particles and phi_i the exact potential of the others at x_i (J/kg) is unbound when its
+    two-body energy per unit mass e_i = 0.5 M / (M - m_i) |v_i - V|^2 + phi_i >= 0 (the
+    kinetic term is the reduced-mass form mu |v_i - V_rest|^2 / (2 m_i), exact for a pair).
+    One pass, no iteration: the hand-off diagnostic ``initial_unbound_mass`` of
+    ``reaccumulate``.  Collisions can still bind such mass by dissipating its energy; perfect
+    merging binds any touching pair whatever its speed.
+    """
+    if mass.shape[0] < 2:
+        return 0.0
+    m_tot = float(mass.sum())
+    v_c = weighted_mean(mass, velocity)
+    phi = _potential_at_members(np.ascontiguousarray(position), np.ascontiguousarray(mass), G)
+    e = 0.5 * m_tot / (m_tot - mass) * np.sum((velocity - v_c) ** 2, axis=1) + phi
+    return float(mass[e >= 0].sum())
+
+
 @njit(cache=True)
 def _potential_at_members(position, mass, g):
     """phi_i = -sum_{j != i} g m_j / |x_i - x_j| (J/kg)."""

@@ -68,6 +68,7 @@ log = logging.getLogger(__name__)
 ESCAPE_RADIUS_FACTOR = 2.0    # escape test beyond this many initial cloud extents from the centre of mass
 BOX_GUARD_FRACTION = 0.9      # particles beyond this fraction are removed (left_box)
 CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
+UNBOUND_WARNING_FRACTION = 0.5  # warn when more of the hand-off mass than this is on escape orbits at t = 0
 SIDECAR_FORMAT = 2            # 2: contact-time bounces, kinetic-energy accumulator, initial-overlap report
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
                        "escaped_momentum", "escaped_angular_momentum")
@@ -227,6 +228,17 @@ class _Run:
         self.escaped = {k: [] for k in ("slot", "mass", "momentum", "position", "velocity", "spin", "time", "reason")}
         self.merges = {"time": [], "survivor": [], "absorbed": []}
         self.diag: dict[str, list] = {}
+        self.initial_unbound_mass = dg.unbound_mass(np.asarray(particles.position, float),
+                                                    np.asarray(particles.velocity, float),
+                                                    np.asarray(particles.mass, float))
+        unbound_fraction = self.initial_unbound_mass / float(np.sum(particles.mass))
+        if unbound_fraction > UNBOUND_WARNING_FRACTION:
+            log.warning("%.3g of the hand-off mass is on escape orbits at t = 0 (two-body energy relative to "
+                        "all the other mass >= 0): without mergers it disperses unless collisions dissipate "
+                        "its energy, while perfect merging glues touching particles whatever their speed "
+                        "(docs/nbody.md, unbound hand-offs)", unbound_fraction)
+        else:
+            log.info("%.3g of the hand-off mass is on escape orbits at t = 0", unbound_fraction)
 
     # --- set-up -------------------------------------------------------------------
     def start(self) -> None:
@@ -533,6 +545,7 @@ class _Run:
             collision_model=self.params["collision_model"],
             initial_overlapping_pairs=int(self.initial_overlaps[0]),
             initial_overlap_energy=float(self.initial_overlaps[2]),
+            initial_unbound_mass=self.initial_unbound_mass,
             steps=int(self.sim.steps_done),
             particle_steps=int(self.resolver.ctx[CTX_PARTICLE_STEPS]) if self.particle_steps_known else -1,
         )

@@ -24,6 +24,12 @@ velocities v1, v2, spin angular momenta S1, S2 in kg m^2/s; M = m1 + m2,
 mu = m1 m2 / M, d = |x2 - x1|, n = (x2 - x1) / d, v = v2 - v1, v_n = (v . n) n,
 v_t = v - v_n):
 
+Every model resolves only pairs in approaching contact (``contact_geometry``): a reported
+pair that moves apart (REBOUND's line search reports every pair whose path came within
+contact during the step, e.g. the overlapping neighbours of a hand-off) is left alone and
+counted.  Merging such pairs would glue an expanding cloud into one body within a few steps
+(runaway merging, docs/nbody.md "Unbound hand-offs").
+
 * merge: one particle at the centre of mass with mass M, velocity
   (m1 v1 + m2 v2) / M, radius (r1^3 + r2^3)^(1/3) (summed volume) and spin
   S = S1 + S2 + mu (x1 - x2) x (v1 - v2), the orbital angular momentum of the pair about
@@ -422,12 +428,12 @@ def _resolve(simp, collp, ctxp):
     event_time = carray(_addr_as_f64(ctx[CTX_EVENT_TIME]), n_slots_words)
     model = ctx[CTX_MODEL]
     g = params[0]
+    if contact_geometry(pf, i, j, h)[0] == NO_CONTACT:
+        ctx[CTX_N_SEPARATING] += 1
+        return 0
     if model == 0:
         return merge_pair(pf, pw, i, j, spin, params, t, ctx, events, event_time)
     if model == 1:
-        if contact_geometry(pf, i, j, h)[0] == NO_CONTACT:
-            ctx[CTX_N_SEPARATING] += 1
-            return 0
         b1 = i * P_STRIDE
         b2 = j * P_STRIDE
         vx = pf[b2 + P_VX] - pf[b1 + P_VX]

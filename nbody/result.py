@@ -114,6 +114,9 @@ class NBodyResult:
         initial_overlap_energy: J, sum over them of G m_i m_j (1/d_ij - 1/(r_i + r_j)): the
             potential energy their separation costs, which the collision resolution can add
             in a cold start (docs/nbody.md).
+        initial_unbound_mass: kg of hand-off mass on escape orbits at t = 0 (two-body energy
+            relative to all the other mass >= 0, ``diagnostics.unbound_mass``); NaN in files
+            written before it existed.
         steps: leapfrog steps done (REBOUND ``steps_done``), over all resumes.
         particle_steps: sum over the steps of the particles each step integrated, over all
             resumes; -1 when the run resumed from a checkpoint written before this counter
@@ -149,6 +152,7 @@ class NBodyResult:
     collision_model: str = "merge"
     initial_overlapping_pairs: int = 0
     initial_overlap_energy: float = 0.0
+    initial_unbound_mass: float = 0.0
     steps: int = 0
     particle_steps: int = 0
 
@@ -161,10 +165,10 @@ class NBodyResult:
 
 
 _SCALARS = ("status", "time", "dynamical_time", "time_step", "collision_model", "initial_overlapping_pairs",
-            "initial_overlap_energy", "steps", "particle_steps")
+            "initial_overlap_energy", "initial_unbound_mass", "steps", "particle_steps")
 # attributes that files written before they existed lack, and the value read for them then
-_LATER_SCALARS = {"initial_overlapping_pairs": -1, "initial_overlap_energy": float("nan"), "steps": -1,
-                  "particle_steps": -1}
+_LATER_SCALARS = {"initial_overlapping_pairs": -1, "initial_overlap_energy": float("nan"),
+                  "initial_unbound_mass": float("nan"), "steps": -1, "particle_steps": -1}
 
 
 def write_result(path: str | os.PathLike, result: NBodyResult, attrs: dict) -> None:
@@ -197,6 +201,6 @@ def read_result(path: str | os.PathLike) -> NBodyResult:
         scalars[name] = value.decode() if isinstance(value, bytes) else str(value)
     for name in ("initial_overlapping_pairs", "steps", "particle_steps"):
         scalars[name] = int(scalars[name])
-    for name in ("time", "dynamical_time", "time_step", "initial_overlap_energy"):
+    for name in ("time", "dynamical_time", "time_step", "initial_overlap_energy", "initial_unbound_mass"):
         scalars[name] = float(scalars[name])
     return NBodyResult(**arrays, diagnostics=diagnostics, **scalars)
