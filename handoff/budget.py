@@ -100,6 +100,9 @@ class HandoffBudget:
         mass_floor: min_mass_fraction x total_mass (kg).
         noise_speed: magnitude of each particle's velocity noise (m/s).
         seed: seed of the random generator (ring phases, then noise).
+        mirrored_y0: True when the snapshot was a half-domain 3d run mirrored across y = 0
+            (handoff/mirror.py): every mesh, particle and dropped number then counts the full
+            body, both halves (mesh_mass = 2 x the half-domain run's mass on its mesh).
     """
 
     geometry: str
@@ -134,6 +137,7 @@ class HandoffBudget:
     mass_floor: float
     noise_speed: float
     seed: int
+    mirrored_y0: bool = False
 
     @property
     def noise_momentum(self) -> np.ndarray:

@@ -8,7 +8,8 @@ Each leaf block of the final hydro snapshot becomes spheres of the N-body stage
     m = sum_cells sum_k alpha_k rho_k V_c,   x = sum_cells m_c x_c / m,   v = sum_cells m_c v_c / m,
 
 with the radius of the sphere inscribed in the cube of the block's smallest edge,
-a = min(dx, dy, dz) / 2.
+a = min(dx, dy, dz) / 2.  A half-domain run (y >= 0, symmetry plane y = 0) is first joined
+with its mirror image (``mirror_y0``, handoff/mirror.py), so the spheres are the full body's.
 
 2d-cylindrical (r, z): the block is the annulus r_lo..r_hi x z_lo..z_hi, rotated about the
 axis z of the output frame.  With the cell masses m_c (full annuli) and the mass-weighted
@@ -54,6 +55,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from impactpipe.handoff.budget import HandoffBudget
+from impactpipe.handoff.mirror import mirror_across_y0
 from impactpipe.handoff.particles import ParticleSet
 from impactpipe.handoff.tracers import block_tracer_records, fill_from_nearest
 from impactpipe.hydro.snapshot import Snapshot, TracerSet
@@ -220,10 +222,14 @@ def blocks_to_spheres(
     velocity_noise: float = 0.01,
     seed: int = 1,
     mass_left_mesh: float | None = None,
+    mirror_y0: bool = False,
 ) -> tuple[ParticleSet, HandoffBudget]:
     """Translate the leaf blocks of a hydro snapshot into N-body spheres.
 
-    The rules are in the module docstring and docs/handoff.md.
+    The rules are in the module docstring and docs/handoff.md.  With ``mirror_y0`` the
+    snapshot is a half-domain 3d run (y >= 0, symmetry plane y = 0): it and its tracers are
+    first joined with their mirror images (:func:`impactpipe.handoff.mirror.mirror_across_y0`),
+    so the particles and the budget describe the full body.
 
     Args:
         snapshot: the hand-off snapshot, geometry "3d" or "2d-cylindrical".
@@ -238,13 +244,17 @@ def blocks_to_spheres(
         min_mass_fraction: blocks below min_mass_fraction x total_mass make no particle.
         velocity_noise: noise speed as a fraction of ``escape_speed``.
         seed: seed of ``numpy.random.default_rng`` (ring phases, then noise).
-        mass_left_mesh: mass that left the mesh before hand-off (kg), carried in the budget.
+        mass_left_mesh: mass that left the mesh before hand-off (kg), carried in the budget;
+            with ``mirror_y0``, that of the full body (twice the half-domain run's).
+        mirror_y0: mirror a half-domain 3d snapshot across y = 0 first.
 
     Returns:
         The particles (ids 1..N in block order) and the hand-off budget.
     """
     _check_arguments(snapshot, target_bulk_density, total_mass, escape_speed, projectile_material_index,
                      min_density_fraction, min_mass_fraction, velocity_noise, mass_left_mesh)
+    if mirror_y0:
+        snapshot, tracers = mirror_across_y0(snapshot, tracers)
     cylindrical = snapshot.geometry == "2d-cylindrical"
     moments = block_moments(snapshot)
     mass_floor = min_mass_fraction * total_mass
@@ -364,6 +374,7 @@ def blocks_to_spheres(
         mass_floor=float(mass_floor),
         noise_speed=float(noise_speed),
         seed=int(seed),
+        mirrored_y0=bool(mirror_y0),
     )
     # A meshed body's mass differs from the analytic one by its surface discretisation
     # (~1e-4 at 10 cells per radius); more than 1 % above M_tot means a wrong total_mass.

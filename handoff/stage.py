@@ -34,18 +34,22 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
         mass_left = float(f["budget"].attrs["mass_left_mesh"])
         mesh_mass_initial = float(f["budget"].attrs["mass_initial"])
     projectile_index = _projectile_index(snapshot.material_names)
+    # A half-domain 3d run computed y >= 0 only: the hand-off mirrors it, and the masses it
+    # refers to are the full body's (twice the run's).
+    halves = 2.0 if values["domain"]["half_domain"] else 1.0
     particles, budget = blocks_to_spheres(
         snapshot,
         tracers,
         target_bulk_density=values["target_reference_density"],
-        total_mass=mesh_mass_initial,
+        total_mass=halves * mesh_mass_initial,
         escape_speed=values["escape_speed"],
         projectile_material_index=projectile_index,
         min_density_fraction=config.handoff.min_density_fraction,
         min_mass_fraction=config.handoff.min_mass_fraction,
         velocity_noise=config.handoff.velocity_noise,
         seed=config.handoff.seed,
-        mass_left_mesh=mass_left,
+        mass_left_mesh=halves * mass_left,
+        mirror_y0=values["domain"]["half_domain"],
     )
     if len(particles) == 0:
         raise RuntimeError(f"hand-off at t = {snapshot.time:.6g} s produced no particle "

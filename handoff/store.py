@@ -5,7 +5,7 @@ Layout (every dataset carries a ``units`` attribute):
     /            attributes: the caller's ``attrs`` (provenance)
     /particles/  one dataset per ParticleSet field, units from PARTICLE_UNITS
     /budget/     one dataset per HandoffBudget number, units from BUDGET_UNITS;
-                 attribute ``geometry``; fields that are None are not written
+                 attributes ``geometry`` and ``mirrored_y0``; fields that are None are not written
 """
 
 from __future__ import annotations
@@ -22,6 +22,10 @@ from impactpipe.handoff.budget import BUDGET_UNITS, HandoffBudget
 from impactpipe.handoff.particles import PARTICLE_UNITS, ParticleSet
 from impactpipe.pipeline.runstore import atomic_path, write_dataset, write_provenance
 
+#: HandoffBudget fields stored as attributes of /budget rather than datasets.
+_ATTRIBUTES = ("geometry", "mirrored_y0")
+
+
 def write_particles(path: str | os.PathLike, particles: ParticleSet, budget: HandoffBudget,
                     attrs: Mapping[str, Any]) -> None:
     """Write the particles and the budget to ``path`` atomically (see the module docstring)."""
@@ -33,9 +37,10 @@ def write_particles(path: str | os.PathLike, particles: ParticleSet, budget: Han
                 write_dataset(group, f.name, getattr(particles, f.name), PARTICLE_UNITS[f.name])
             group = h5.create_group("budget")
             group.attrs["geometry"] = budget.geometry
+            group.attrs["mirrored_y0"] = budget.mirrored_y0
             for f in fields(HandoffBudget):
                 value = getattr(budget, f.name)
-                if f.name != "geometry" and value is not None:
+                if f.name not in _ATTRIBUTES and value is not None:
                     write_dataset(group, f.name, value, BUDGET_UNITS[f.name])
 
 
@@ -52,8 +57,9 @@ def read_budget(path: str | os.PathLike) -> HandoffBudget:
     with h5py.File(path, "r") as h5:
         group = h5["budget"]
         values["geometry"] = str(group.attrs["geometry"])
+        values["mirrored_y0"] = bool(group.attrs.get("mirrored_y0", False))
         for f in fields(HandoffBudget):
-            if f.name == "geometry":
+            if f.name in _ATTRIBUTES:
                 continue
             if f.name not in group:
                 values[f.name] = None

@@ -26,7 +26,7 @@ from impactpipe.pipeline.stages import StageContext
 from .io import append_snapshot, write_tracers
 from .problems import PROBLEMS
 from .solver import HydroFailure, Simulation
-from .tracers import Tracers, place_on_rays
+from .tracers import Tracers, place_on_grid, place_on_rays
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +60,10 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
             "target": {"material": scene.target.material, "radius": scene.target.radius},
             "projectile": {"material": scene.projectile.material, "radius": scene.projectile.radius,
                            "velocity": scene.impact.velocity},
+            "angle": scene.impact.angle,
+            "full_domain": scene.full_domain,
             "cells_per_projectile_radius": config.hydro.cells_per_projectile_radius,
-            "margin": scene.domain_margin,
+            "margin": values["domain"]["margin"],
             "end_time": values["end_time"],
         }
     params = scene.model_dump(exclude={"problem", "geometry"})
@@ -98,14 +100,36 @@ def tracers_enabled(config) -> tuple[bool, str]:
     return False, f"auto: off for the {config.scene.problem} verification problem"
 
 
+def tracer_grid_spacing(target_radius: float, count: int) -> float:
+    """Lattice spacing h (m) of the 3d tracer grid: the whole target holds about ``count`` tracers.
+
+    h = (V_T / count)^(1/3), V_T = (4 pi / 3) R_T^3.
+    """
+    return (4.0 * np.pi / 3.0 * target_radius ** 3 / count) ** (1.0 / 3.0)
+
+
 def add_tracers(sim: Simulation, config, end_time: float) -> None:
-    """Place the impact scene's tracers (rays from the impact point, plus the projectile)."""
+    """Place the impact scene's tracers.
+
+    2d-cylindrical: rays from the impact point plus a projectile grid (:func:`place_on_rays`).
+    3d: cubic lattices filling both bodies (:func:`place_on_grid`), spacing
+    :func:`tracer_grid_spacing` in the target and min(h, R_P / 4) in the projectile; a
+    half-domain run (mirror plane y = 0) keeps the lattice points with y > 0 (none lies on
+    y = 0), and the hand-off mirrors them with the mesh.
+    """
     scene = config.scene
     r_t, r_p = scene.target.radius, scene.projectile.radius
     count = config.hydro.tracers.count
-    rays = min(TRACER_RAYS, max(1, count))
-    positions, materials = place_on_rays((0.0, r_t), r_t, 0.0, n_rays=rays, count=max(count, rays),
-                                         projectile_radius=r_p, projectile_center_z=r_t + r_p)
+    if sim.mesh.geometry == "3d":
+        positions, materials = place_on_grid((0.0, 0.0, 0.0), r_t, (0.0, 0.0, r_t + r_p), r_p,
+                                             tracer_grid_spacing(r_t, max(count, 1)))
+        if not scene.full_domain:
+            half = positions[:, 1] > 0.0
+            positions, materials = positions[half], materials[half]
+    else:
+        rays = min(TRACER_RAYS, max(1, count))
+        positions, materials = place_on_rays((0.0, r_t), r_t, 0.0, n_rays=rays, count=max(count, rays),
+                                             projectile_radius=r_p, projectile_center_z=r_t + r_p)
     sim.tracers = Tracers(positions, materials, history_interval=config.hydro.tracers.history_interval,
                           end_time=end_time)
 

@@ -95,7 +95,50 @@ def derive(config: Config) -> dict[str, Any]:
     out["self_gravity"], out["self_gravity_rule"] = self_gravity_choice(
         config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
         c_t, out["end_time"])
+    out["domain"] = impact_domain(config, geom, m_t + m_p, out["end_time"])
     return out
+
+
+def impact_domain(config: Config, geom: str, total_mass: float, end_time: float) -> dict[str, Any] | None:
+    """The impact mesh box (m) and the margin rule behind it; None for a geometry the impact cannot use.
+
+    The mesh extends beyond the target (and above the projectile) by
+
+        margin = max(scene.domain_margin, v_esc t_end / R_T)   target radii,
+
+    v_esc = sqrt(2 G (M_T + M_P) / R_T) the escape speed of the two bodies together and
+    t_end the hydro end time (the latest hand-off time).  Without self-gravity in the hydro
+    stage material moves at most v t_end from the target's surface, so everything slower than
+    the escape speed (all that can reaccumulate) is still on the mesh at hand-off; faster
+    material may leave through the outflow faces and is counted there (hydro budget
+    ``*_left_mesh``).  The box itself is :func:`impactpipe.hydro.problems.impact.domain`.
+    """
+    from impactpipe.hydro.problems import impact
+
+    if geom not in impact.GEOMETRIES:
+        return None
+    scene = config.scene
+    v_esc = math.sqrt(2.0 * G * total_mass / scene.target.radius)
+    needed = v_esc * end_time / scene.target.radius
+    margin = max(scene.domain_margin, needed)
+    which = "scene.domain_margin" if margin == scene.domain_margin else "v_esc t_end / R_T"
+    box = impact.domain(geom, scene.target.radius, scene.projectile.radius, config.hydro.cells_per_projectile_radius,
+                        margin, config.hydro.block_cells, scene.full_domain)
+    cells = [int(n) for n in box["cells"]]
+    return {
+        "margin": margin,
+        "margin_rule": f"max(scene.domain_margin = {scene.domain_margin:g}, v_esc t_end / R_T = {v_esc:.4g} m/s x "
+                       f"{end_time:.4g} s / {scene.target.radius:g} m = {needed:.4g}) = {margin:.4g} target radii "
+                       f"({which}); material faster than v_esc may leave and is counted as outflow",
+        "lo": [float(x) for x in box["lo"]],
+        "hi": [float(x) for x in box["hi"]],
+        "cells": cells,
+        "total_cells": int(np.prod(cells)),
+        "block_cells": int(box["block_cells"]),
+        "boundaries": [list(pair) for pair in box["boundaries"]],
+        "symmetry": box["symmetry"],
+        "half_domain": bool(box["half_domain"]),
+    }
 
 
 def strength_choice(strength: dict[str, Any]) -> dict[str, Any]:
@@ -178,9 +221,8 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         if cells % block:
             errors.append(f"scene.cells: {cells} is not a multiple of the block size {block} "
                           f"(hydro.block_cells); use a multiple of {block}")
-    if config.scene.problem == "impact" and values["geometry"] != "2d-cylindrical":
-        errors.append(f"scene.impact.angle: a {values['geometry']} impact (angle {config.scene.impact.angle:g}) is not "
-                      f"available in this version; only head-on impacts (angle 90, 2d-cylindrical) run")
+    if config.scene.problem == "impact":
+        errors.extend(_impact_geometry_errors(config.scene, values["geometry"]))
     t_handoff = config.handoff.time
     if t_handoff is not None:
         outputs = config.hydro.output_times or []
@@ -194,4 +236,21 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     if values.get("self_gravity"):
         errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
                       f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")
+    return errors
+
+
+def _impact_geometry_errors(scene, geom: str) -> list[str]:
+    """An impact scene's geometry, angle and full_domain that do not fit together, as ``key: message`` lines."""
+    from impactpipe.hydro.problems import impact
+
+    if geom not in impact.GEOMETRIES:
+        return [f"scene.geometry: an impact runs in {', '.join(impact.GEOMETRIES)} (got {geom}); "
+                f"use auto (2d-cylindrical for angle 90, 3d otherwise)"]
+    errors = []
+    if geom == "2d-cylindrical" and scene.impact.angle != 90.0:
+        errors.append(f"scene.impact.angle: {scene.impact.angle:g} is oblique, which 2d-cylindrical cannot represent "
+                      f"(head-on only, angle 90); set scene.geometry to 3d or auto")
+    if scene.full_domain and geom != "3d":
+        errors.append(f"scene.full_domain: true applies to 3d impacts only (geometry is {geom}, which uses "
+                      f"the symmetry axis); remove it or set scene.geometry to 3d")
     return errors

@@ -1,14 +1,34 @@
-"""Head-on impact of a projectile sphere on a target sphere (2d-cylindrical, void around).
+"""Impact of a projectile sphere on a target sphere, void around (2d-cylindrical or 3d).
 
-The target (radius R_T) is centred on the axis at z = 0, the projectile (radius R_P)
-at z = R_T + R_P, touching the target at t = 0 and moving at -velocity along z.  Both
-start at their reference density with e = 0 (p = 0).  Material 0 is the target, material 1
-the projectile (named "<material> (projectile)" when both are the same material), so the
-projectile's mass can be followed.  The mesh spans r in [0, (1 + margin)
-R_T] and z in [-(1 + margin) R_T, R_T + 2 R_P + margin R_T] with cell size
-R_P / cells_per_projectile_radius (cell counts rounded up to whole blocks), reflecting on
-the axis and outflow elsewhere.  Volume fractions are set by ``subsamples``^2 point samples
-per cell.
+The target (radius R_T) is centred at the origin, the projectile (radius R_P) at
+(0, 0, R_T + R_P): the two touch at the contact point (0, 0, R_T), whose tangent plane is
+z = R_T.  Both start at their reference density rho0 with e = 0 (p = 0).  Material 0 is the
+target, material 1 the projectile (named "<material> (projectile)" when both are the same
+material), so the projectile's mass can be followed.
+
+The projectile moves in the target frame at
+
+    v_P = V (cos theta, 0, -sin theta)      (m/s),
+
+theta = ``angle`` (degrees) measured from the tangent plane at the contact point (90 is
+head-on); the impact plane is x-z and the projectile travels downrange towards +x.
+
+Geometries:
+
+- 2d-cylindrical (head-on only, theta = 90): axes (r, z), the symmetry axis is z,
+  reflecting at r = 0.
+- 3d: axes (x, y, z).  The scene is mirror-symmetric about y = 0, so by default only
+  y >= 0 is computed, with a reflecting plane at y = 0 (``full_domain`` computes
+  y in [-Y, Y] instead, the mesh being the mirror image of the half one).
+
+Mesh (:func:`domain`): cell size dx = R_P / ``cells_per_projectile_radius``; with
+L = (1 + ``margin``) R_T the box spans r or x in [-L, L] (r in [0, L]), y in [0, L]
+(or [-L, L]) and z in [-L, R_T + 2 R_P + margin R_T]; each axis's cell count is rounded up
+to whole blocks (x is centred on 0, the others grow away from the target's lower / the
+symmetry side).  Outflow everywhere else: what leaves is counted by the solver.
+Volume fractions are set by ``subsamples`` point samples per cell and axis in the cells that
+the sphere's surface may cut (cells wholly inside or outside are set directly), weighted by
+the annular volume in 2d-cylindrical.
 """
 
 from __future__ import annotations
@@ -28,11 +48,13 @@ from impactpipe.hydro.problems.common import (
 from impactpipe.hydro.state import HydroState
 
 #: Geometries this problem runs in.
-GEOMETRIES = ('2d-cylindrical',)
+GEOMETRIES = ('2d-cylindrical', '3d')
 
 DEFAULTS = {
     "target": {"material": "basalt", "radius": 1000.0},
     "projectile": {"material": "basalt", "radius": 100.0, "velocity": 3000.0},
+    "angle": 90.0,
+    "full_domain": False,
     "cells_per_projectile_radius": 10,
     "margin": 0.25,
     "subsamples": 4,
@@ -40,55 +62,122 @@ DEFAULTS = {
 }
 
 
-def sphere_fraction(mesh: BlockMesh, z_center: float, radius: float, subsamples: int) -> np.ndarray:
-    """Volume fraction (NB, nr, nz, 1) of a sphere on the axis, by volume-weighted point samples."""
-    n = subsamples
-    offsets = (np.arange(n) + 0.5) / n - 0.5
-    centers = mesh.cell_centers()
-    dr = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
-    dz = mesh.block_dx[:, 1].reshape(-1, 1, 1, 1)
-    inside = np.zeros_like(centers[:, 0])
-    weight = np.zeros_like(inside)
-    for a in offsets:
-        r = centers[:, 0] + a * dr
-        w = np.abs(r)
-        for b in offsets:
-            z = centers[:, 1] + b * dz
-            inside += w * ((r * r + (z - z_center) ** 2) < radius * radius)
-            weight += w
-    return inside / weight
+def projectile_start(target_radius: float, projectile_radius: float, speed: float, angle: float):
+    """(centre (3,) m, velocity (3,) m/s) of the projectile at t = 0, in 3d Cartesian coordinates.
+
+    Centre (0, 0, R_T + R_P); velocity V (cos theta, 0, -sin theta), theta = ``angle`` in
+    degrees from the tangent plane at the contact point (0, 0, R_T).  At theta = 90 the
+    x component is exactly 0.
+    """
+    if not 0.0 < angle <= 90.0:
+        raise ValueError(f"angle: the impact angle must lie in (0, 90] degrees from the tangent plane (got {angle})")
+    theta = np.radians(angle)
+    cos_theta = 0.0 if angle == 90.0 else float(np.cos(theta))
+    centre = np.array([0.0, 0.0, target_radius + projectile_radius])
+    return centre, speed * np.array([cos_theta, 0.0, -np.sin(theta)])
+
+
+def domain(geometry: str, target_radius: float, projectile_radius: float, cells_per_projectile_radius: float,
+           margin: float, block_cells: int | None = None, full_domain: bool = False) -> dict:
+    """The impact mesh box (see the module docstring); every length in m.
+
+    Returns a dict with ``cell_size`` dx, ``lo`` and ``hi`` (one entry per used axis),
+    ``cells`` (per used axis, multiples of ``block_cells``), ``boundaries`` ((low, high) kind per
+    axis), ``block_cells``, ``symmetry`` (a sentence naming the symmetry used) and ``half_domain``
+    (True when only y >= 0 of a 3d scene is computed).
+    """
+    check_geometry("impact", GEOMETRIES, geometry)
+    ndim = 2 if geometry == "2d-cylindrical" else 3
+    bc = int(block_cells or DEFAULT_BLOCK_CELLS[ndim])
+    dx = projectile_radius / cells_per_projectile_radius
+    half_width = (1.0 + margin) * target_radius
+    z_lo = -half_width
+    z_hi = target_radius + 2.0 * projectile_radius + margin * target_radius
+
+    def whole_blocks(length: float) -> int:
+        return int(np.ceil(length / dx / bc)) * bc
+
+    nz = whole_blocks(z_hi - z_lo)
+    n_side = whole_blocks(half_width)
+    if geometry == "2d-cylindrical":
+        return {"cell_size": dx, "lo": [0.0, z_lo], "hi": [n_side * dx, z_lo + nz * dx], "cells": [n_side, nz],
+                "boundaries": [("reflecting", "outflow"), ("outflow", "outflow")], "block_cells": bc,
+                "symmetry": "axisymmetric about z (reflecting axis r = 0)", "half_domain": False}
+    nx = whole_blocks(2.0 * half_width)
+    x_lo = -0.5 * nx * dx
+    if full_domain:
+        y_lo, ny, y_bc = -n_side * dx, 2 * n_side, ("outflow", "outflow")
+        symmetry = "none: both halves y < 0 and y > 0 computed (full_domain)"
+    else:
+        y_lo, ny, y_bc = 0.0, n_side, ("reflecting", "outflow")
+        symmetry = "mirror plane y = 0 (reflecting), half domain y >= 0; the hand-off mirrors it"
+    return {"cell_size": dx, "lo": [x_lo, y_lo, z_lo], "hi": [x_lo + nx * dx, y_lo + ny * dx, z_lo + nz * dx],
+            "cells": [nx, ny, nz], "boundaries": [("outflow", "outflow"), y_bc, ("outflow", "outflow")],
+            "block_cells": bc, "symmetry": symmetry, "half_domain": not full_domain}
+
+
+def sphere_fraction(mesh: BlockMesh, center, radius: float, subsamples: int) -> np.ndarray:
+    """Volume fraction (NB, nx, ny, nz) of the ball |x - center| < radius in each cell (-).
+
+    ``center`` is (x, y, z) in 3d and (0, z) (on the axis) in 2d-cylindrical.  Cells whose
+    centre lies more than half a cell diagonal inside (outside) the sphere get 1 (0); the
+    others are sampled at ``subsamples`` points per axis (offsets (i + 1/2)/n - 1/2 cells),
+    each weighted by its radius r in 2d-cylindrical (annular volume) and equally in 3d.
+    """
+    ndim = mesh.ndim
+    center = np.asarray(center, dtype=float)[:ndim]
+    centers = mesh.cell_centers()[:, :ndim]
+    widths = mesh.block_dx[:, :ndim]
+    shape = (mesh.nblocks, 1, 1, 1)
+    distance = np.sqrt(sum((centers[:, d] - center[d]) ** 2 for d in range(ndim)))
+    half_diagonal = 0.5 * np.sqrt((widths ** 2).sum(axis=1)).reshape(shape)
+    frac = (distance < radius - half_diagonal).astype(float)
+    cut = np.abs(distance - radius) <= half_diagonal
+    block, *cell = np.nonzero(cut)
+    offsets = (np.arange(subsamples) + 0.5) / subsamples - 0.5
+    grids = np.meshgrid(*([offsets] * ndim), indexing="ij")
+    inside = np.zeros(block.size)
+    weight = np.zeros(block.size)
+    for sample in zip(*(g.ravel() for g in grids)):
+        points = [centers[(block, d, *cell)] + sample[d] * widths[block, d] for d in range(ndim)]
+        w = np.abs(points[0]) if mesh.geometry == "2d-cylindrical" else np.ones(block.size)
+        r2 = sum((points[d] - center[d]) ** 2 for d in range(ndim))
+        inside += w * (r2 < radius * radius)
+        weight += w
+    frac[cut] = inside / weight
+    return frac
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
           geometry: str = "2d-cylindrical"):
-    """Build the impact :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+    """Build the impact :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring)."""
     check_geometry("impact", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     tgt, prj = p["target"], p["projectile"]
+    if geometry == "2d-cylindrical" and p["angle"] != 90.0:
+        raise ValueError(f"angle: {p['angle']:g} is oblique, which is not axisymmetric; "
+                         f"2d-cylindrical runs head-on impacts (angle 90) only, use 3d")
+    if geometry == "2d-cylindrical" and p["full_domain"]:
+        raise ValueError("full_domain: True applies to 3d only (2d-cylindrical uses the symmetry axis); "
+                         "use False or geometry 3d")
     _, specs, _ = material_list(materials, [tgt["material"], prj["material"]])
     names = [tgt["material"], prj["material"]]
     if names[0] == names[1]:
         names[1] = f"{names[1]} (projectile)"
         specs = [specs[0], dict(specs[0])]
     eos = pack_eos(specs)
-    bc = int(block_cells or DEFAULT_BLOCK_CELLS[2])
-    dx = prj["radius"] / p["cells_per_projectile_radius"]
-    r_hi = (1.0 + p["margin"]) * tgt["radius"]
-    z_lo = -(1.0 + p["margin"]) * tgt["radius"]
-    z_hi = tgt["radius"] + 2.0 * prj["radius"] + p["margin"] * tgt["radius"]
-    nr = int(np.ceil(r_hi / dx / bc)) * bc
-    nz = int(np.ceil((z_hi - z_lo) / dx / bc)) * bc
-    mesh = BlockMesh.uniform(geometry, [0.0, z_lo], [nr * dx, z_lo + nz * dx], [nr, nz],
-                             [("reflecting", "outflow"), ("outflow", "outflow")], bc)
+    box = domain(geometry, tgt["radius"], prj["radius"], p["cells_per_projectile_radius"], p["margin"],
+                 block_cells, p["full_domain"])
+    mesh = BlockMesh.uniform(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"])
     state = HydroState.empty(mesh, len(names))
-    bodies = (
-        (tgt, 0.0, 0.0),
-        (prj, tgt["radius"] + prj["radius"], -prj["velocity"]),
-    )
-    for k, (body, z_center, vz) in enumerate(bodies):
+    centre, velocity = projectile_start(tgt["radius"], prj["radius"], prj["velocity"], p["angle"])
+    if geometry == "2d-cylindrical":  # mesh components (r, z, 0)
+        centre, velocity = centre[1:], np.array([0.0, velocity[2], 0.0])
+    bodies = ((tgt, np.zeros(3), np.zeros(3)), (prj, centre, velocity))
+    for k, (body, body_centre, body_velocity) in enumerate(bodies):
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
-        frac = sphere_fraction(mesh, z_center, body["radius"], p["subsamples"])
-        state.set_material(mesh, frac, k, eos, rho0, np.array([0.0, vz, 0.0]), specific_energy=0.0)
+        frac = sphere_fraction(mesh, body_centre, body["radius"], p["subsamples"])
+        state.set_material(mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
     strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
     return new_simulation(mesh, names, specs, state, cfl, strengths,
                           strength_specs(materials, [tgt["material"], prj["material"]]))
