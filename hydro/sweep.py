@@ -73,10 +73,13 @@ from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, material_state
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
 TENSION_TOLERANCE = 1.0e-3
-#: Cells filled below PHI_SECOND_ORDER, and their neighbours, reconstruct at first order: the
-#: limited slope of a volume fraction next to void can take the face density to zero while
-#: the face pressure keeps the cell's, and that face state (p > 0 on a vanishing density)
-#: would give an unbounded face velocity p / (rho c).  Free surfaces are first order.
+#: Only cells that one material fills to PHI_SECOND_ORDER or more, and whose neighbours are such
+#: cells, reconstruct at second order; mixed and partly void cells (interfaces, free surfaces)
+#: and their neighbours use their cell values.  The limited slope of a volume fraction takes
+#: the face density towards the lighter side (void, or a vapour at 1e-6 of the other's
+#: density) while the face pressure keeps the mixture's, and that face state (p > 0 on a
+#: vanishing density) gives an unbounded face velocity p / (rho c): 1.3e5 m/s in case 8c
+#: next to void, 2.2e5 m/s for ice vapour beside compressed iron in an ice-on-iron impact.
 PHI_SECOND_ORDER = 1.0 - 1.0e-3
 #: A cell whose materials fill more than 1 - FULL_TOLERANCE of it has no void.
 FULL_TOLERANCE = 1.0e-8
@@ -326,8 +329,14 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior, te
     limit can predict tens of MPa of tension, which would pull a light neighbour to many
     km/s) falls back to the cell values (first order, counted).
     """
-    first_order = (sc[W_PHI, i - 1] < PHI_SECOND_ORDER or sc[W_PHI, i] < PHI_SECOND_ORDER
-                   or sc[W_PHI, i + 1] < PHI_SECOND_ORDER or sc[W_RHO, i] <= 0.0)
+    first_order = sc[W_RHO, i] <= 0.0
+    for j in range(i - 1, i + 2):
+        pure = False
+        for k in range(nmat):
+            if sc[W_MAT + W_STRIDE * k, j] >= PHI_SECOND_ORDER:
+                pure = True
+        if not pure:
+            first_order = True
     if not first_order:
         rho = sc[W_RHO, i]
         un = sc[W_UN, i]
