@@ -9,6 +9,7 @@ from typing import Any
 import h5py
 
 from impactpipe.hydro.io import read_snapshot, read_tracers
+from impactpipe.hydro.problems.impact import PROJECTILE_MATERIAL
 from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
@@ -16,10 +17,6 @@ from .spheres import blocks_to_spheres
 from .store import write_particles
 
 log = logging.getLogger(__name__)
-
-#: Name of the projectile's material slot in an impact scene's hydro run.
-PROJECTILE_SLOT = "projectile"
-
 
 def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     """Hand off the final hydro snapshot of ``ctx.run_dir``; returns the summary entries."""
@@ -33,7 +30,7 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     with h5py.File(hydro_path, "r") as f:
         mass_left = float(f["budget"].attrs["mass_left_mesh"])
         mesh_mass_initial = float(f["budget"].attrs["mass_initial"])
-    projectile_index = _projectile_index(snapshot.material_names)
+    projectile_index = PROJECTILE_MATERIAL if config.scene.problem == "impact" else None
     # A half-domain 3d run computed y >= 0 only: the hand-off mirrors it, and the masses it
     # refers to are the full body's (twice the run's).
     halves = 2.0 if values["domain"]["half_domain"] else 1.0
@@ -74,10 +71,3 @@ def snapshot_index(hydro_path, time: float | None) -> int:
             return index
     raise ValueError(f"handoff.time = {time:g} s: no hydro snapshot at that time (snapshots at "
                      f"{', '.join(f'{t:.6g}' for t in times)} s)")
-
-
-def _projectile_index(material_names: list[str]) -> int | None:
-    for index, name in enumerate(material_names):
-        if name == PROJECTILE_SLOT or name.startswith(PROJECTILE_SLOT + ":"):
-            return index
-    return None

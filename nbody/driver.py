@@ -9,7 +9,10 @@ The run (see docs/nbody.md for the full description):
    the compiled resolver of :mod:`impactpipe.nbody.resolver`.
 2. The simulation advances in chunks that end at output times (every ``output_interval``)
    or earlier, so that no particle can reach the box edge within a chunk:
-   chunk <= 0.5 min_i (h - |x_i|) / |v_i| with h the box half-width.
+   chunk <= 0.5 min_i (h - |x_i|) / |v_i| with h the box half-width, and at most
+   MAX_CHUNK_STEPS steps, so that the escape removal and the time-step rule below act soon
+   after fast ejecta leave (with km/s ejecta the first output interval alone can be 1e5
+   collision-limited steps).
 3. Between chunks: merge events go into the provenance map (union-find); particles beyond
    h/2 on escape orbits (``diagnostics.escaping``) are removed as escaped, particles beyond
    0.9 h that are not are removed as ``left_box`` (with a warning), and any particle REBOUND
@@ -68,6 +71,7 @@ log = logging.getLogger(__name__)
 ESCAPE_RADIUS_FACTOR = 2.0    # escape test beyond this many initial cloud extents from the centre of mass
 BOX_GUARD_FRACTION = 0.9      # particles beyond this fraction are removed (left_box)
 CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
+MAX_CHUNK_STEPS = 2000        # chunk <= this many steps, so escapers leave and dt grows back soon
 UNBOUND_WARNING_FRACTION = 0.5  # warn when more of the hand-off mass than this is on escape orbits at t = 0
 SIDECAR_FORMAT = 2            # 2: contact-time bounces, kinetic-energy accumulator, initial-overlap report
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
@@ -178,7 +182,7 @@ def reaccumulate(
             run.checkpoint(archive, sidecar, first=True)
 
     while run.status is None:
-        t_target = min(run.next_output, run.chunk_end_by_box())
+        t_target = min(run.next_output, run.chunk_end_by_box(), run.sim.t + MAX_CHUNK_STEPS * run.sim.dt)
         run.advance(t_target)
         t = run.sim.t
         if run.sim.N == 0:

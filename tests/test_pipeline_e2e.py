@@ -4,9 +4,11 @@ import json
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from impactpipe.handoff import read_particles
 from impactpipe.pipeline.cli import main
 
 QUICKSTART = Path(__file__).parent.parent / "configs" / "quickstart.yaml"
@@ -37,7 +39,7 @@ def test_summary_holds_the_published_quantities(quickstart):
         assert key in summary, key
     assert set(summary["stages"]) == {"hydro", "handoff", "nbody", "analysis"}
     assert all(s["wall_seconds"] > 0 for s in summary["stages"].values())
-    assert summary["Q"] == pytest.approx(0.5 * 0.1 ** 3 * 1.0e3 ** 2)
+    assert summary["Q"] == pytest.approx(0.5 * 0.1 ** 3 * 250.0 ** 2)
     assert 0.0 < summary["M_lr_over_M_T"] <= (1.0 + summary["gamma"]) * (1 + 1e-3)
     assert 0 < summary["N_lr"] <= summary["N_init"]
 
@@ -52,6 +54,16 @@ def test_mass_budget_closes_through_every_stage(quickstart):
     assert handoff["particle_mass"] + handoff["dropped_mass"] == pytest.approx(handoff["mesh_mass"], rel=1e-12)
     assert nbody["mass_initial"] == pytest.approx(handoff["particle_mass"], rel=1e-12)
     assert abs(nbody["mass_error"]) < 1e-12
+
+
+def test_particles_carry_the_projectile_fraction(quickstart):
+    """The projectile's mass in the particles (sum m_i f_i) is the projectile's mass on the mesh."""
+    out, _ = quickstart
+    particles = read_particles(out / "handoff.h5")
+    assert np.isfinite(particles.projectile_fraction).all()
+    with h5py.File(out / "hydro.h5", "r") as f:
+        projectile_mass = float(f["budget"].attrs["mass_initial"]) * 0.1 ** 3 / (1 + 0.1 ** 3)
+    assert (particles.mass * particles.projectile_fraction).sum() == pytest.approx(projectile_mass, rel=0.05)
 
 
 def test_outputs_carry_units_and_provenance(quickstart):

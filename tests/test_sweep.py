@@ -155,7 +155,7 @@ def test_real_stages_share_one_hydro_run_between_collision_models(tmp_path):
     base = tmp_path / "tiny.yaml"
     base.write_text((HERE.parent / "configs" / "quickstart.yaml").read_text()
                     .replace("cells_per_projectile_radius: 4", "cells_per_projectile_radius: 2")
-                    .replace("velocity: 1.0e3", "velocity: 1.0e2"))
+                    .replace("velocity: 250.0", "velocity: 1.0e2"))
     spec = {"name": "real", "base": str(base), "output": str(tmp_path / "sweep"),
             "axes": {"nbody.collision_model": ["merge", "conditional_merge"]}}
     path = tmp_path / "sweep.yaml"

@@ -47,6 +47,9 @@ from impactpipe.hydro.problems.common import (
 )
 from impactpipe.hydro.state import HydroState
 
+#: Material index of the projectile (the target is 0).
+PROJECTILE_MATERIAL = 1
+
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
 
