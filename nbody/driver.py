@@ -261,7 +261,9 @@ class _Run:
         self.t_ref = 0.0
         dt = collision_time_step(m, r, v, bulk_density=self.params["bulk_density"],
                                  steps_per_dynamical_time=self.params["steps_per_dynamical_time"],
-                                 collision_step_fraction=self.params["collision_step_fraction"])
+                                 collision_step_fraction=self.params["collision_step_fraction"],
+                                 collision_search=self.params["collision_search"],
+                                 collision_model=self.params["collision_model"])
         self.sim = build_simulation(x - x_com, v - v_com, m, r, dt=dt,
                                     opening_angle=self.params["opening_angle"],
                                     collision_search=self.params["collision_search"],
@@ -469,7 +471,9 @@ class _Run:
         _, m, r, _, v = self._arrays()
         dt = collision_time_step(m, r, v, bulk_density=self.params["bulk_density"],
                                  steps_per_dynamical_time=self.params["steps_per_dynamical_time"],
-                                 collision_step_fraction=self.params["collision_step_fraction"])
+                                 collision_step_fraction=self.params["collision_step_fraction"],
+                                 collision_search=self.params["collision_search"],
+                                 collision_model=self.params["collision_model"])
         if dt < self.sim.dt or dt > 2.0 * self.sim.dt:
             log.info("time step %s from %.4g s to %.4g s at t = %.6g s",
                      "reduced" if dt < self.sim.dt else "raised", self.sim.dt, dt, self.sim.t)

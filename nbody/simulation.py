@@ -67,16 +67,30 @@ def relative_speed_bound(mass: np.ndarray, velocity: np.ndarray, bulk_density: f
 
 def collision_time_step(mass, radius, velocity, *, bulk_density: float,
                         steps_per_dynamical_time: float = 100.0,
-                        collision_step_fraction: float = 0.5) -> float:
-    """The leapfrog step (s) of the module's rule: min(t_dyn / n, f r_min / v_rel_max)."""
+                        collision_step_fraction: float = 0.5, collision_search: str = "tree",
+                        collision_model: str = "bounce") -> float:
+    """The leapfrog step (s): min(t_dyn / n, f L / v_rel_max).
+
+    L = r_min for the ``tree`` search, which sees a pair only while it overlaps, and for the
+    models that bounce (resting contacts need steps short against a particle).  Perfect
+    merging with the ``linetree`` search, which checks every pair's straight relative path
+    over the whole step and so misses no contact at any step length, uses
+    L = R_packed = (3 M / (4 pi rho))^(1/3), the radius of all the mass at bulk density, which
+    keeps each straight path short against the body: with km/s ejecta and 40 m particles the
+    r_min term was 0.017 s, 1e5 times shorter than t_dyn / 100, and case 8c's N-body stage
+    would have taken hours.
+    """
     if not 0 < collision_step_fraction <= 1:
         raise ValueError(f"collision_step_fraction must be in (0, 1] (got {collision_step_fraction})")
     if not steps_per_dynamical_time > 0:
         raise ValueError(f"steps_per_dynamical_time must be > 0 (got {steps_per_dynamical_time})")
     t_dyn = dynamical_time(bulk_density)
-    r_min = float(np.min(radius))
+    if collision_search == "linetree" and collision_model == "merge":
+        length = (3.0 * float(np.sum(mass)) / (4.0 * math.pi * bulk_density)) ** (1.0 / 3.0)
+    else:
+        length = float(np.min(radius))
     v_rel = relative_speed_bound(mass, velocity, bulk_density)
-    return min(t_dyn / steps_per_dynamical_time, collision_step_fraction * r_min / v_rel)
+    return min(t_dyn / steps_per_dynamical_time, collision_step_fraction * length / v_rel)
 
 
 def build_simulation(position: np.ndarray, velocity: np.ndarray, mass: np.ndarray,
