@@ -53,7 +53,7 @@ from scipy import optimize
 from . import derived, runstore
 from .config import ConfigError, key_paths
 from .stages import STAGES, read_records, stage_hashes
-from .sweep import Sweep, SweepRunner, SweepSpec, make_executor, write_results
+from .sweep import Sweep, SweepSpec, open_runner
 
 log = logging.getLogger(__name__)
 
@@ -388,14 +388,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
     runstore.write_text_atomic(sweep.source, yaml.safe_dump(
         {**sweep.spec.model_dump(mode="json", exclude_none=True), "ladders": ladders,
          "depths_in_projectile_radii": list(depths)}, sort_keys=False))
-    close = None
-    if executor is None:
-        executor, close = make_executor(sweep.spec.execution)
-    from tqdm import tqdm
-
-    bar = tqdm(total=0, desc=f"convergence {sweep.spec.name}", unit="run", disable=None if show_progress else True)
-    runner = SweepRunner(sweep, executor, bar)
-    try:
+    with open_runner(sweep, executor, show_progress, "convergence") as runner:
         by_digest: dict[str, str] = {}
         for rung in rungs:
             config = sweep.config_for(rung.params)
@@ -404,11 +397,6 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
                 by_digest[digest] = runner.add_point(rung.params, group=rung.ladder)
             rung.name = by_digest[digest]
         results = runner.run_points(sorted(set(by_digest.values())))
-    finally:
-        bar.close()
-        write_results(sweep, runner.points)
-        if close is not None:
-            close()
     base = sweep.config_for({})
     for rung in rungs:
         _fill(rung, results[rung.name], runner.points[rung.name], sweep, depths)

@@ -16,6 +16,7 @@ LocalCluster).  A failed point is recorded with its error and log and retried up
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import itertools
 import json
 import logging
@@ -624,29 +625,38 @@ def make_executor(execution: Execution) -> tuple[cf.Executor, Any]:
     return client.get_executor(pure=False), close
 
 
-def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: bool = True) -> dict[str, Any]:
-    """Run a sweep to the end; returns {"points": ..., "qstar": [...]}; writes the tables."""
-    sweep.directory.mkdir(parents=True, exist_ok=True)
-    runstore.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
+@contextlib.contextmanager
+def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool, label: str):
+    """A :class:`SweepRunner` on ``executor`` (or one made from the sweep's execution settings)
+    with a progress bar; on exit the bar closes, the result tables are written (also after an
+    error or an interrupt) and an executor made here shuts down."""
     close = None
     if executor is None:
         executor, close = make_executor(sweep.spec.execution)
     from tqdm import tqdm
 
-    bar = tqdm(total=0, desc=f"sweep {sweep.spec.name}", unit="run", disable=None if show_progress else True)
+    bar = tqdm(total=0, desc=f"{label} {sweep.spec.name}", unit="run", disable=None if show_progress else True)
     runner = SweepRunner(sweep, executor, bar)
     try:
-        qstar = []
-        if sweep.spec.mode == "grid":
-            runner.run_grid()
-        else:
-            qstar = runner.run_qstar()
-            write_qstar_table(sweep, qstar)
+        yield runner
     finally:
         bar.close()
         write_results(sweep, runner.points)
         if close is not None:
             close()
+
+
+def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: bool = True) -> dict[str, Any]:
+    """Run a sweep to the end; returns {"points": ..., "qstar": [...]}; writes the tables."""
+    sweep.directory.mkdir(parents=True, exist_ok=True)
+    runstore.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
+    qstar = []
+    with open_runner(sweep, executor, show_progress, "sweep") as runner:
+        if sweep.spec.mode == "grid":
+            runner.run_grid()
+        else:
+            qstar = runner.run_qstar()
+            write_qstar_table(sweep, qstar)
     return {"points": runner.points, "qstar": qstar}
 
 
