@@ -10,7 +10,7 @@ from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, temperature
 from impactpipe.hydro.exact.impedance import hugoniot_state
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.strength.parameters import pack_strength
-from impactpipe.hydro.strength.yield_strength import yield_strength
+from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
 
 POISSON = 0.25
 
@@ -142,7 +142,8 @@ def test_hugoniot_elastic_limit_and_plastic_offset_geo():
 
     def strength_at(i):
         t = temperature(eos.kind[0], eos.params[0], eos.table, rho[i], energy[i])
-        return yield_strength(arrays.model[0], arrays.params[0], p[i], t, 0.0)
+        # the GEO strength bounds sqrt(J2): the von Mises equivalent yield stress is sqrt(3) Y
+        return equivalent_yield_stress(arrays.model[0], yield_strength(arrays.model[0], arrays.params[0], p[i], t, 0.0))
 
     # precursor: sigma_HEL = (1 - nu) / (1 - 2 nu) Y(P_HEL)
     idx = np.nonzero(precursor)[0]

@@ -39,7 +39,7 @@ from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
 from impactpipe.hydro.strength.parameters import NONE, P_BD, P_BP, ROCK
-from impactpipe.hydro.strength.yield_strength import yield_strength
+from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
 from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID
 
 # work array slots (``work[NB, NWORK, NX, NY, NZ]``)
@@ -206,7 +206,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         if ns < 4:
                             sxy = 0.0
                         tk = temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                        y = yield_strength(model[k], params[k], pk, tk, dmg)
+                        y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], pk, tk, dmg))
                         if rk < STRENGTH_MIN_DENSITY_FRACTION * reference_density(eos_kind[k], eos_params[k], eos_table):
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1

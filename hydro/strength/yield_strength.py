@@ -1,7 +1,10 @@
 """Yield strength Y(P, T, D) of the von Mises, GEO and ROCK models (Collins, Melosh & Ivanov 2004 form).
 
-Y is the von Mises equivalent stress at yield, sqrt(3 J2) = sqrt(3/2 S:S) (Pa); see
-docs/strength.md for the convention.  P is the material pressure (Pa, compression > 0),
+Conventions (docs/strength.md): the von Mises model's Y is the uniaxial yield stress, the
+material yields where the equivalent stress sqrt(3 J2) = sqrt(3/2 S:S) reaches Y; the GEO and
+ROCK models' Y is the Collins, Melosh & Ivanov (2004) strength in the form of method.md,
+compared with sqrt(J2), so their yield surface is sqrt(3 J2) = sqrt(3) Y
+(:func:`equivalent_yield_stress`).  P is the material pressure (Pa, compression > 0),
 T its temperature (K), D its damage (0 intact, 1 fully damaged).
 
 - intact (Lundborg):      Y_i = Y0 + mu_i P / (1 + mu_i P / (Y_M - Y0))      (P >= 0)
@@ -23,6 +26,9 @@ from numba import njit
 from impactpipe.hydro.strength.parameters import (
     GEO, MU_D, MU_I, ROCK, T_MELT, VON_MISES, XI, Y0, Y_C, Y_M, Y_T, YIELD_VM,
 )
+
+#: sqrt(3), the ratio of the von Mises equivalent stress sqrt(3 J2) to sqrt(J2).
+SQRT3 = 1.7320508075688772
 
 
 @njit(cache=True, inline="always")
@@ -80,3 +86,17 @@ def yield_strength(model, params, pressure, temperature, damage):
     if pressure < 0.0:
         y *= tensile_taper(pressure, params[Y_T] * (1.0 - min(max(damage, 0.0), 1.0)))
     return y * thermal_softening(temperature, params[T_MELT], params[XI])
+
+
+@njit(cache=True, inline="always")
+def equivalent_yield_stress(model, strength):
+    """The von Mises equivalent stress sqrt(3 J2) (Pa) at which material of ``model`` yields.
+
+    von Mises: Y itself (uniaxial yield stress).  GEO and ROCK: sqrt(3) Y, since their Y bounds
+    sqrt(J2) (method.md section 2.2; the reference study's convention).  A case 8c run with
+    the presets read as sqrt(3 J2) <= Y instead gave M_lr/M_T = 0.50 against the published
+    0.76; with sqrt(J2) <= Y, 0.68 (docs/validation.md).
+    """
+    if model == GEO or model == ROCK:
+        return SQRT3 * strength
+    return strength
