@@ -1,0 +1,85 @@
+"""Each automatic choice is derived with its rule, shown by validate, and skipped physics costs
+nothing (issue 11, "model only what a scene requires")."""
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from impactpipe.hydro.stage import build_simulation
+from impactpipe.pipeline import derived
+from impactpipe.pipeline.cli import main
+from impactpipe.pipeline.config import load_config, parse_config
+
+CONFIGS = Path(__file__).parent.parent / "configs"
+QUICKSTART = CONFIGS / "quickstart.yaml"
+CASE_9A = CONFIGS / "reference" / "case9a.yaml"  # hydro strength preset
+CASE_8C = CONFIGS / "reference" / "case8c.yaml"  # GEO weak
+SOD = """
+name: sod
+scene:
+  problem: shock_tube
+  cells: 64
+  left: {material: gas, density: 1.0, pressure: 1.0}
+  right: {material: gas, density: 0.125, pressure: 0.1}
+  end_time: 0.2
+materials:
+  gas: {eos: {model: ideal_gas, gamma: 1.4}}
+"""
+
+
+def test_geometry_follows_the_impact_angle():
+    head_on = derived.derive(load_config(QUICKSTART))
+    assert head_on["geometry"] == "2d-cylindrical" and "90" in head_on["geometry_rule"]
+    oblique = derived.derive(load_config(QUICKSTART, overrides={"scene.impact.angle": 45.0}))
+    assert oblique["geometry"] == "3d"
+    assert oblique["domain"]["half_domain"] and oblique["domain"]["symmetry"]
+
+
+def test_hand_off_time_is_four_sound_crossing_times():
+    values = derived.derive(load_config(QUICKSTART))
+    assert values["end_time"] == pytest.approx(4.0 * values["sound_crossing_time"], rel=1e-12)
+    assert "4 target sound-crossing times" in values["end_time_rule"]
+    fixed = derived.derive(load_config(QUICKSTART, overrides={"hydro.end_time": 2.5}))
+    assert fixed["end_time"] == 2.5 and fixed["end_time_rule"] == "set in the config"
+
+
+def test_hydro_preset_runs_no_strength_kernel():
+    """Case 9a's 'hydro' GEO preset has zero yield strength: strength is off and the simulation
+    carries no stress state; case 8c's 'weak' preset turns it on."""
+    hydro = load_config(CASE_9A, overrides={"hydro.cells_per_projectile_radius": 1})
+    values = derived.derive(hydro)
+    assert all(not choice["enabled"] for choice in values["strength"].values())
+    assert "no strength kernel" in values["strength"]["basalt"]["rule"]
+    sim = build_simulation(hydro, values)
+    assert sim.strength is None and sim.state.arhoq.shape[1] == 0
+    weak = load_config(CASE_8C, overrides={"hydro.cells_per_projectile_radius": 1})
+    weak_values = derived.derive(weak)
+    assert weak_values["strength"]["basalt"]["enabled"]
+    assert build_simulation(weak, weak_values).strength is not None
+
+
+def test_self_gravity_rule_is_stated_with_its_numbers():
+    values = derived.derive(load_config(QUICKSTART))
+    assert values["self_gravity"] is False
+    rule = values["self_gravity_rule"]
+    assert "Pa" in rule and "m/s" in rule, rule
+
+
+def test_tracers_only_where_the_analysis_needs_them():
+    impact = load_config(QUICKSTART)
+    on, why = derived.derive(impact)["tracers"], derived.derive(impact)["tracers_rule"]
+    assert on and "auto" in why
+    tube = parse_config(SOD)
+    values = derived.derive(tube)
+    assert values["tracers"] is False and "off" in values["tracers_rule"]
+    assert build_simulation(tube, values).tracers is None
+    off = load_config(QUICKSTART, overrides={"hydro.tracers.enabled": False})
+    assert derived.derive(off)["tracers"] is False
+
+
+def test_validate_prints_every_choice_and_its_rule():
+    result = CliRunner().invoke(main, ["validate", str(QUICKSTART)])
+    assert result.exit_code == 0, result.output
+    for key in ("geometry", "end_time", "self_gravity", "tracers", "strength", "margin"):
+        assert key in result.output, key
