@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from sweep_stand_ins import _finish
 
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_yaml
 from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson, run_ladders)
-from impactpipe.pipeline.runstore import atomic_path
 
 HERE = Path(__file__).parent
 QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
@@ -23,13 +23,6 @@ QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
 #: plus NBODY_SLOPE (1/n - 1/100) with n = nbody.steps_per_dynamical_time (0 at its default 100).
 CONVERGED, AMPLITUDE, ORDER = 0.7, 0.3, 2.0
 NBODY_SLOPE = 2.0
-
-
-def _finish(ctx, stage):
-    with atomic_path(ctx.path(stage)) as tmp:
-        tmp.write_text(stage)
-    with open(ctx.run_dir.parent / "calls.log", "a") as log:
-        log.write(f"{ctx.run_dir.name} {stage}\n")
 
 
 def hydro(ctx):

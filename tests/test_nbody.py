@@ -26,6 +26,17 @@ def sphere_radius(m):
     return (3.0 * np.asarray(m) / (4.0 * math.pi * RHO)) ** (1.0 / 3.0)
 
 
+def drop_sidecar_meta(sidecar, key):
+    """Rewrite an N-body checkpoint sidecar without ``key`` in its metadata, as an older
+    version of the stage wrote it."""
+    with np.load(sidecar) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    del meta[key]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(sidecar, **arrays)
+
+
 def pair_sim(model, x2, v2, m=(2e12, 1e12), eps_n=0.5, eps_t=1.0, v1=(0.0, 0.0, 0.0)):
     """Two particles (1 at the origin) in a REBOUND simulation with the compiled resolver."""
     m = np.array(m)
@@ -475,24 +486,14 @@ def test_interrupted_run_resumes_to_the_same_final_state(tmp_path):
     assert capped.steps < full.steps and (again.steps, again.particle_steps) == (full.steps, full.particle_steps)
     # a sidecar written before the particle-step counter existed: that count is unknown (-1), steps are not
     sidecar = tmp_path / "wall.bin.state.npz"
-    with np.load(sidecar) as z:
-        arrays = {k: z[k] for k in z.files}
-    meta = json.loads(str(arrays["meta"]))
-    del meta["particle_steps"]
-    arrays["meta"] = np.array(json.dumps(meta))
-    np.savez(sidecar, **arrays)
+    drop_sidecar_meta(sidecar, "particle_steps")
     old = reaccumulate(ps, archive_path=tmp_path / "wall.bin", **kw)
     assert (old.steps, old.particle_steps) == (full.steps, -1)
     with pytest.raises(driver.ArchiveMismatch, match="resume=False"):
         reaccumulate(ps, archive_path=tmp_path / "full.bin", **{**kw, "seed": 12})
     # a sidecar of another format (an older version of the stage) is refused, not misread
     sidecar = tmp_path / "full.bin.state.npz"
-    with np.load(sidecar) as z:
-        arrays = {k: z[k] for k in z.files}
-    meta = json.loads(str(arrays["meta"]))
-    del meta["format"]
-    arrays["meta"] = np.array(json.dumps(meta))
-    np.savez(sidecar, **arrays)
+    drop_sidecar_meta(sidecar, "format")
     with pytest.raises(driver.ArchiveMismatch, match="another version"):
         reaccumulate(ps, archive_path=tmp_path / "full.bin", **kw)
 

@@ -2,13 +2,12 @@
 time-step keys (stage hash, restart of the checkpointed run), and hand-offs that leave no remnant
 (every particle escapes, a single particle, no particle) carried through the analysis stage."""
 
-import json
 from dataclasses import fields
 
 import h5py
 import numpy as np
 import pytest
-from test_nbody import cold_cloud, sphere_radius
+from test_nbody import cold_cloud, drop_sidecar_meta, sphere_radius
 
 from impactpipe.handoff.particles import PARTICLE_UNITS, ParticleSet
 from impactpipe.nbody import read_result
@@ -79,12 +78,7 @@ def test_counters_reach_the_summary_and_time_step_keys_rerun_the_stage(tmp_path)
     # a cap alone resumes the finished checkpoint (no stepping); one written before the particle-step
     # counter existed leaves that count out of the summary, which the convergence table shows blank
     sidecar = tmp_path / "nbody.bin.state.npz"
-    with np.load(sidecar) as z:
-        arrays = {k: z[k] for k in z.files}
-    meta = json.loads(str(arrays["meta"]))
-    del meta["particle_steps"]
-    arrays["meta"] = np.array(json.dumps(meta))
-    np.savez(sidecar, **arrays)
+    drop_sidecar_meta(sidecar, "particle_steps")
     summary = run(tmp_path, cold_cloud(40, seed=4), **{"nbody.stop.max_wall_seconds": 1000.0})
     assert summary["stages"]["nbody"]["steps"] == result.steps and "particle_steps" not in summary["stages"]["nbody"]
     assert np.isnan(costs_of(summary)["particle_steps"])
