@@ -67,24 +67,65 @@ def conserved_quantities(position, velocity, mass, radius, spin) -> dict[str, np
     }
 
 
+def overlapping_pairs(position: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs i < j with |x_i - x_j| < r_i + r_j: (i, j, |x_i - x_j| in m), sorted by (i, j)."""
+    empty = np.zeros(0, dtype=np.int64)
+    if radius.shape[0] < 2:
+        return empty, empty, np.zeros(0)
+    pairs = cKDTree(position).query_pairs(r=2.0 * float(radius.max()), output_type="ndarray")
+    if pairs.size == 0:
+        return empty, empty, np.zeros(0)
+    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    d = np.linalg.norm(position[i] - position[j], axis=1)
+    over = d < radius[i] + radius[j]
+    order = np.lexsort((j[over], i[over]))
+    return i[over][order], j[over][order], d[over][order]
+
+
 def overlaps(position: np.ndarray, radius: np.ndarray, mass: np.ndarray) -> tuple[int, float, float]:
     """Overlapping pairs, |x_i - x_j| < r_i + r_j: (count, deepest 1 - |x_i - x_j| / (r_i + r_j),
     sum of G m_i m_j (1 / |x_i - x_j| - 1 / (r_i + r_j)) in J, the potential energy that
     pushing every pair apart to contact, each on its own, would cost)."""
-    if radius.shape[0] < 2:
+    i, j, d = overlapping_pairs(position, radius)
+    if i.size == 0:
         return 0, 0.0, 0.0
-    pairs = cKDTree(position).query_pairs(r=2.0 * float(radius.max()), output_type="ndarray")
-    if pairs.size == 0:
-        return 0, 0.0, 0.0
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = np.linalg.norm(position[i] - position[j], axis=1)
     contact = radius[i] + radius[j]
-    over = d < contact
-    if not over.any():
-        return 0, 0.0, 0.0
-    depth = 1.0 - d[over] / contact[over]
-    energy = G * mass[i[over]] * mass[j[over]] * (1.0 / d[over] - 1.0 / contact[over])
-    return int(over.sum()), float(depth.max()), float(energy.sum())
+    energy = G * mass[i] * mass[j] * (1.0 / d - 1.0 / contact)
+    return int(i.size), float((1.0 - d / contact).max()), float(energy.sum())
+
+
+def removal_energy(position, velocity, mass, radius, spin, removed) -> float:
+    """Energy (J) the particles of the set R (boolean mask ``removed``) take out of the total:
+
+        E(all) - E(rest) = sum_{i in R} (m_i |v_i|^2 / 2 + |S_i|^2 / (2 I_i)) - sum' G m_i m_j / |x_i - x_j|
+
+    with E the ``conserved_quantities`` energy and sum' over the pairs with at least one member
+    in R: their kinetic and spin energy and their potential energy among themselves and with
+    the rest.  Velocities in the frame the energies are reported in.
+    """
+    idx = np.flatnonzero(removed)
+    if idx.size == 0:
+        return 0.0
+    rest = np.flatnonzero(~removed)
+    q = conserved_quantities(position[idx], velocity[idx], mass[idx], radius[idx], spin[idx])
+    cross = _cross_potential(np.ascontiguousarray(position[idx]), np.ascontiguousarray(mass[idx]),
+                             np.ascontiguousarray(position[rest]), np.ascontiguousarray(mass[rest]), G)
+    return q["energy"] + cross
+
+
+@njit(cache=True)
+def _cross_potential(xa, ma, xb, mb, g):
+    """-sum_{a, b} g m_a m_b / |x_a - x_b| (J) between two disjoint sets of particles."""
+    u = 0.0
+    for a in range(ma.shape[0]):
+        acc = 0.0
+        for b in range(mb.shape[0]):
+            dx = xa[a, 0] - xb[b, 0]
+            dy = xa[a, 1] - xb[b, 1]
+            dz = xa[a, 2] - xb[b, 2]
+            acc += mb[b] / math.sqrt(dx * dx + dy * dy + dz * dz)
+        u -= g * ma[a] * acc
+    return u
 
 
 def contact_groups(position: np.ndarray, radius: np.ndarray) -> np.ndarray:

@@ -17,7 +17,10 @@ The run (see docs/nbody.md for the full description):
    h/2 on escape orbits (``diagnostics.escaping``) are removed as escaped, particles beyond
    0.9 h that are not are removed as ``left_box`` (with a warning), and any particle REBOUND
    removed by itself is recorded as ``lost`` (with a warning): nothing leaves silently.
-   After a removal the frame is re-centred on the remaining centre of mass.  If the
+   After a removal the frame is re-centred on the remaining centre of mass.  The energy
+   the removed particles take out is accumulated (``escaped_energy``), and the pairs that
+   overlapped at t = 0 and are now at or beyond contact are closed (``resolver``: until
+   then they are pushed apart only as far as their own kinetic energy pays).  If the
    particles now move faster than the time-step rule assumed, the step is reduced.
 4. At output times the diagnostics are recorded and the stop criteria checked
    (``no_particles_left`` as soon as a removal leaves the simulation empty, with a last
@@ -61,8 +64,8 @@ from impactpipe.handoff.particles import ParticleSet
 from impactpipe.pipeline.runstore import atomic_path
 
 from . import diagnostics as dg
-from .resolver import (CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, CTX_PARTICLE_STEPS, MODEL_CODES,
-                       CollisionResolver, particle_view)
+from .resolver import (CTX_N_BOUNCE, CTX_N_HANDOFF, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, CTX_PARTICLE_STEPS,
+                       MODEL_CODES, PARAM_KINETIC, PARAM_PUSH_ENERGY, CollisionResolver, particle_view)
 from .result import ESCAPE_ORBIT, LEFT_BOX, LOST, NO_PARTICLES_LEFT, TERMINAL_STATUSES, NBodyResult
 from .simulation import G, build_simulation, collision_time_step, dynamical_time, weighted_mean
 
@@ -73,7 +76,7 @@ BOX_GUARD_FRACTION = 0.9      # particles beyond this fraction are removed (left
 CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
 MAX_CHUNK_STEPS = 2000        # chunk <= this many steps, so escapers leave and dt grows back soon
 UNBOUND_WARNING_FRACTION = 0.5  # warn when more of the hand-off mass than this is on escape orbits at t = 0
-SIDECAR_FORMAT = 2            # 2: contact-time bounces, kinetic-energy accumulator, initial-overlap report
+SIDECAR_FORMAT = 3            # 3: contact-time impact velocity, energy-limited pushes of t = 0 overlaps, energy account
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
                        "escaped_momentum", "escaped_angular_momentum")
 
@@ -273,9 +276,13 @@ class _Run:
         self.next_output = self.params["output_interval"]
         self.next_archive = self.params["archive_interval"]
         self.initial_overlaps = dg.overlaps(x, r, m)
+        pair_i, pair_j, pair_d = dg.overlapping_pairs(x, r)
+        self.resolver.set_handoff_overlaps(pair_i, pair_j, pair_d)
+        self.handoff_open = int(pair_i.size)
+        self.escaped_energy = 0.0
         if self.initial_overlaps[0]:
-            log.warning("%d particle pairs overlap at t = 0 (deepest %.3f of the radii sum); separating them "
-                        "costs up to %.4g J of potential energy", *self.initial_overlaps)
+            log.warning("%d particle pairs overlap at t = 0 (deepest %.3f of the radii sum; separating each on "
+                        "its own would cost %.4g J of potential energy)", *self.initial_overlaps)
         self._remember_state()
 
     def load(self, archive: Path, sidecar: Path) -> None:
@@ -298,7 +305,13 @@ class _Run:
         self.resolver.ctx[CTX_N_MERGE] = meta["n_merge"]
         self.resolver.ctx[CTX_N_BOUNCE] = meta["n_bounce"]
         self.resolver.ctx[CTX_N_SEPARATING] = meta["n_separating"]
-        self.resolver.params[3] = meta["collision_kinetic_energy_change"]
+        self.resolver.params[PARAM_KINETIC] = meta["collision_kinetic_energy_change"]
+        self.resolver.params[PARAM_PUSH_ENERGY] = meta["overlap_push_energy"]
+        keys = arrays["handoff_keys"]
+        n0 = len(self.slot_ids)
+        self.resolver.set_handoff_overlaps(keys // n0, keys % n0, arrays["handoff_floor"], arrays["handoff_open"])
+        self.handoff_open = int(arrays["handoff_open"].sum())
+        self.escaped_energy = meta["escaped_energy"]
         self.resolver.ctx[CTX_N_OVERLAP] = meta["n_overlap_push"]
         # sidecars written before the counter existed lack it: the count is then unknown (-1)
         self.particle_steps_known = "particle_steps" in meta
@@ -352,7 +365,9 @@ class _Run:
             "dt": self.sim.dt, "steps_done": int(self.sim.steps_done),
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
             "n_separating": int(self.resolver.ctx[CTX_N_SEPARATING]),
-            "collision_kinetic_energy_change": float(self.resolver.params[3]),
+            "collision_kinetic_energy_change": float(self.resolver.params[PARAM_KINETIC]),
+            "overlap_push_energy": float(self.resolver.params[PARAM_PUSH_ENERGY]),
+            "escaped_energy": self.escaped_energy,
             "n_overlap_push": int(self.resolver.ctx[CTX_N_OVERLAP]),
             **({"particle_steps": int(self.resolver.ctx[CTX_PARTICLE_STEPS])} if self.particle_steps_known else {}),
             "box_half_width": self.box_half_width, "escape_radius": self.escape_radius,
@@ -361,8 +376,11 @@ class _Run:
             "initial_overlaps": list(self.initial_overlaps),
             "next_output": self.next_output, "next_archive": self.next_archive,
         }
+        n_handoff = int(self.resolver.ctx[CTX_N_HANDOFF])
         arrays = {"meta": np.array(json.dumps(meta)), "spin": self.resolver.spin, "parent": self.parent,
-                  "snapshot_slots": snapshot_slots}
+                  "snapshot_slots": snapshot_slots, "handoff_keys": self.resolver.handoff_keys[:n_handoff],
+                  "handoff_floor": self.resolver.handoff_floor[:n_handoff],
+                  "handoff_open": self.resolver.handoff_open[:n_handoff]}
         for k, v in self._escaped_arrays().items():
             arrays["escaped_" + k] = v
         for k, v in self._merge_arrays().items():
@@ -427,6 +445,9 @@ class _Run:
             log.warning("%d bound particle(s) reached %.2f of the box half-width at t = %.6g s; "
                         "removed as left_box", int(guard.sum()), BOX_GUARD_FRACTION, t)
         remove = np.flatnonzero(esc | guard)
+        if remove.size:
+            self.escaped_energy += dg.removal_energy(x, v + self.frame_velocity, m, r, self.resolver.spin[slots],
+                                                     esc | guard)
         origin = self.origin(t)
         for k in remove:
             self._record_escape(slots[k], m[k], x[k] + origin, v[k] + self.frame_velocity, t,
@@ -440,6 +461,9 @@ class _Run:
             return
         if remove.size or lost.size:
             self._recentre()
+        if self.handoff_open:
+            slots, _, r, x, _ = self._arrays()
+            self.handoff_open = self.resolver.close_separated(slots, x, r)
         self._check_time_step()
         self._remember_state()
 
@@ -497,8 +521,11 @@ class _Run:
             "n_merge": int(self.resolver.ctx[CTX_N_MERGE]), "n_bounce": int(self.resolver.ctx[CTX_N_BOUNCE]),
             "largest_mass": float(m.max()) if len(m) else 0.0, "remnant_mass": m_lr, "orbiting_mass": m_orb,
             "time_step": self.sim.dt,
-            "collision_kinetic_energy_change": float(self.resolver.params[3]),
+            "escaped_energy": self.escaped_energy,
+            "collision_kinetic_energy_change": float(self.resolver.params[PARAM_KINETIC]),
             "n_overlap_push": int(self.resolver.ctx[CTX_N_OVERLAP]),
+            "overlap_push_energy": float(self.resolver.params[PARAM_PUSH_ENERGY]),
+            "handoff_overlaps_open": self.handoff_open,
             "overlapping_pairs": n_over, "max_overlap": deepest,
         }
         for k, val in row.items():

@@ -56,6 +56,7 @@ DIAGNOSTIC_UNITS = {
     "escaped_mass": "kg",
     "escaped_momentum": "kg*m/s",
     "escaped_angular_momentum": "kg*m**2/s",
+    "escaped_energy": "J",
     "n_merge": "dimensionless",
     "n_bounce": "dimensionless",
     "largest_mass": "kg",
@@ -66,6 +67,8 @@ DIAGNOSTIC_UNITS = {
     "overlapping_pairs": "dimensionless",
     "max_overlap": "dimensionless",
     "n_overlap_push": "dimensionless",
+    "overlap_push_energy": "J",
+    "handoff_overlaps_open": "dimensionless",
 }
 
 DIAGNOSTIC_DESCRIPTIONS = {
@@ -75,6 +78,9 @@ DIAGNOSTIC_DESCRIPTIONS = {
     "escaped_mass": "cumulative mass removed (escaped, left the box or lost)",
     "escaped_momentum": "cumulative momentum carried by removed particles; momentum + escaped_momentum is conserved",
     "escaped_angular_momentum": "cumulative angular momentum (about the origin, incl. spin) of removed particles",
+    "escaped_energy": "cumulative energy removed particles took out of energy at their removal (kinetic, spin and "
+                      "their potential energy with the rest); energy + escaped_energy - overlap_push_energy changes "
+                      "only by collision losses and the integrator's error",
     "n_merge": "cumulative mergers",
     "n_bounce": "cumulative bounces",
     "largest_mass": "mass of the most massive particle",
@@ -82,7 +88,11 @@ DIAGNOSTIC_DESCRIPTIONS = {
     "orbiting_mass": "mass outside the largest remnant bound to it",
     "collision_kinetic_energy_change": "cumulative change of the translational kinetic energy made by the "
                                        "collision resolver (bounces, pushes paid from kinetic energy, mergers)",
-    "n_overlap_push": "cumulative bounces of pairs overlapping since before the step, pushed apart to contact",
+    "n_overlap_push": "cumulative bounces of pairs overlapping since before the step, pushed apart",
+    "overlap_push_energy": "cumulative potential energy that pushes added beyond what the pushed pairs' kinetic "
+                           "energy paid: overlaps that arose during the run (resting contacts) pushed to contact, "
+                           "pairs overlapping since t = 0 pushed back to their distance at t = 0",
+    "handoff_overlaps_open": "pairs overlapping at t = 0 that have not yet been separated to contact",
     "overlapping_pairs": "pairs with |x_i - x_j| < r_i + r_j",
     "max_overlap": "largest 1 - |x_i - x_j| / (r_i + r_j) over the overlapping pairs (0 if none)",
 }
