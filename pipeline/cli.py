@@ -306,6 +306,43 @@ def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool,
     click.echo(f"wrote {target} (snapshot {index}, t = {snapshot.time:.6g} s)")
 
 
+@main.command("export")
+@click.argument("run_dir", metavar="RUN_DIR", type=click.Path(file_okay=False, exists=True))
+@click.option("--time", "at_time", type=float, help="Snapshot time (s); the nearest snapshot is used (default: last).")
+@click.option("--all", "every", is_flag=True, help="Export every snapshot (RUN_DIR/export/hydro_<index>.vtkhdf).")
+@click.option("--format", "file_format", type=click.Choice(["vtkhdf"]), default="vtkhdf", show_default=True,
+              help="vtkhdf: VTKHDF unstructured grid of the leaf cells, for ParaView >= 5.11.")
+@click.option("--out", "out_path", type=click.Path(dir_okay=False),
+              help="Output file (default RUN_DIR/export/hydro_<index>.vtkhdf).")
+def export_cmd(run_dir: str, at_time: float | None, every: bool, file_format: str, out_path: str | None) -> None:
+    """Write hydro snapshots of RUN_DIR for ParaView (docs/visualisation.md)."""
+    import h5py
+
+    from impactpipe.hydro.export import write_vtkhdf
+    from impactpipe.hydro.snapshot_lookup import find_snapshot, hydro_file, snapshot_times
+
+    if every and (at_time is not None or out_path):
+        click.echo("--all writes every snapshot to RUN_DIR/export/; it takes no --time or --out", err=True)
+        sys.exit(2)
+    try:
+        path = hydro_file(run_dir)
+    except FileNotFoundError:
+        click.echo(f"{run_dir}: no hydro.h5 (has the hydro stage finished?)", err=True)
+        sys.exit(2)
+    with h5py.File(path, "r") as fh:
+        provenance = {key: value for key, value in fh.attrs.items() if isinstance(value, str)}
+    indices = range(len(snapshot_times(path))) if every else [None]
+    for wanted in indices:
+        try:
+            snapshot, index = find_snapshot(path, time=at_time, index=wanted)
+        except KeyError as exc:
+            click.echo(f"error: {exc.args[0]}", err=True)
+            sys.exit(2)
+        target = Path(out_path or Path(run_dir) / "export" / f"hydro_{index:04d}.{file_format}")
+        write_vtkhdf(snapshot, target, {**provenance, "source": str(path), "snapshot_index": str(index)})
+        click.echo(f"wrote {target} (snapshot {index}, t = {snapshot.time:.6g} s)")
+
+
 @main.command("handoff-scan")
 @click.argument("config_path", metavar="CONFIG", type=click.Path(dir_okay=False))
 @click.option("--times", required=True, help="Hand-off times in seconds, comma-separated (e.g. 4,6,8,10,12,15).")
