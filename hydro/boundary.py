@@ -9,8 +9,11 @@ cells per axis (padded index ``i``, interior ``g <= i < g + n``) the ghost cell 
 - reflecting: the mirror cell ``g + j`` of the same block, normal momentum negated;
 - outflow: the first interior cell ``g`` (zero gradient).
 
-and symmetrically on the high side.  The copies are block-to-block, so an AMR level can
-replace a neighbour entry by prolongation/restriction without changing the sweeps.
+and symmetrically on the high side.  Faces between blocks of different refinement levels
+(``mesh.neighbor_level`` != 0) are skipped here and filled by restriction (coarse ghosts
+from the fine interior) and then prolongation (fine ghosts from the coarse interior and its
+just-restricted ghosts) by :func:`fill_field_ghosts` / :func:`fill_state_ghosts`, using the
+plans of :mod:`impactpipe.hydro.amr.plans`.
 """
 
 from __future__ import annotations
@@ -18,17 +21,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh import REFLECTING
 
 
 @njit(cache=True)
-def fill_ghosts(field, neighbor, axis, ghost, flip_component):
-    """Fill the ghost slabs of ``field[NB, C, NX, NY, NZ]`` along ``axis`` in place.
+def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component):
+    """Fill the same-level and domain-face ghost slabs of ``field[NB, C, NX, NY, NZ]`` along ``axis``.
 
     ``flip_component`` is the component index whose sign flips at a reflecting boundary
-    (the normal momentum, ``axis``) or -1 for scalar fields.  Serial: the copies are a
-    small fraction of a sweep's work and a parallel region per field costs more in
-    thread synchronisation than it saves.
+    (the normal momentum, ``axis``) or -1 for scalar fields.  Coarse/fine faces are left
+    alone.  Serial: the copies are a small fraction of a sweep's work and a parallel region
+    per field costs more in thread synchronisation than it saves.
     """
     nb, nc, nx, ny, nz = field.shape
     npad = (nx, ny, nz)[axis]
@@ -36,6 +41,8 @@ def fill_ghosts(field, neighbor, axis, ghost, flip_component):
     for b in range(nb):
         for side in range(2):
             nbr = neighbor[b, axis, side]
+            if nbr >= 0 and neighbor_level[b, axis, side] != 0:
+                continue
             for j in range(ghost):
                 if side == 0:
                     dst = ghost - 1 - j
@@ -83,12 +90,38 @@ def _hi(npad, ghost):
     return npad - ghost if npad > 1 else 1
 
 
-def fill_state_ghosts(state, mesh, axis: int) -> None:
-    """Fill the ghosts of every conserved field of ``state`` along ``axis``."""
+def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = -1) -> None:
+    """Fill the ghosts of one field along ``axis``; coarse/fine faces by restriction and copies.
+
+    For fields that are not conserved amounts (velocities, stresses of the strength step):
+    coarse ghosts get the volume-weighted fine means, fine ghosts a copy of the coarse cell.
+    """
     g = int(mesh.ghost[axis])
     if g == 0:
         return
-    for arr in (state.alpha, state.arho, state.arhoe, state.energy, state.arhoq):
-        fill_ghosts(arr, mesh.neighbor, axis, g, -1)
-    fill_ghosts(state.momentum, mesh.neighbor, axis, g, axis)
+    fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, axis, g, flip_component)
+    if mesh.adaptive:
+        plans = axis_plans(mesh, axis)
+        restrict_ghosts(field, plans["restrict"], plans["restrict_weight"])
+        prolong_field_ghosts(field, plans["prolong"])
+
+
+def fill_state_ghosts(state, mesh, axis: int) -> None:
+    """Fill the ghosts of every conserved field of ``state`` along ``axis``.
+
+    Coarse/fine faces: restriction, then the conservative limited prolongation of
+    :func:`impactpipe.hydro.amr.transfer.prolong_state_ghosts`.
+    """
+    g = int(mesh.ghost[axis])
+    if g == 0:
+        return
+    fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+    for arr in fields:
+        fill_ghosts(arr, mesh.neighbor, mesh.neighbor_level, axis, g, axis if arr is state.momentum else -1)
+    if not mesh.adaptive:
+        return
+    plans = axis_plans(mesh, axis)
+    for arr in fields:
+        restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
+    prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 

@@ -1,12 +1,23 @@
-"""Block-structured mesh: the domain tiled with equal blocks of cells, with ghost layers.
+"""Block-structured mesh: the domain tiled with leaf blocks of a quadtree / octree, with ghost layers.
 
-One refinement level for now.  Every block carries its own lower corner, cell size and
-level (``block_lo``, ``block_dx``, ``block_level``) and the mesh keeps a neighbour table
-``neighbor[NB, 3, 2]`` (axis, side: 0 = low, 1 = high): a value >= 0 is the index of the
-adjacent block (periodic wrap included), a negative value is a domain boundary code
-(:data:`OUTFLOW`, :data:`REFLECTING`).  Ghost filling (:mod:`impactpipe.hydro.boundary`) is
-driven by that table only, so a later AMR level can add coarse/fine neighbour entries
-without touching the sweeps.
+Every block has the same number of cells, ``block_cells`` per used axis.  The root level 0
+tiles the domain with ``blocks_per_axis`` blocks; refining a block splits it in two along
+each used axis (2^ndim children at level L + 1, cell size halved), so a block at level L
+with integer index ``block_index`` = (i, j, k) covers
+
+    [domain_lo + (i, j, k) W_L, domain_lo + (i + 1, j + 1, k + 1) W_L],   W_L = block_cells dx_0 / 2^L
+
+(dx_0 the root cell size).  Only leaf blocks are stored.  Neighbouring leaves differ by at
+most one level across faces, edges and corners (2:1 balance, kept by
+:mod:`impactpipe.hydro.amr.regrid`).
+
+The neighbour table ``neighbor[NB, 3, 2]`` (axis, side: 0 = low, 1 = high) holds, for a
+face inside the domain, the index of a leaf across it (periodic wrap included): the block
+of the same level, the coarser block (``neighbor_level`` = -1) or one of the 2^(ndim-1)
+finer blocks (``neighbor_level`` = +1); for a domain face a negative boundary code
+(:data:`OUTFLOW`, :data:`REFLECTING`).  Same-level faces and domain faces are filled by
+:func:`impactpipe.hydro.boundary.fill_ghosts`, coarse/fine faces by restriction and
+prolongation (:mod:`impactpipe.hydro.amr.transfer`).
 
 Field arrays have shape ``(NB, C, NX, NY, NZ)`` with ``NX = nx + 2 g`` on used axes and
 ``1`` (no ghosts) on unused ones; ``g = GHOST = 2`` serves the second-order stencil.
@@ -18,7 +29,7 @@ volume pi (r_hi^2 - r_lo^2) dz) and 3d.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,23 +43,36 @@ DEFAULT_BLOCK_CELLS = {1: 8, 2: 16, 3: 8}
 
 GEOMETRY_CODES = {"1d-planar": 0, "2d-planar": 1, "2d-cylindrical": 2, "3d": 3}
 CYLINDRICAL = 2
+#: Bits per axis of a block key (:func:`block_keys`): up to 2^18 blocks along an axis at any level.
+KEY_BITS = 18
+
+
+def block_keys(level, index) -> np.ndarray:
+    """Integer keys of blocks (level (N,), index (N, 3)) for sorted lookup; unique per block."""
+    level = np.asarray(level, dtype=np.int64)
+    index = np.asarray(index, dtype=np.int64)
+    return ((level << KEY_BITS | index[:, 2]) << KEY_BITS | index[:, 1]) << KEY_BITS | index[:, 0]
 
 
 @dataclass
 class BlockMesh:
-    """A uniform single-level block mesh.
+    """The leaf blocks of a block-structured (optionally adaptive) mesh.
 
     Attributes:
         geometry: one of the snapshot geometries.
         domain_lo, domain_hi: (3,) domain corners (m); unused axes 0.
-        blocks_per_axis: (3,) number of blocks along each axis (1 on unused axes).
+        blocks_per_axis: (3,) number of root (level 0) blocks along each axis (1 on unused axes).
         block_cells: cells per block along each used axis.
         boundaries: ((low, high), ...) boundary kind per used axis, from :data:`BOUNDARY_KINDS`.
         block_lo: (NB, 3) lower corner of each block (m).
         block_dx: (NB, 3) cell size of each block (m); 0 on unused axes.
-        block_level: (NB,) refinement level (all 0 here).
-        block_id: (NB,) stable block ids.
+        block_level: (NB,) refinement level, 0 = root.
+        block_id: (NB,) block ids, unique within the mesh (:func:`block_keys`).
         neighbor: (NB, 3, 2) neighbour block index or boundary code.
+        block_index: (NB, 3) integer position of each block on the block grid of its level.
+        neighbor_level: (NB, 3, 2) level of the neighbour minus the block's own (-1, 0, +1; 0 at
+            domain faces).
+        max_level: the finest level refinement may reach (0: a uniform mesh).
     """
 
     geometry: str
@@ -62,6 +86,11 @@ class BlockMesh:
     block_level: np.ndarray
     block_id: np.ndarray
     neighbor: np.ndarray
+    block_index: np.ndarray
+    neighbor_level: np.ndarray
+    max_level: int = 0
+    #: Derived data cached per mesh (ghost-exchange and reflux plans), never saved.
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def uniform(
@@ -72,13 +101,15 @@ class BlockMesh:
         cells,
         boundaries,
         block_cells: int | None = None,
+        max_level: int = 0,
     ) -> "BlockMesh":
-        """Tile the box ``[domain_lo, domain_hi]`` with ``cells`` cells per used axis.
+        """Tile the box ``[domain_lo, domain_hi]`` with ``cells`` cells per used axis (all at level 0).
 
         ``cells`` (one int per used axis) must be a multiple of ``block_cells`` along each
         axis.  ``boundaries`` gives a (low, high) pair of kinds per used axis; periodic must
         be set on both sides.  In 2d-cylindrical the low r boundary is the symmetry axis and
-        must be "reflecting" with ``domain_lo[0] == 0``.
+        must be "reflecting" with ``domain_lo[0] == 0``.  ``max_level`` is the finest level
+        adaptive refinement may later reach (cell size dx / 2^max_level).
         """
         if geometry not in GEOMETRIES:
             raise ValueError(f"unknown geometry {geometry!r}; choose one of {GEOMETRIES}")
@@ -87,6 +118,8 @@ class BlockMesh:
         cells = list(np.atleast_1d(cells).astype(int))
         if len(cells) != ndim or len(boundaries) != ndim:
             raise ValueError(f"{geometry} needs {ndim} entries in cells and boundaries")
+        if not 0 <= int(max_level) < 2 ** KEY_BITS:
+            raise ValueError(f"max_level must be >= 0, got {max_level}")
         lo = np.zeros(3)
         hi = np.zeros(3)
         lo[:ndim] = np.asarray(domain_lo, dtype=float)[:ndim]
@@ -106,43 +139,108 @@ class BlockMesh:
                 raise ValueError(f"axis {d}: periodic must be set on both sides")
         if geometry == "2d-cylindrical" and (lo[0] != 0.0 or boundaries[0][0] != "reflecting"):
             raise ValueError("2d-cylindrical needs r_lo = 0 with a reflecting axis boundary")
-
+        if (nblk << int(max_level)).max() >= 2 ** KEY_BITS:
+            raise ValueError(f"{nblk[:ndim].tolist()} root blocks refined {max_level} times exceed "
+                             f"2^{KEY_BITS} blocks along an axis")
         nb = int(np.prod(nblk))
         idx = np.arange(nb)
-        ib = np.stack([idx % nblk[0], (idx // nblk[0]) % nblk[1], idx // (nblk[0] * nblk[1])], axis=1)
-        dx = np.zeros(3)
-        dx[:ndim] = (hi[:ndim] - lo[:ndim]) / np.asarray(cells, dtype=float)
-        block_lo = lo[None, :] + ib * (dx * block_cells)[None, :]
-        block_lo[:, ndim:] = 0.0
-        neighbor = np.zeros((nb, 3, 2), dtype=np.int64)
+        index = np.stack([idx % nblk[0], (idx // nblk[0]) % nblk[1], idx // (nblk[0] * nblk[1])], axis=1)
+        return cls.from_leaves(geometry, lo, hi, nblk, block_cells, tuple(tuple(b) for b in boundaries),
+                               np.zeros(nb, dtype=np.int64), index, int(max_level))
+
+    @classmethod
+    def from_leaves(cls, geometry: str, domain_lo, domain_hi, blocks_per_axis, block_cells: int, boundaries,
+                    level, index, max_level: int) -> "BlockMesh":
+        """The mesh of the leaf blocks (``level`` (NB,), ``index`` (NB, 3)) over a root grid.
+
+        Geometry, cell sizes and the neighbour tables follow from the root grid; the leaves
+        must tile the domain and be 2:1 balanced across faces (a ValueError names the first
+        block whose face has no leaf across it).
+        """
+        ndim = GEOMETRY_DIMENSIONS[geometry]
+        level = np.asarray(level, dtype=np.int64)
+        index = np.asarray(index, dtype=np.int64)
+        lo = np.asarray(domain_lo, dtype=float)
+        hi = np.asarray(domain_hi, dtype=float)
+        nblk = np.asarray(blocks_per_axis, dtype=np.int64)
+        used = np.arange(3) < ndim
+        root_dx = np.where(used, (hi - lo) / (nblk * block_cells), 0.0)
+        block_dx = root_dx[None, :] / (2.0 ** level)[:, None]
+        block_lo = np.where(used, lo[None, :] + index * block_cells * block_dx, 0.0)
+        mesh = cls(geometry=geometry, domain_lo=lo, domain_hi=hi, blocks_per_axis=nblk, block_cells=int(block_cells),
+                   boundaries=tuple(tuple(b) for b in boundaries), block_lo=block_lo, block_dx=block_dx,
+                   block_level=level, block_id=block_keys(level, index), neighbor=np.zeros((len(level), 3, 2), np.int64),
+                   block_index=index, neighbor_level=np.zeros((len(level), 3, 2), np.int64),
+                   max_level=int(max_level))
+        mesh._link_neighbors()
+        return mesh
+
+    def blocks_at_level(self, level) -> np.ndarray:
+        """(N, 3) number of blocks along each axis that tile the domain at ``level`` (N,)."""
+        level = np.asarray(level, dtype=np.int64)
+        grow = np.where(np.arange(3) < self.ndim, 1, 0)
+        return self.blocks_per_axis[None, :] << (np.atleast_1d(level)[:, None] * grow[None, :])
+
+    def lookup(self, level, index) -> np.ndarray:
+        """Indices of the leaf blocks at ``level`` (N,) and ``index`` (N, 3); -1 where none is a leaf."""
+        if "sorted_keys" not in self.cache:
+            order = np.argsort(self.block_id, kind="stable")
+            self.cache["sorted_keys"] = (self.block_id[order], order)
+        keys, order = self.cache["sorted_keys"]
+        level = np.asarray(level, dtype=np.int64)
+        index = np.asarray(index, dtype=np.int64)
+        out = np.full(len(level), -1, dtype=np.int64)
+        valid = (level >= 0) & (index >= 0).all(axis=1)
+        if not valid.any() or keys.size == 0:
+            return out
+        want = block_keys(level[valid], index[valid])
+        pos = np.minimum(np.searchsorted(keys, want), keys.size - 1)
+        out[valid] = np.where(keys[pos] == want, order[pos], -1)
+        return out
+
+    def _link_neighbors(self) -> None:
+        """Fill ``neighbor`` and ``neighbor_level`` from the leaf positions (see the module docstring)."""
         codes = {"outflow": OUTFLOW, "reflecting": REFLECTING}
+        level = self.block_level
+        extent = self.blocks_at_level(level)
         for d in range(3):
             for side, step in ((0, -1), (1, 1)):
-                if d >= ndim:
-                    neighbor[:, d, side] = REFLECTING
+                if d >= self.ndim:
+                    self.neighbor[:, d, side] = REFLECTING
+                    self.neighbor_level[:, d, side] = 0
                     continue
-                j = ib.copy()
-                j[:, d] += step
-                inside = (j[:, d] >= 0) & (j[:, d] < nblk[d])
-                kind = boundaries[d][side]
+                probe = self.block_index.copy()
+                probe[:, d] += step
+                kind = self.boundaries[d][side]
                 if kind == "periodic":
-                    j[:, d] %= nblk[d]
-                    inside[:] = True
-                flat = j[:, 0] + nblk[0] * (j[:, 1] + nblk[1] * j[:, 2])
-                neighbor[:, d, side] = np.where(inside, flat, codes.get(kind, OUTFLOW))
-        return cls(
-            geometry=geometry,
-            domain_lo=lo,
-            domain_hi=hi,
-            blocks_per_axis=nblk,
-            block_cells=block_cells,
-            boundaries=tuple(tuple(b) for b in boundaries),
-            block_lo=block_lo,
-            block_dx=np.repeat(dx[None, :], nb, axis=0),
-            block_level=np.zeros(nb, dtype=np.int64),
-            block_id=idx.astype(np.int64),
-            neighbor=neighbor,
-        )
+                    probe[:, d] %= extent[:, d]
+                inside = (probe[:, d] >= 0) & (probe[:, d] < extent[:, d])
+                same = self.lookup(np.where(inside, level, -1), probe)
+                coarse = self.lookup(np.where(inside & (same < 0), level - 1, -1), probe >> 1)
+                child = 2 * probe
+                if side == 0:
+                    child[:, d] += 1
+                fine = self.lookup(np.where(inside & (same < 0) & (coarse < 0), level + 1, -1), child)
+                nbr = np.where(same >= 0, same, np.where(coarse >= 0, coarse, fine))
+                missing = inside & (nbr < 0)
+                if missing.any():
+                    b = int(np.argmax(missing))
+                    raise ValueError(f"block {b} (level {level[b]}, index {self.block_index[b].tolist()}): no leaf "
+                                     f"across its {'low' if side == 0 else 'high'} face along axis {d}; the leaves "
+                                     f"do not tile the domain 2:1 balanced")
+                self.neighbor[:, d, side] = np.where(inside, nbr, codes.get(kind, OUTFLOW))
+                self.neighbor_level[:, d, side] = np.where(inside & (same < 0), np.where(coarse >= 0, -1, 1), 0)
+
+    @property
+    def adaptive(self) -> bool:
+        """True when the mesh may hold more than one level."""
+        return self.max_level > 0
+
+    @property
+    def root_cell_size(self) -> np.ndarray:
+        """(3,) cell size of level 0 (m); 0 on unused axes."""
+        used = np.arange(3) < self.ndim
+        return np.where(used, (self.domain_hi - self.domain_lo) / (self.blocks_per_axis * self.block_cells), 0.0)
 
     @property
     def ndim(self) -> int:
@@ -236,23 +334,26 @@ class BlockMesh:
             "block_level": self.block_level,
             "block_id": self.block_id,
             "neighbor": self.neighbor,
+            "block_index": self.block_index,
+            "neighbor_level": self.neighbor_level,
+            "max_level": self.max_level,
         }
 
     @classmethod
     def from_arrays(cls, data: dict) -> "BlockMesh":
-        """Inverse of :meth:`to_arrays`."""
+        """Inverse of :meth:`to_arrays` (a single-level mesh saved without ``block_index`` is rebuilt from its corners)."""
         bnd = tuple(tuple(s.decode() if isinstance(s, bytes) else str(s) for s in row) for row in data["boundaries"])
         geometry = data["geometry"]
-        return cls(
-            geometry=geometry.decode() if isinstance(geometry, bytes) else str(geometry),
-            domain_lo=np.asarray(data["domain_lo"], dtype=float),
-            domain_hi=np.asarray(data["domain_hi"], dtype=float),
-            blocks_per_axis=np.asarray(data["blocks_per_axis"], dtype=np.int64),
-            block_cells=int(data["block_cells"]),
-            boundaries=bnd,
-            block_lo=np.asarray(data["block_lo"], dtype=float),
-            block_dx=np.asarray(data["block_dx"], dtype=float),
-            block_level=np.asarray(data["block_level"], dtype=np.int64),
-            block_id=np.asarray(data["block_id"], dtype=np.int64),
-            neighbor=np.asarray(data["neighbor"], dtype=np.int64),
-        )
+        geometry = geometry.decode() if isinstance(geometry, bytes) else str(geometry)
+        lo = np.asarray(data["domain_lo"], dtype=float)
+        hi = np.asarray(data["domain_hi"], dtype=float)
+        nblk = np.asarray(data["blocks_per_axis"], dtype=np.int64)
+        level = np.asarray(data["block_level"], dtype=np.int64)
+        if "block_index" in data:
+            index = np.asarray(data["block_index"], dtype=np.int64)
+        else:
+            width = np.where(nblk > 0, (hi - lo) / nblk, 1.0)
+            index = np.rint((np.asarray(data["block_lo"], dtype=float) - lo) / np.where(width > 0, width, 1.0))
+            index = np.where(np.arange(3) < GEOMETRY_DIMENSIONS[geometry], index, 0).astype(np.int64)
+        return cls.from_leaves(geometry, lo, hi, nblk, int(data["block_cells"]), bnd, level, index,
+                               int(data.get("max_level", 0)))

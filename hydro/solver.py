@@ -1,16 +1,21 @@
 """The hydro driver: :class:`Simulation` advances a :class:`HydroState` on a :class:`BlockMesh`.
 
-One step: dt from the CFL condition (:mod:`impactpipe.hydro.timestep`), then one sweep per
-used axis (:mod:`impactpipe.hydro.sweep`), each after filling the ghosts along its axis; the
-sweep order alternates every step (x y z, then z y x), which makes the splitting second
-order over a pair of steps (Strang).  The state at the start of the step is kept, so a
+One step: on an adaptive mesh, every ``refinement.interval`` steps, a regrid
+(:mod:`impactpipe.hydro.amr.regrid`); dt from the CFL condition over all blocks
+(:mod:`impactpipe.hydro.timestep`; one global step for every level); then one sweep per used
+axis (:mod:`impactpipe.hydro.sweep`), each after filling the ghosts along its axis and, on an
+adaptive mesh, followed by refluxing the coarse cells beside finer blocks
+(:func:`impactpipe.hydro.amr.transfer.reflux`); the sweep order alternates every step
+(x y z, then z y x), which makes the splitting second order over a pair of steps (Strang).  The state at the start of the step is kept, so a
 failing step leaves the last good state available (:meth:`Simulation.restore_last_good`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
+import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -18,6 +23,9 @@ import h5py
 import numba
 import numpy as np
 
+from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh
+from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.mesh import BlockMesh
@@ -83,13 +91,27 @@ class Simulation:
         time: initial time (s).
         tracers: Lagrangian tracers carried with the flow, or None.  Any object with
             ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
-            ``save(h5group)`` (see :mod:`impactpipe.hydro.tracers`).
+            ``save(h5group)`` and ``mesh_changed(mesh)`` (see :mod:`impactpipe.hydro.tracers`).
+        refinement: when and where an adaptive mesh (``mesh.max_level`` > 0) refines; the
+            default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
+        gravity: external gravity applied once per step after the strength step, or None: an
+            object with ``advance(state, dt, block_lo, block_dx)`` and ``work`` (J), see
+            :class:`impactpipe.hydro.gravity.ExternalGravity`.
     """
 
     def __init__(self, mesh: BlockMesh, material_names: list[str], eos_specs: list[dict], state: HydroState,
                  cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0,
                  tracers=None, tensile_strength: Iterable[float] | None = None,
-                 strength: list[dict | None] | None = None):
+                 strength: list[dict | None] | None = None, gravity=None,
+                 refinement: RefinementRule | None = None):
+        self.gravity = gravity
+        self.refinement = refinement or RefinementRule()
+        #: Regrids that changed the mesh, blocks split into children and sibling groups merged.
+        self.regrids = 0
+        self.blocks_refined = 0
+        self.blocks_coarsened = 0
+        #: Wall seconds spent in :meth:`regrid` (flagging, balancing, moving the state).
+        self.regrid_seconds = 0.0
         if not 0.0 < cfl <= 1.0:
             raise ValueError(f"cfl must be in (0, 1], got {cfl}")
         if len(material_names) != state.nmat or len(eos_specs) != state.nmat:
@@ -132,8 +154,17 @@ class Simulation:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
         self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape), nq)
-        self._good = state.copy()
-        self._good_counters = (self.boundary.copy(), self.floors.copy(), self.amounts.copy()) + self._strength_counters()
+        self._face_flux = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim,
+                                             state.nmat, state.arhoq.shape[1])
+        if mesh.adaptive:
+            for axis in range(mesh.ndim):
+                fill_state_ghosts(state, mesh, axis)
+        self._keep_good()
+
+    def _keep_good(self) -> None:
+        """Start the last-good copies (state, counters, clock) from the current ones."""
+        self._good = self.state.copy()
+        self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
 
     # ------------------------------------------------------------------ stepping
@@ -153,6 +184,8 @@ class Simulation:
 
     def step(self, dt_max: float = np.inf) -> float:
         """Advance one step of at most ``dt_max`` (s); returns the step taken (s)."""
+        if self.mesh.adaptive and self.step_count % self.refinement.interval == 0:
+            self.regrid()
         dt = self.stable_dt()
         if self.dt_first is None:
             self.dt_first = dt
@@ -170,16 +203,21 @@ class Simulation:
         for axis in axes:
             fill_state_ghosts(st, self.mesh, axis)
             sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
-                  self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.eos.kind, self.eos.params,
-                  self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary,
-                  self.floors, self.amounts,
-                  self._failure)
+                  self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.mesh.neighbor_level,
+                  self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary, self.floors, self.amounts, self._failure,
+                  self._face_flux)
             if self._failure[:, 0].any():
                 self._raise_sweep_failure()
+            if self.mesh.adaptive:
+                plans = axis_plans(self.mesh, axis)
+                reflux(axis, plans["reflux"], plans["reflux_volume"], self._face_flux, st.alpha, st.arho, st.arhoe,
+                       st.arhoq, st.momentum, st.energy, self.floors, self.amounts)
         if self.strength is not None:
-            self.strength.advance(st, dt, self.eos, self.boundary)
+            self.strength.advance(st, dt, self.eos, self.boundary, self.floors, self.amounts)
             if not np.isfinite(st.momentum).all():
                 raise HydroFailure("NaN in the momentum after the strength step", self._good_clock[0], -1, None, {})
+        if self.gravity is not None:
+            self.gravity.advance(st, dt, self.mesh.block_lo, self.mesh.block_dx)
         self.time += dt
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
@@ -214,6 +252,49 @@ class Simulation:
         if self.time >= end_time * (1.0 - 1e-14):
             self.time = end_time
         return steps
+
+    # ------------------------------------------------------------------ refinement
+
+    def regrid(self) -> bool:
+        """Refine and coarsen the adaptive mesh by the refinement rule; True when it changed.
+
+        The state moves onto the new blocks conservatively (:mod:`impactpipe.hydro.amr.regrid`).
+        Per-block counters are summed into the new mesh's first block, so every total stays.
+        """
+        started = time.perf_counter()
+        try:
+            return self._regrid()
+        finally:
+            self.regrid_seconds += time.perf_counter() - started
+
+    def _regrid(self) -> bool:
+        mesh, st = self.mesh, self.state
+        for axis in range(mesh.ndim):
+            fill_state_ghosts(st, mesh, axis)
+        refine, coarsen = flag_blocks(mesh, st, self.eos, self.shear_modulus, self.tensile_strength,
+                                      self.refinement)
+        plan = plan_leaves(mesh, refine, coarsen)
+        if plan is None:
+            return False
+        new_mesh, new_state = remesh(mesh, st, plan)
+        self.mesh, self.state = new_mesh, new_state
+        for axis in range(new_mesh.ndim):
+            fill_state_ghosts(new_state, new_mesh, axis)
+        nb = new_mesh.nblocks
+        self.boundary, self.floors, self.amounts = (_summed_rows(a, nb) for a in (self.boundary, self.floors,
+                                                                                 self.amounts))
+        self._failure = np.zeros((nb, 4), dtype=np.int64)
+        self._rate = np.zeros(nb)
+        self._face_flux = allocate_face_flux(nb, new_mesh.padded_shape, new_mesh.ndim, st.nmat, st.arhoq.shape[1])
+        if self.strength is not None:
+            self.strength.mesh_changed(new_mesh)
+        if self.tracers is not None:
+            self.tracers.mesh_changed(new_mesh)
+        self.regrids += 1
+        self.blocks_refined += len(plan["children"]) // 2 ** new_mesh.ndim
+        self.blocks_coarsened += len(plan["parents"]) // 2 ** new_mesh.ndim
+        self._keep_good()
+        return True
 
     # ------------------------------------------------------------------ failure handling
 
@@ -352,9 +433,16 @@ class Simulation:
                 fh.attrs["material_names"] = json.dumps(self.material_names)
                 fh.attrs["eos_specs"] = json.dumps(self.eos_specs)
                 fh.attrs["strength_specs"] = json.dumps(self.strength_specs)
+                fh.attrs["refinement"] = json.dumps(dataclasses.asdict(self.refinement))
+                fh.attrs["regrids"] = self.regrids
+                fh.attrs["blocks_refined"] = self.blocks_refined
+                fh.attrs["blocks_coarsened"] = self.blocks_coarsened
                 mesh_grp = fh.create_group("mesh")
                 for key, value in self.mesh.to_arrays().items():
-                    mesh_grp.attrs[key] = value if isinstance(value, (str, int)) else np.asarray(value)
+                    if isinstance(value, (str, int)):
+                        mesh_grp.attrs[key] = value
+                    else:
+                        mesh_grp.create_dataset(key, data=np.asarray(value))
                 state_grp = fh.create_group("state")
                 for name in FIELDS:
                     state_grp.create_dataset(name, data=getattr(self.state, name))
@@ -374,7 +462,9 @@ class Simulation:
     def from_checkpoint(cls, path: str | Path) -> "Simulation":
         """Rebuild a Simulation written by :meth:`save_checkpoint`; it continues bit for bit."""
         with h5py.File(path, "r") as fh:
-            mesh = BlockMesh.from_arrays(dict(fh["mesh"].attrs))
+            mesh_data = dict(fh["mesh"].attrs)
+            mesh_data.update({key: fh["mesh"][key][()] for key in fh["mesh"]})
+            mesh = BlockMesh.from_arrays(mesh_data)
             nmat = fh["state/alpha"].shape[1]
             arrays = {name: fh["state"][name][()] for name in FIELDS if name in fh["state"]}
             arrays.setdefault("arhoq", np.zeros((mesh.nblocks, 0) + mesh.padded_shape))
@@ -384,7 +474,16 @@ class Simulation:
             sim = cls(mesh, json.loads(fh.attrs["material_names"]), json.loads(fh.attrs["eos_specs"]), state,
                       cfl=float(fh.attrs["cfl"]), shear_modulus=None if strength else shear.reshape(nmat, -1)[:, 0],
                       tensile_strength=fh["counters/tensile_strength"][()],
-                      time=float(fh.attrs["time"]), strength=strength)
+                      time=float(fh.attrs["time"]), strength=strength,
+                      refinement=_rule_from_json(fh.attrs.get("refinement")))
+            if mesh.adaptive:  # the ghosts as saved (the constructor refilled them), so the run continues exactly
+                for name in FIELDS:
+                    if name in fh["state"]:
+                        np.copyto(getattr(sim.state, name), fh["state"][name][()])
+                sim._keep_good()
+            sim.regrids = int(fh.attrs.get("regrids", 0))
+            sim.blocks_refined = int(fh.attrs.get("blocks_refined", 0))
+            sim.blocks_coarsened = int(fh.attrs.get("blocks_coarsened", 0))
             sim.step_count = int(fh.attrs["step_count"])
             sim.cell_updates = int(fh.attrs["cell_updates"])
             dt_first = float(fh.attrs["dt_first"])
@@ -400,6 +499,22 @@ class Simulation:
 
                 sim.tracers = Tracers.load(fh["tracers"])
         return sim
+
+
+def _rule_from_json(text) -> RefinementRule | None:
+    """The refinement rule saved by :meth:`Simulation.save_checkpoint` (None in older checkpoints)."""
+    if text is None:
+        return None
+    values = json.loads(text)
+    values["boxes"] = tuple((tuple(lo), tuple(hi), int(level)) for lo, hi, level in values.get("boxes", ()))
+    return RefinementRule(**values)
+
+
+def _summed_rows(counters: np.ndarray, nblocks: int) -> np.ndarray:
+    """Per-block counters for a new mesh of ``nblocks`` blocks: the old totals in row 0."""
+    out = np.zeros((nblocks,) + counters.shape[1:], dtype=counters.dtype)
+    out[0] = counters.sum(axis=0)
+    return out
 
 
 def _load_named_columns(dataset, names: tuple[str, ...], out: np.ndarray) -> None:

@@ -65,6 +65,8 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
             "cells_per_projectile_radius": config.hydro.cells_per_projectile_radius,
             "margin": values["domain"]["margin"],
             "end_time": values["end_time"],
+            "levels": values["levels"],
+            "refinement": config.hydro.refinement.model_dump(),
         }
     params = scene.model_dump(exclude={"problem", "geometry"})
     if scene.problem == "interface_advection" and params["outer"] is None:

@@ -174,13 +174,15 @@ def _cell_index(axis, i, j1, j2):
 
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
-          eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary, floors, amounts,
-          failure):
+          neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
+          floors, amounts, failure, face_flux):
     """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
     ``boundary``, ``floors``, ``amounts`` accumulate per block; ``failure`` records the first
-    failing cell of each block.
+    failing cell of each block.  Through each block face along ``axis`` whose neighbour is at
+    another refinement level (``neighbor_level`` != 0) the amounts dt A F are stored in
+    ``face_flux[b, side, :, j1, j2]`` for refluxing (:mod:`impactpipe.hydro.amr.transfer`).
     """
     nb, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
@@ -311,6 +313,18 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         boundary[b, BND_MOMENTUM + t1] += w * sc[f_row + F_MT1, f]
                         boundary[b, BND_MOMENTUM + t2] += w * sc[f_row + F_MT2, f]
                         boundary[b, BND_ENERGY] += w * sc[f_row + F_E, f]
+                    elif neighbor_level[b, axis, side] != 0:
+                        f = g if side == 0 else g + n
+                        area = dt * (face_area_lo if side == 0 else face_area_hi)
+                        for k in range(nmat):
+                            for c in range(3):
+                                face_flux[b, side, c * nmat + k, j1, j2] = area * sc[f_row + F_MAT + 3 * k + c, f]
+                        face_flux[b, side, 3 * nmat + axis, j1, j2] = area * sc[f_row + F_MN, f]
+                        face_flux[b, side, 3 * nmat + t1, j1, j2] = area * sc[f_row + F_MT1, f]
+                        face_flux[b, side, 3 * nmat + t2, j1, j2] = area * sc[f_row + F_MT2, f]
+                        face_flux[b, side, 3 * nmat + 3, j1, j2] = area * sc[f_row + F_E, f]
+                        for c in range(nmat * nq):
+                            face_flux[b, side, 3 * nmat + 4 + c, j1, j2] = area * sc[fq_row + c, f]
                 # 4-5. update interior cells
                 for i in range(g, g + n):
                     ix, iy, iz = _cell_index(axis, i, j1, j2)

@@ -14,12 +14,23 @@ multilinear weights.  Weighting by the tracer's own partial density means void a
 materials (a_c = 0) do not drag it: a tracer in a slab next to void moves with the slab.
 In a single material of uniform density v is plain multilinear interpolation (exact for a
 linear velocity field).  When every a_c vanishes the tracer takes the velocity of the cell
-that contains it (0 in a void cell).  The stencil reads interior cells only: a stencil cell
-outside the owning block is taken from the neighbour block through ``mesh.neighbor``
-(corners by two hops); at a domain face a reflecting boundary mirrors the cell and negates
-the normal velocity (the symmetry axis r = 0 is one), outflow repeats the edge cell
-(zero gradient), periodic wraps.  Ghost layers are never read, so the hydro state is not
-touched.
+that contains it (0 in a void cell).
+
+**Stencil on an adaptive mesh.**  The stencil lives on the cell grid of one level, addressed
+by global cell indices; the leaf holding any cell is found by walking the block tree
+(:func:`block_tree`).  It starts on the owning block's level L.  A stencil cell in a leaf
+of that level is read directly; one in a finer leaf (L + 1) stands for the 2^ndim cells
+covering it, each with W_c / 2^ndim (their mean); when a cell of positive weight lies in a
+coarser leaf, the whole stencil is taken on the grid of level L - 1 instead (the owning
+block's cells then enter by 2^ndim as well).  Every stencil is thus multilinear
+interpolation on one level with exact point values of a linear field, so a linear field is
+interpolated exactly across coarse/fine faces, edges and corners; the price is the coarser
+stencil within about one cell of a coarser leaf.  On a single-level mesh this is the plain
+stencil of the owning block.  At a domain face a reflecting boundary mirrors the cell and
+negates the normal velocity (the symmetry axis r = 0 is one), outflow repeats the edge cell
+(zero gradient), periodic wraps.  Interior cells only are read: ghost layers are stale
+between sweeps (the solver fills each axis's ghosts just before its sweep) and are never
+read, so the tracers do not touch the hydro state.
 
 **Time integration** (Heun, second order): with v_n the field at t_n (sampled in
 :meth:`Tracers.before_step`, before the sweeps) and v_{n+1} the field after the step,
@@ -49,10 +60,12 @@ The peak pressure (Pa), its time (s) and the peak temperature (K) are the runnin
 that reaches k * history_interval appends (time, all positions) to arrays preallocated for
 ``end_time`` and doubled when full; 24 bytes per tracer and sample.
 
-**Block lookup.**  :class:`UniformLocator` finds the owning block of a point on a
-single-level :class:`~impactpipe.hydro.mesh.BlockMesh` by arithmetic on the block grid
-(:func:`locate`).  An AMR mesh replaces it with a locator of the same call signature;
-the stencil only needs the owning block and the neighbour table.
+**Block lookup.**  :class:`BlockLocator` finds the owning leaf block of a point on any
+:class:`~impactpipe.hydro.mesh.BlockMesh` (:func:`locate`): the root block from the root
+block grid, then one step down the block tree per level.  A regrid builds a new mesh with
+renumbered blocks; the Simulation then calls :meth:`Tracers.mesh_changed`, which rebuilds
+the locator and re-finds every tracer's block.  Positions and records are untouched by a
+regrid (a tracer is a point, not a cell quantity).
 """
 
 from __future__ import annotations
@@ -63,7 +76,7 @@ import numpy as np
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed, temperature
-from impactpipe.hydro.mesh import GHOST, OUTFLOW, REFLECTING, BlockMesh
+from impactpipe.hydro.mesh import GHOST, OUTFLOW, REFLECTING, BlockMesh, block_keys
 from impactpipe.hydro.snapshot import TracerSet
 from impactpipe.hydro.timestep import ALPHA_MIN
 from impactpipe.pipeline.runstore import write_dataset
@@ -97,70 +110,129 @@ HISTORY_CHUNK = 64
 
 # ---------------------------------------------------------------------------- block lookup
 
+#: Entry of a block tree under construction that no block has filled (the leaves leave a hole).
+_UNSET = np.iinfo(np.int64).min
+
+
+def block_tree(mesh: BlockMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The leaf blocks of ``mesh`` as a tree of refined blocks over the root block grid.
+
+    Returns ``root`` (``blocks_per_axis`` shape) coding each level-0 block and ``children``
+    (nodes, 2^ndim) coding child c of each refined block (bit d of c set: the upper half
+    along axis d, i.e. child index 2 i_d + 1 on the next level).  A code >= 0 is the index
+    of a leaf block, a code < 0 the refined block (tree node) -1 - code.  A single-level
+    mesh has no nodes and ``root`` maps the block grid to the block indices.
+    """
+    ndim = mesh.ndim
+    level, index = mesh.block_level, mesh.block_index
+    top = int(level.max(initial=0))
+    node_keys, node_index = [], []
+    for lev in range(top):
+        deeper = level > lev
+        ancestors = index[deeper] >> (level[deeper] - lev)[:, None]
+        keys, first = np.unique(block_keys(np.full(len(ancestors), lev), ancestors), return_index=True)
+        node_keys.append(keys)
+        node_index.append(ancestors[first])
+    offset = np.cumsum([0] + [len(k) for k in node_keys])
+    root = np.full(tuple(int(n) for n in mesh.blocks_per_axis), _UNSET, dtype=np.int64)
+    children = np.full((int(offset[-1]), 1 << ndim), _UNSET, dtype=np.int64)
+    for lev in range(top + 1):
+        leaf = np.flatnonzero(level == lev)
+        items = index[leaf]
+        codes = leaf
+        if lev < top:
+            items = np.concatenate([items, node_index[lev]])
+            codes = np.concatenate([codes, -1 - (offset[lev] + np.arange(len(node_keys[lev])))])
+        if lev == 0:
+            root[items[:, 0], items[:, 1], items[:, 2]] = codes
+            continue
+        parent = offset[lev - 1] + np.searchsorted(node_keys[lev - 1],
+                                                   block_keys(np.full(len(items), lev - 1), items >> 1))
+        bit = ((items[:, :ndim] & 1) << np.arange(ndim)).sum(axis=1)
+        children[parent, bit] = codes
+    if (root == _UNSET).any() or (children == _UNSET).any():
+        raise ValueError("the leaf blocks do not tile the domain")
+    return root, children
+
+
+@njit(cache=True)
+def _grid_index(s, lev, n):
+    """Index floor(2^lev s) on the level-``lev`` block grid of an axis with ``n`` root blocks,
+    clamped to [0, n 2^lev - 1] (s = position / root block width)."""
+    return min(max(int(math.floor(s * (1 << lev))), 0), (n << lev) - 1)
+
 
 @njit(cache=True, parallel=True)
-def _locate_uniform(position, skip, domain_lo, domain_hi, block_width, table, ndim, out):
-    """Owning block of each point on a uniform block grid, into ``out[N]``.
+def _locate(position, skip, domain_lo, domain_hi, block_width, root, children, ndim, out):
+    """Owning leaf block of each point, into ``out[N]``.
 
-    Block grid index ib_d = floor((x_d - lo_d) / w_d), clamped so that x_d = hi_d belongs
-    to the last block; ``out`` is -1 for skipped points and points outside [lo, hi].
+    With s_d = (x_d - lo_d) / w_d (w_d the root block width) the block holding the point on
+    level L has grid index floor(2^L s_d) (clamped, so that x_d = hi_d belongs to the last
+    block); the walk starts at the root block and descends into the child holding the point
+    until it reaches a leaf.  Multiplying by 2^L is exact, so the indices of successive
+    levels nest.  ``out`` is -1 for skipped points and points outside [lo, hi].
     """
-    nblk = table.shape
+    nblk = root.shape
     for t in prange(position.shape[0]):
         if skip[t]:
             out[t] = -1
             continue
         inside = True
-        i0 = 0
-        i1 = 0
-        i2 = 0
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
         for d in range(ndim):
             x = position[t, d]
             if not (domain_lo[d] <= x <= domain_hi[d]):
                 inside = False
                 break
-            i = min(max(int(math.floor((x - domain_lo[d]) / block_width[d])), 0), nblk[d] - 1)
+            s = (x - domain_lo[d]) / block_width[d]
             if d == 0:
-                i0 = i
+                s0 = s
             elif d == 1:
-                i1 = i
+                s1 = s
             else:
-                i2 = i
-        out[t] = table[i0, i1, i2] if inside else -1
+                s2 = s
+        if not inside:
+            out[t] = -1
+            continue
+        i0 = _grid_index(s0, 0, nblk[0])
+        i1 = _grid_index(s1, 0, nblk[1])
+        i2 = _grid_index(s2, 0, nblk[2])
+        code = root[i0, i1, i2]
+        lev = 0
+        while code < 0:
+            lev += 1
+            j0 = _grid_index(s0, lev, nblk[0])
+            j1 = _grid_index(s1, lev, nblk[1]) if ndim > 1 else 0
+            j2 = _grid_index(s2, lev, nblk[2]) if ndim > 2 else 0
+            code = children[-1 - code, (j0 - 2 * i0) + 2 * (j1 - 2 * i1) + 4 * (j2 - 2 * i2)]
+            i0, i1, i2 = j0, j1, j2
+        out[t] = code
 
 
-class UniformLocator:
-    """Owning-block lookup on a single-level :class:`BlockMesh`.
+class BlockLocator:
+    """Owning-block lookup on a :class:`BlockMesh` of any leaf set (single-level or adaptive).
 
-    The block grid (``blocks_per_axis`` blocks of width (domain_hi - domain_lo) /
-    blocks_per_axis per axis) is mapped to block indices from ``block_lo``, so no block
-    ordering is assumed.  Call ``locator(positions, skip, out)``: ``positions`` (N, 3) m,
+    Holds the block tree of :func:`block_tree`; the walk per point costs one step per
+    level (:func:`_locate`).  Call ``locator(positions, skip, out)``: ``positions`` (N, 3) m,
     ``skip`` (N,) bool, ``out`` (N,) int64 receives the block index, -1 for skipped points
-    and points outside the domain.
+    and points outside the domain.  Build a new one for every new mesh (every regrid).
     """
 
     def __init__(self, mesh: BlockMesh):
         ndim = mesh.ndim
-        if np.any(mesh.block_level != 0):
-            raise ValueError("UniformLocator needs a single-level mesh (block_level all 0)")
-        nblk = np.asarray(mesh.blocks_per_axis, dtype=np.int64)
         width = np.ones(3)
-        width[:ndim] = (mesh.domain_hi[:ndim] - mesh.domain_lo[:ndim]) / nblk[:ndim]
-        grid = np.zeros((mesh.nblocks, 3), dtype=np.int64)
-        grid[:, :ndim] = np.rint((mesh.block_lo[:, :ndim] - mesh.domain_lo[:ndim]) / width[:ndim]).astype(np.int64)
-        table = np.full(tuple(int(n) for n in nblk), -1, dtype=np.int64)
-        table[grid[:, 0], grid[:, 1], grid[:, 2]] = np.arange(mesh.nblocks)
-        if (table < 0).any():
-            raise ValueError("the blocks do not tile the domain's block grid")
+        width[:ndim] = (mesh.domain_hi[:ndim] - mesh.domain_lo[:ndim]) / mesh.blocks_per_axis[:ndim]
         self.ndim = ndim
         self.domain_lo = mesh.domain_lo.copy()
         self.domain_hi = mesh.domain_hi.copy()
         self.block_width = width
-        self.table = table
+        self.root, self.children = block_tree(mesh)
 
     def __call__(self, positions: np.ndarray, skip: np.ndarray, out: np.ndarray) -> np.ndarray:
-        _locate_uniform(positions, skip, self.domain_lo, self.domain_hi, self.block_width, self.table,
-                        self.ndim, out)
+        _locate(positions, skip, self.domain_lo, self.domain_hi, self.block_width, self.root, self.children,
+                self.ndim, out)
         return out
 
 
@@ -168,56 +240,119 @@ def locate(mesh: BlockMesh, positions) -> np.ndarray:
     """(N,) index of the block containing each point of ``positions`` (N, 3) m, -1 outside the domain."""
     pos = _as_positions(positions)
     out = np.empty(pos.shape[0], dtype=np.int64)
-    return UniformLocator(mesh)(pos, np.zeros(pos.shape[0], dtype=np.bool_), out)
+    return BlockLocator(mesh)(pos, np.zeros(pos.shape[0], dtype=np.bool_), out)
 
 
 # ---------------------------------------------------------------------------- stencil
+#
+# Cells are addressed by global indices on the cell grid of a level L: cell g_d along axis d
+# covers [lo_d + g_d dx_L, lo_d + (g_d + 1) dx_L], dx_L = dx_0 / 2^L; block b holds the cells
+# block_index[b] * block_cells + [0, block_cells) of its own level.
 
 
 @njit(cache=True, inline="always")
-def _step_axis(blk, idx, d, n, neighbor):
-    """(block, interior index, velocity sign) of the cell ``idx`` in [-1, n] along axis ``d`` of block ``blk``."""
-    if idx < 0:
-        nbr = neighbor[blk, d, 0]
-        if nbr >= 0:
-            return nbr, idx + n, 1.0
-        if nbr == REFLECTING:
-            return blk, -1 - idx, -1.0
-        return blk, 0, 1.0
-    if idx >= n:
-        nbr = neighbor[blk, d, 1]
-        if nbr >= 0:
-            return nbr, idx - n, 1.0
-        if nbr == REFLECTING:
-            return blk, 2 * n - 1 - idx, -1.0
-        return blk, n - 1, 1.0
-    return blk, idx, 1.0
+def _cell_block(g, lev, m, block_cells):
+    """Index on the level-``m`` block grid of the block covering cell ``g`` of level ``lev``."""
+    if m <= lev:
+        return (g >> (lev - m)) // block_cells
+    return (g << (m - lev)) // block_cells
 
 
 @njit(cache=True, inline="always")
-def _base(x, lo, dx, d, ndim):
-    """Lower stencil index (cell-centred, may be -1) and the weight of the upper cell along axis ``d``."""
+def _leaf_of_cell(g0, g1, g2, lev, block_cells, root, children):
+    """(leaf block, its level m) covering cell (g0, g1, g2) of level ``lev`` (unused axes 0).
+
+    m < lev: the leaf is coarser than the cell; m >= lev: the cell is the 2^(m - lev) cells
+    per used axis from g 2^(m - lev) of that leaf (all in it: a stencil spans levels L - 1 to
+    L + 1 around a block of level L by the 2:1 balance, so m - lev <= 2, and block_cells is
+    a multiple of 4 on a refined mesh, :meth:`Tracers.mesh_changed`).
+    """
+    i0 = _cell_block(g0, lev, 0, block_cells)
+    i1 = _cell_block(g1, lev, 0, block_cells)
+    i2 = _cell_block(g2, lev, 0, block_cells)
+    code = root[i0, i1, i2]
+    m = 0
+    while code < 0:
+        m += 1
+        j0 = _cell_block(g0, lev, m, block_cells)
+        j1 = _cell_block(g1, lev, m, block_cells)
+        j2 = _cell_block(g2, lev, m, block_cells)
+        code = children[-1 - code, (j0 - 2 * i0) + 2 * (j1 - 2 * i1) + 4 * (j2 - 2 * i2)]
+        i0, i1, i2 = j0, j1, j2
+    return code, m
+
+
+@njit(cache=True, inline="always")
+def _wrap(g, n, low, high):
+    """(cell index in [0, n), velocity sign) for cell ``g`` of an axis of ``n`` cells with the
+    domain-face codes ``low`` and ``high`` (|g| or g - n at most one cell outside).
+
+    Periodic wraps, reflecting mirrors (g -> -1 - g or 2 n - 1 - g, sign -1), outflow
+    repeats the edge cell.
+    """
+    if g < 0:
+        if low == PERIODIC:
+            return g + n, 1.0
+        if low == REFLECTING:
+            return -1 - g, -1.0
+        return 0, 1.0
+    if g >= n:
+        if high == PERIODIC:
+            return g - n, 1.0
+        if high == REFLECTING:
+            return 2 * n - 1 - g, -1.0
+        return n - 1, 1.0
+    return g, 1.0
+
+
+@njit(cache=True, inline="always")
+def _base(x, b, lev, d, ndim, block_lo, block_dx, block_index, block_level, block_cells):
+    """Lower stencil cell and the weight of the upper cell along axis ``d`` on the level-``lev``
+    cell grid (lev <= the level of block ``b``), for the point x inside block ``b``.
+
+    The cell index i counts from cell q, the level-lev cell holding the block's first cell
+    f = block_index[b, d] block_cells; with r = 2^(level_b - lev) and f = r q + p,
+    s = ((x - block_lo) / dx_b + p) / r - 0.5 is the point's position in level-lev cells
+    from the centre of cell q: i = floor(s), weight s - i.  On the block's own level
+    (r = 1, q = f) this is s = (x - block_lo) / dx_b - 0.5.
+    """
     if d >= ndim:
         return 0, 0.0
-    s = (x - lo) / dx - 0.5
+    shift = block_level[b] - lev
+    if shift == 0:
+        s = (x - block_lo[b, d]) / block_dx[b, d] - 0.5
+    else:
+        first = block_index[b, d] * block_cells
+        s = ((x - block_lo[b, d]) / block_dx[b, d] + (first - ((first >> shift) << shift))) / (1 << shift) - 0.5
     i = int(math.floor(s))
     return i, s - i
 
 
 @njit(cache=True, inline="always")
-def _corner(c, b, i0, j0, k0, fx, fy, fz, ndim, ncell, neighbor):
-    """Corner ``c`` (bit d = upper cell along axis d) of the stencil of block ``b``.
+def _global_cell(i, b, lev, d, block_index, block_level, block_cells):
+    """Global index on the level-``lev`` cell grid of cell ``i`` counted as in :func:`_base`."""
+    return ((block_index[b, d] * block_cells) >> (block_level[b] - lev)) + i
 
-    Returns (block, padded ix, iy, iz, multilinear weight, velocity signs sx, sy, sz).
+
+@njit(cache=True, inline="always")
+def _corner(c, b, lev, i0, j0, k0, fx, fy, fz, ndim, codes, cells, block_index, block_level, block_cells,
+            root, children):
+    """Corner ``c`` (bit d set: upper cell along axis d) of the level-``lev`` stencil with lower
+    cell (i0, j0, k0) (counted as in :func:`_base`) around a point in block ``b``.
+
+    Returns (block, padded ix, iy, iz, n, multilinear weight, velocity signs sx, sy, sz): the
+    corner cell is the n cells per used axis from (ix, iy, iz) of that leaf block (n = 1 on
+    the leaf's own level, 2^(m - lev) on a finer leaf of level m), after the domain faces
+    (:func:`_wrap`, on the level's ``cells << lev`` cells per axis).  Block -1 when the leaf
+    is coarser than ``lev`` (the stencil must drop a level).
     """
     ix, iy, iz = i0, j0, k0
     w = 1.0
-    if ndim > 0:
-        if c & 1:
-            ix += 1
-            w *= fx
-        else:
-            w *= 1.0 - fx
+    if c & 1:
+        ix += 1
+        w *= fx
+    else:
+        w *= 1.0 - fx
     if ndim > 1:
         if c & 2:
             iy += 1
@@ -232,15 +367,26 @@ def _corner(c, b, i0, j0, k0, fx, fy, fz, ndim, ncell, neighbor):
             w *= 1.0 - fz
     gy = GHOST if ndim > 1 else 0
     gz = GHOST if ndim > 2 else 0
-    if 0 <= ix < ncell[0] and 0 <= iy < ncell[1] and 0 <= iz < ncell[2]:
-        return b, ix + GHOST, iy + gy, iz + gz, w, 1.0, 1.0, 1.0
-    blk, ix, sx = _step_axis(b, ix, 0, ncell[0], neighbor)
-    sy = sz = 1.0
+    if lev == block_level[b] and 0 <= ix < block_cells and 0 <= iy < block_cells and 0 <= iz < block_cells:
+        return b, ix + GHOST, iy + gy, iz + gz, 1, w, 1.0, 1.0, 1.0
+    g0, sx = _wrap(_global_cell(ix, b, lev, 0, block_index, block_level, block_cells), cells[0] << lev,
+                   codes[0, 0], codes[0, 1])
+    g1, sy = 0, 1.0
+    g2, sz = 0, 1.0
     if ndim > 1:
-        blk, iy, sy = _step_axis(blk, iy, 1, ncell[1], neighbor)
+        g1, sy = _wrap(_global_cell(iy, b, lev, 1, block_index, block_level, block_cells), cells[1] << lev,
+                       codes[1, 0], codes[1, 1])
     if ndim > 2:
-        blk, iz, sz = _step_axis(blk, iz, 2, ncell[2], neighbor)
-    return blk, ix + GHOST, iy + gy, iz + gz, w, sx, sy, sz
+        g2, sz = _wrap(_global_cell(iz, b, lev, 2, block_index, block_level, block_cells), cells[2] << lev,
+                       codes[2, 0], codes[2, 1])
+    blk, m = _leaf_of_cell(g0, g1, g2, lev, block_cells, root, children)
+    if m < lev:
+        return -1, 0, 0, 0, 0, w, sx, sy, sz
+    shift = m - lev
+    ix = (g0 << shift) - block_index[blk, 0] * block_cells + GHOST
+    iy = (g1 << shift) - block_index[blk, 1] * block_cells + gy if ndim > 1 else 0
+    iz = (g2 << shift) - block_index[blk, 2] * block_cells + gz if ndim > 2 else 0
+    return blk, ix, iy, iz, 1 << shift, w, sx, sy, sz
 
 
 @njit(cache=True, inline="always")
@@ -259,16 +405,76 @@ def _containing_cell(x, y, z, b, block_lo, block_dx, ncell, ndim):
 # ---------------------------------------------------------------------------- kernels
 
 
+@njit(cache=True, inline="always")
+def _velocity_terms(arho, momentum, blk, k, ix, iy, iz, w, sx, sy, sz, ndim):
+    """(W a u_x, W a u_y, W a u_z, W a) of cell (blk, ix, iy, iz) for material ``k``, u = m / rho
+    with the velocity signs applied; zeros where a = arho_k <= 0."""
+    a = arho[blk, k, ix, iy, iz]
+    if a <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    rho = 0.0
+    for j in range(arho.shape[1]):
+        rho += arho[blk, j, ix, iy, iz]
+    f = w * a / rho
+    t0 = f * sx * momentum[blk, 0, ix, iy, iz]
+    t1 = f * sy * momentum[blk, 1, ix, iy, iz] if ndim > 1 else 0.0
+    t2 = f * sz * momentum[blk, 2, ix, iy, iz] if ndim > 2 else 0.0
+    return t0, t1, t2, w * a
+
+
+@njit(cache=True)
+def _adaptive_velocity_sums(x, y, z, b, k, ndim, block_lo, block_dx, block_index, block_level, block_cells, codes,
+                            cells, root, children, arho, momentum):
+    """(sum W a u_x, sum W a u_y, sum W a u_z, sum W a) over the level-aware stencil of a point
+    in block ``b``: the stencil of the block's level, dropped one level at a time while a corner
+    of positive weight lies in a coarser leaf (a stencil of one level keeps multilinear
+    interpolation exact for linear fields); a corner on a finer leaf adds its n^ndim cells,
+    each with W / n^ndim (their mean stands for the coarser cell)."""
+    lev = block_level[b]
+    while True:
+        i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        num0 = 0.0
+        num1 = 0.0
+        num2 = 0.0
+        den = 0.0
+        complete = True
+        for c in range(1 << ndim):
+            blk, ix, iy, iz, n, w, sx, sy, sz = _corner(c, b, lev, i0, j0, k0, fx, fy, fz, ndim, codes, cells,
+                                                        block_index, block_level, block_cells, root, children)
+            if w <= 0.0:
+                continue
+            if blk < 0:
+                complete = False
+                break
+            share = w / n**ndim
+            for p in range(n):
+                for q in range(n if ndim > 1 else 1):
+                    for r in range(n if ndim > 2 else 1):
+                        t0, t1, t2, td = _velocity_terms(arho, momentum, blk, k, ix + p, iy + q, iz + r, share, sx,
+                                                         sy, sz, ndim)
+                        num0 += t0
+                        num1 += t1
+                        num2 += t2
+                        den += td
+        if complete:
+            return num0, num1, num2, den
+        lev -= 1
+
+
 @njit(cache=True, parallel=True)
-def _sample_velocity(position, sign, material, skip, block, block_lo, block_dx, ncell, ndim, neighbor,
-                     arho, momentum, out):
+def _sample_velocity(position, sign, material, skip, block, block_lo, block_dx, block_index, block_level,
+                     block_cells, ncell, ndim, codes, cells, root, children, arho, momentum, out):
     """Partial-density-weighted multilinear velocity (m/s) at each point, into ``out[N, 3]``.
 
     v = sum_c W_c a_c (m_c / rho_c) / sum_c W_c a_c with a_c the partial density of the
-    point's material; the containing cell's velocity when the denominator vanishes.
-    Momentum components beyond ``ndim`` are zero by the state's contract and not read.
-    Component d is multiplied by ``sign[t, d]`` (-1 for a point folded through a reflecting
-    face).  Skipped points are left unchanged.
+    point's material, over the cell-centred stencil of the owning block's level.  When a
+    corner of positive weight is not a single cell of that level (it lies in a finer or a
+    coarser leaf) the sums come from :func:`_adaptive_velocity_sums`.  The containing cell's
+    velocity when the denominator vanishes.  Momentum components beyond ``ndim`` are zero by
+    the state's contract and not read.  Component d is multiplied by ``sign[t, d]`` (-1 for
+    a point folded through a reflecting face).  Skipped points are left unchanged.
     """
     nmat = arho.shape[1]
     for t in prange(position.shape[0]):
@@ -277,28 +483,29 @@ def _sample_velocity(position, sign, material, skip, block, block_lo, block_dx, 
         b = block[t]
         k = material[t]
         x, y, z = position[t, 0], position[t, 1], position[t, 2]
-        i0, fx = _base(x, block_lo[b, 0], block_dx[b, 0], 0, ndim)
-        j0, fy = _base(y, block_lo[b, 1], block_dx[b, 1], 1, ndim)
-        k0, fz = _base(z, block_lo[b, 2], block_dx[b, 2], 2, ndim)
+        lev = block_level[b]
+        i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
         num0 = 0.0
         num1 = 0.0
         num2 = 0.0
         den = 0.0
         for c in range(1 << ndim):
-            blk, ix, iy, iz, w, sx, sy, sz = _corner(c, b, i0, j0, k0, fx, fy, fz, ndim, ncell, neighbor)
-            a = arho[blk, k, ix, iy, iz]
-            if w <= 0.0 or a <= 0.0:
+            blk, ix, iy, iz, n, w, sx, sy, sz = _corner(c, b, lev, i0, j0, k0, fx, fy, fz, ndim, codes, cells,
+                                                        block_index, block_level, block_cells, root, children)
+            if w <= 0.0:
                 continue
-            rho = 0.0
-            for j in range(nmat):
-                rho += arho[blk, j, ix, iy, iz]
-            f = w * a / rho
-            num0 += f * sx * momentum[blk, 0, ix, iy, iz]
-            if ndim > 1:
-                num1 += f * sy * momentum[blk, 1, ix, iy, iz]
-            if ndim > 2:
-                num2 += f * sz * momentum[blk, 2, ix, iy, iz]
-            den += w * a
+            if n != 1:
+                num0, num1, num2, den = _adaptive_velocity_sums(x, y, z, b, k, ndim, block_lo, block_dx, block_index,
+                                                                block_level, block_cells, codes, cells, root, children,
+                                                                arho, momentum)
+                break
+            t0, t1, t2, td = _velocity_terms(arho, momentum, blk, k, ix, iy, iz, w, sx, sy, sz, ndim)
+            num0 += t0
+            num1 += t1
+            num2 += t2
+            den += td
         if den > 0.0:
             v0, v1, v2 = num0 / den, num1 / den, num2 / den
         else:
@@ -317,15 +524,50 @@ def _sample_velocity(position, sign, material, skip, block, block_lo, block_dx, 
         out[t, 2] = sign[t, 2] * v2
 
 
+@njit(cache=True)
+def _adaptive_best_cell(x, y, z, b, k, ndim, block_lo, block_dx, block_index, block_level, block_cells, codes, cells,
+                        root, children, alpha, arho):
+    """(block, padded ix, iy, iz) of the cell with the largest W alpha_k rho_k (alpha_k > ALPHA_MIN)
+    over the level-aware stencil of :func:`_adaptive_velocity_sums` (block -1: none)."""
+    lev = block_level[b]
+    while True:
+        i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        best = 0.0
+        cb, cx, cy, cz = -1, 0, 0, 0
+        complete = True
+        for c in range(1 << ndim):
+            blk, ix, iy, iz, n, w, _, _, _ = _corner(c, b, lev, i0, j0, k0, fx, fy, fz, ndim, codes, cells,
+                                                     block_index, block_level, block_cells, root, children)
+            if w <= 0.0:
+                continue
+            if blk < 0:
+                complete = False
+                break
+            share = w / n**ndim
+            for p in range(n):
+                for q in range(n if ndim > 1 else 1):
+                    for r in range(n if ndim > 2 else 1):
+                        score = share * arho[blk, k, ix + p, iy + q, iz + r]
+                        if alpha[blk, k, ix + p, iy + q, iz + r] > ALPHA_MIN and score > best:
+                            best = score
+                            cb, cx, cy, cz = blk, ix + p, iy + q, iz + r
+        if complete:
+            return cb, cx, cy, cz
+        lev -= 1
+
+
 @njit(cache=True, parallel=True)
-def _record_peaks(position, material, skip, block, unrecorded_only, time, block_lo, block_dx, ncell, ndim,
-                  neighbor, alpha, arho, arhoe, eos_kind, eos_params, eos_table, peak_pressure,
-                  peak_pressure_time, peak_temperature):
+def _record_peaks(position, material, skip, block, unrecorded_only, time, block_lo, block_dx, block_index,
+                  block_level, block_cells, ncell, ndim, codes, cells, root, children, alpha, arho, arhoe, eos_kind,
+                  eos_params, eos_table, peak_pressure, peak_pressure_time, peak_temperature):
     """Update the running peak pressure (Pa, with its time in s) and peak temperature (K).
 
     The tracer's cell is the containing cell when it holds the tracer's material
-    (alpha_k > ALPHA_MIN), else the stencil cell with the largest W_c alpha_k rho_k; none
-    (material absent from the stencil) means no record this time.  There
+    (alpha_k > ALPHA_MIN), else the stencil cell with the largest W_c alpha_k rho_k (the
+    stencil of :func:`_sample_velocity`; :func:`_adaptive_best_cell` where it spans levels);
+    none (material absent from the stencil) means no record this time.  There
     rho_k = arho_k / alpha_k, e_k = arhoe_k / arho_k, p_k = P_k(rho_k, e_k), T_k = T_k(rho_k, e_k).
     With ``unrecorded_only`` only tracers without a record yet (NaN peak time) are sampled.
     Returns the number of tracers on the mesh still without a record.
@@ -340,13 +582,22 @@ def _record_peaks(position, material, skip, block, unrecorded_only, time, block_
         cb = b
         cx, cy, cz = _containing_cell(x, y, z, b, block_lo, block_dx, ncell, ndim)
         if not (alpha[cb, k, cx, cy, cz] > ALPHA_MIN and arho[cb, k, cx, cy, cz] > 0.0):
-            i0, fx = _base(x, block_lo[b, 0], block_dx[b, 0], 0, ndim)
-            j0, fy = _base(y, block_lo[b, 1], block_dx[b, 1], 1, ndim)
-            k0, fz = _base(z, block_lo[b, 2], block_dx[b, 2], 2, ndim)
+            lev = block_level[b]
+            i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+            j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+            k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
             best = 0.0
             cb = -1
             for c in range(1 << ndim):
-                blk, ix, iy, iz, w, _, _, _ = _corner(c, b, i0, j0, k0, fx, fy, fz, ndim, ncell, neighbor)
+                blk, ix, iy, iz, n, w, _, _, _ = _corner(c, b, lev, i0, j0, k0, fx, fy, fz, ndim, codes, cells,
+                                                         block_index, block_level, block_cells, root, children)
+                if w <= 0.0:
+                    continue
+                if n != 1:
+                    cb, cx, cy, cz = _adaptive_best_cell(x, y, z, b, k, ndim, block_lo, block_dx, block_index,
+                                                         block_level, block_cells, codes, cells, root, children,
+                                                         alpha, arho)
+                    break
                 score = w * arho[blk, k, ix, iy, iz]
                 if alpha[blk, k, ix, iy, iz] > ALPHA_MIN and score > best:
                     best = score
@@ -527,6 +778,7 @@ class Tracers:
         self._good = {name: getattr(self, name).copy() for name in self._MUTABLE}
         self._good_counts = (0, 0.0, n)
         self._mesh = None
+        self._nmat = None
 
     #: Arrays that a step changes (kept at the start of each step for :meth:`restore_good`).
     _MUTABLE = ("position", "velocity", "peak_pressure", "peak_pressure_time", "peak_temperature", "exited",
@@ -542,12 +794,21 @@ class Tracers:
     # ------------------------------------------------------------------ mesh binding
 
     def _bind(self, mesh: BlockMesh, nmat: int) -> None:
-        """Cache the mesh's lookup arrays; check the tracers against it (once per mesh object)."""
-        if mesh is self._mesh:
-            return
-        if (self.material >= nmat).any():
-            raise ValueError(f"tracer material index >= number of materials ({nmat})")
+        """Follow ``mesh`` unless it is the bound one; check the material indices against ``nmat``."""
+        if mesh is not self._mesh:
+            self.mesh_changed(mesh)
+        if nmat != self._nmat:
+            if (self.material >= nmat).any():
+                raise ValueError(f"tracer material index >= number of materials ({nmat})")
+            self._nmat = nmat
+
+    def mesh_changed(self, mesh: BlockMesh) -> None:
+        """Bind to a new mesh (the Simulation calls this after every regrid, which renumbers the
+        blocks): check the positions against it, rebuild the block lookup (:class:`BlockLocator`)
+        and re-find the owning block of every tracer on the mesh.  Positions and records stay."""
         ndim = mesh.ndim
+        if mesh.block_level.max(initial=0) > 0 and mesh.block_cells % 4:
+            raise ValueError(f"tracers on a refined mesh need block_cells divisible by 4, got {mesh.block_cells}")
         on = ~self.exited
         if np.any(self.position[on, ndim:] != 0.0):
             raise ValueError(f"{mesh.geometry}: tracer position components beyond axis {ndim} must be 0")
@@ -561,28 +822,39 @@ class Tracers:
             codes[d] = [kinds[pair[0]], kinds[pair[1]]]
         self._codes = codes
         self._ncell = np.asarray(mesh.interior_shape, dtype=np.int64)
-        self._locate = UniformLocator(mesh)
+        self._cells = np.asarray(mesh.blocks_per_axis, dtype=np.int64) * mesh.block_cells
+        self._locate = BlockLocator(mesh)
         self._mesh = mesh
+        self._locate(self.position, self.exited, self._block)
+
+    @property
+    def owning_block(self) -> np.ndarray:
+        """(N,) index of the block holding each tracer on the bound mesh (-1 once exited), as found
+        by the last step or :meth:`mesh_changed` (a copy)."""
+        return self._block.copy()
 
     def _sample(self, sim, dt: float, out: np.ndarray) -> None:
         """Sample the velocity at x_n + dt v_n (folded into the domain, into ``self._trial``; blocks
         into ``self._block``) into ``out``."""
         mesh = sim.mesh
+        loc = self._locate
         _fold(self.position, self._v_start, dt, self.exited, mesh.domain_lo, mesh.domain_hi, self._codes,
               mesh.ndim, self._trial, self._sign)
-        self._locate(self._trial, self.exited, self._block)
+        loc(self._trial, self.exited, self._block)
         _sample_velocity(self._trial, self._sign, self.material, self.exited, self._block, mesh.block_lo,
-                         mesh.block_dx, self._ncell, mesh.ndim, mesh.neighbor, sim.state.arho, sim.state.momentum,
-                         out)
+                         mesh.block_dx, mesh.block_index, mesh.block_level, mesh.block_cells, self._ncell, mesh.ndim,
+                         self._codes, self._cells, loc.root, loc.children, sim.state.arho, sim.state.momentum, out)
 
     def _record(self, sim, unrecorded_only: bool) -> None:
         """Peak pressure / temperature at the current positions (``self._block`` must be current)."""
         mesh = sim.mesh
         st = sim.state
         eos = sim.eos
+        loc = self._locate
         self._missing = _record_peaks(self.position, self.material, self.exited, self._block, unrecorded_only,
-                                      sim.time, mesh.block_lo, mesh.block_dx, self._ncell, mesh.ndim, mesh.neighbor,
-                                      st.alpha, st.arho, st.arhoe, eos.kind, eos.params, eos.table,
+                                      sim.time, mesh.block_lo, mesh.block_dx, mesh.block_index, mesh.block_level,
+                                      mesh.block_cells, self._ncell, mesh.ndim, self._codes, self._cells, loc.root,
+                                      loc.children, st.alpha, st.arho, st.arhoe, eos.kind, eos.params, eos.table,
                                       self.peak_pressure, self.peak_pressure_time, self.peak_temperature)
 
     def _sample_history(self, time: float) -> None:

@@ -19,6 +19,7 @@ from typing import Annotated, Any, Literal, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from impactpipe.hydro.amr.regrid import RefinementRule
 from impactpipe.hydro.problems import advection, impact, interface_advection, noh, planar_impact, sedov, shock_tube
 
 from . import presets
@@ -289,6 +290,35 @@ Scene = Annotated[
 # --------------------------------------------------------------------------- stages
 
 
+class RefinementBox(Strict):
+    lo: list[float] = Field(description="lower corner (m), one value per used axis")
+    hi: list[float] = Field(description="upper corner (m), one value per used axis")
+    level: int = Field(ge=0, description="refine every block overlapping the box to at least this level")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "RefinementBox":
+        if len(self.lo) != len(self.hi) or any(h <= lo for lo, h in zip(self.lo, self.hi)):
+            raise ValueError(f"lo = {self.lo} and hi = {self.hi} must have the same length with hi > lo on every axis")
+        return self
+
+
+class Refinement(Strict):
+    """``hydro.refinement``: when and where an adaptive mesh refines (impactpipe.hydro.amr.regrid.RefinementRule)."""
+
+    interval: int = Field(RefinementRule.interval, ge=1, description="steps between regrids")
+    interfaces: Literal["all", "active", "off"] = Field(
+        RefinementRule.interfaces, description="refine at material interfaces and free surfaces: everywhere to the "
+                                               "finest level (all), there only where they move or are loaded and one "
+                                               "level coarser where quiet (active), or not (off)")
+    pressure_jump: float | None = Field(RefinementRule.pressure_jump, gt=0, lt=1,
+                                        description="relative pressure jump across a cell that refines (null: off)")
+    density_jump: float | None = Field(RefinementRule.density_jump, gt=0, lt=1,
+                                       description="relative density jump across a cell that refines (null: off)")
+    pressure_floor: float = Field(RefinementRule.pressure_floor, gt=0, lt=1,
+                                  description="pressure floor of the jump indicator, fraction of the largest |p|")
+    boxes: list[RefinementBox] = Field(default_factory=list)
+
+
 class Tracers(Strict):
     enabled: bool | Literal["auto"] = "auto"
     count: int = Field(900, ge=0)
@@ -299,6 +329,7 @@ class Hydro(Strict):
     cells_per_projectile_radius: float = Field(20.0, gt=0)
     block_cells: int | None = Field(None, ge=4, le=64, description="cells per block edge; default 16 in 2D, 8 in 3D")
     max_levels: int | Literal["auto"] = "auto"
+    refinement: Refinement = Field(default_factory=Refinement)
     cfl: float = Field(0.4, gt=0, le=1)
     end_time: float | Literal["auto"] = "auto"
     output_times: list[float] | None = None

@@ -65,7 +65,11 @@ def derive(config: Config) -> dict[str, Any]:
     from impactpipe.hydro.stage import tracers_enabled
 
     out["tracers"], out["tracers_rule"] = tracers_enabled(config)
-    out["mesh"] = "uniform, one level at the finest cell size (adaptive refinement is not available yet)"
+    out["levels"], out["levels_rule"] = mesh_levels(config, geom)
+    out["mesh"] = ("uniform, one level at the finest cell size" if out["levels"] == 1 else
+                   f"adaptive, {out['levels']} levels (root cells 2^{out['levels'] - 1} finest cells), "
+                   f"refining at {refinement_summary(config.hydro.refinement)} every "
+                   f"{config.hydro.refinement.interval} steps")
     if config.scene.problem != "impact":
         out["end_time"] = config.scene.end_time
         return out
@@ -99,6 +103,47 @@ def derive(config: Config) -> dict[str, Any]:
     return out
 
 
+def mesh_levels(config: Config, geom: str) -> tuple[int, str]:
+    """Number of refinement levels of the hydro mesh and the rule that gave it.
+
+    ``hydro.max_levels: auto`` for an impact: levels = 1 + floor(log2(R_T / (n_b dx))), dx the
+    finest cell (R_P / cells_per_projectile_radius) and n_b the cells per block edge, so a
+    root block is at most one target radius wide; the finest level then holds the bodies'
+    surfaces and the shocks, the coarsest the quiet interior and the void.  Other scenes run
+    one level (their own resolution keys set the mesh).
+    """
+    from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS
+    from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS
+
+    chosen = config.hydro.max_levels
+    if config.scene.problem != "impact":
+        return (1, "one level: only impact scenes refine adaptively") if chosen == "auto" else \
+            (int(chosen), "set in the config")
+    if chosen != "auto":
+        return int(chosen), "set in the config"
+    scene = config.scene
+    block = config.hydro.block_cells or DEFAULT_BLOCK_CELLS[GEOMETRY_DIMENSIONS.get(geom, 2)]
+    dx = scene.projectile.radius / config.hydro.cells_per_projectile_radius
+    ratio = scene.target.radius / (block * dx)
+    levels = 1 + max(0, int(math.floor(math.log2(ratio)))) if ratio >= 1.0 else 1
+    return levels, (f"auto: 1 + floor(log2(R_T / (block_cells dx))) = 1 + floor(log2({scene.target.radius:g} m / "
+                    f"({block} x {dx:.4g} m))) = {levels}")
+
+
+def refinement_summary(refinement) -> str:
+    """The enabled refinement criteria in words."""
+    parts = []
+    if refinement.interfaces != "off":
+        parts.append(f"interfaces and free surfaces ({refinement.interfaces})")
+    if refinement.pressure_jump is not None:
+        parts.append(f"pressure jumps > {refinement.pressure_jump:g}")
+    if refinement.density_jump is not None:
+        parts.append(f"density jumps > {refinement.density_jump:g}")
+    if refinement.boxes:
+        parts.append(f"{len(refinement.boxes)} box(es)")
+    return ", ".join(parts) if parts else "user boxes only (no criterion enabled)"
+
+
 def impact_domain(config: Config, geom: str, total_mass: float, end_time: float) -> dict[str, Any] | None:
     """The impact mesh box (m) and the margin rule behind it; None for a geometry the impact cannot use.
 
@@ -122,8 +167,9 @@ def impact_domain(config: Config, geom: str, total_mass: float, end_time: float)
     needed = v_esc * end_time / scene.target.radius
     margin = max(scene.domain_margin, needed)
     which = "scene.domain_margin" if margin == scene.domain_margin else "v_esc t_end / R_T"
+    levels, _ = mesh_levels(config, geom)
     box = impact.domain(geom, scene.target.radius, scene.projectile.radius, config.hydro.cells_per_projectile_radius,
-                        margin, config.hydro.block_cells, scene.full_domain)
+                        margin, config.hydro.block_cells, scene.full_domain, levels)
     cells = [int(n) for n in box["cells"]]
     return {
         "margin": margin,
@@ -230,9 +276,9 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         if not (any(abs(t - t_handoff) <= 1e-9 * max(t, 1e-300) for t in outputs) or abs(end - t_handoff) <= 1e-9 * end):
             errors.append(f"handoff.time: {t_handoff:g} s has no hydro snapshot; it must be one of "
                           f"hydro.output_times or the hydro end time ({end:.6g} s)")
-    if config.hydro.max_levels not in ("auto", 1):
-        errors.append(f"hydro.max_levels: {config.hydro.max_levels} refinement levels are not available in this "
-                      f"version (adaptive refinement is not implemented); use 'auto' or 1")
+    if config.hydro.max_levels not in ("auto", 1) and config.scene.problem != "impact":
+        errors.append(f"hydro.max_levels: {config.hydro.max_levels} levels; only impact scenes refine adaptively "
+                      f"in this version (scene.problem is {config.scene.problem}); use 'auto' or 1")
     if values.get("self_gravity"):
         errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
                       f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")

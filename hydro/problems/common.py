@@ -28,9 +28,11 @@ def material_list(materials: dict[str, dict], used: list[str]):
 
 
 def new_simulation(mesh: BlockMesh, names: list[str], specs: list[dict], state: HydroState, cfl: float,
-                   tensile_strength=None, strength=None) -> Simulation:
-    """A :class:`Simulation` over ``state`` with the given materials (``strength``: one resolved spec each)."""
-    return Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strength, strength=strength)
+                   tensile_strength=None, strength=None, refinement=None) -> Simulation:
+    """A :class:`Simulation` over ``state`` with the given materials (``strength``: one resolved spec each;
+    ``refinement``: the :class:`~impactpipe.hydro.amr.regrid.RefinementRule` of an adaptive mesh)."""
+    return Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strength, strength=strength,
+                      refinement=refinement)
 
 
 def tensile_strengths(materials: dict[str, dict], used: list[str]) -> list[float]:

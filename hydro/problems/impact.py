@@ -21,11 +21,15 @@ Geometries:
   y >= 0 is computed, with a reflecting plane at y = 0 (``full_domain`` computes
   y in [-Y, Y] instead, the mesh being the mirror image of the half one).
 
-Mesh (:func:`domain`): cell size dx = R_P / ``cells_per_projectile_radius``; with
+Mesh (:func:`domain`): finest cell size dx = R_P / ``cells_per_projectile_radius``; with
 L = (1 + ``margin``) R_T the box spans r or x in [-L, L] (r in [0, L]), y in [0, L]
 (or [-L, L]) and z in [-L, R_T + 2 R_P + margin R_T]; each axis's cell count is rounded up
-to whole blocks (x is centred on 0, the others grow away from the target's lower / the
-symmetry side).  Outflow everywhere else: what leaves is counted by the solver.
+to whole root blocks (x is centred on 0, the others grow away from the target's lower / the
+symmetry side).  Outflow everywhere else: what leaves is counted by the solver.  With
+``levels`` > 1 the mesh is adaptive: root cells are 2^(levels - 1) dx, the blocks that the
+bodies' surfaces cross start at the finest level (so both spheres are resolved at dx from
+t = 0), and ``refinement`` (:class:`~impactpipe.hydro.amr.regrid.RefinementRule` keys)
+decides where the mesh refines and coarsens as the impact proceeds.
 Volume fractions are set by ``subsamples`` point samples per cell and axis in the cells that
 the sphere's surface may cut (cells wholly inside or outside are set directly), weighted by
 the annular volume in 2d-cylindrical.
@@ -35,6 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
 from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS, BlockMesh
 from impactpipe.hydro.problems.common import (
@@ -62,6 +67,8 @@ DEFAULTS = {
     "margin": 0.25,
     "subsamples": 4,
     "end_time": 1.0,
+    "levels": 1,
+    "refinement": None,
 }
 
 
@@ -81,16 +88,18 @@ def projectile_start(target_radius: float, projectile_radius: float, speed: floa
 
 
 def domain(geometry: str, target_radius: float, projectile_radius: float, cells_per_projectile_radius: float,
-           margin: float, block_cells: int | None = None, full_domain: bool = False) -> dict:
+           margin: float, block_cells: int | None = None, full_domain: bool = False, levels: int = 1) -> dict:
     """The impact mesh box (see the module docstring); every length in m.
 
-    Returns a dict with ``cell_size`` dx, ``lo`` and ``hi`` (one entry per used axis),
-    ``cells`` (per used axis, multiples of ``block_cells``), ``boundaries`` ((low, high) kind per
-    axis), ``block_cells``, ``symmetry`` (a sentence naming the symmetry used) and ``half_domain``
-    (True when only y >= 0 of a 3d scene is computed).
+    Returns a dict with ``cell_size`` dx (the finest), ``lo`` and ``hi`` (one entry per used
+    axis), ``cells`` (per used axis at the finest level, multiples of ``block_cells``
+    2^(levels - 1)), ``root_cells`` (per used axis at level 0), ``boundaries`` ((low, high) kind
+    per axis), ``block_cells``, ``symmetry`` (a sentence naming the symmetry used) and
+    ``half_domain`` (True when only y >= 0 of a 3d scene is computed).
     """
     check_geometry("impact", GEOMETRIES, geometry)
     ndim = 2 if geometry == "2d-cylindrical" else 3
+    scale = 2 ** (int(levels) - 1)
     bc = int(block_cells or DEFAULT_BLOCK_CELLS[ndim])
     dx = projectile_radius / cells_per_projectile_radius
     half_width = (1.0 + margin) * target_radius
@@ -98,12 +107,13 @@ def domain(geometry: str, target_radius: float, projectile_radius: float, cells_
     z_hi = target_radius + 2.0 * projectile_radius + margin * target_radius
 
     def whole_blocks(length: float) -> int:
-        return int(np.ceil(length / dx / bc)) * bc
+        return int(np.ceil(length / dx / (bc * scale))) * bc * scale
 
     nz = whole_blocks(z_hi - z_lo)
     n_side = whole_blocks(half_width)
     if geometry == "2d-cylindrical":
         return {"cell_size": dx, "lo": [0.0, z_lo], "hi": [n_side * dx, z_lo + nz * dx], "cells": [n_side, nz],
+                "root_cells": [n_side // scale, nz // scale],
                 "boundaries": [("reflecting", "outflow"), ("outflow", "outflow")], "block_cells": bc,
                 "symmetry": "axisymmetric about z (reflecting axis r = 0)", "half_domain": False}
     nx = whole_blocks(2.0 * half_width)
@@ -115,7 +125,8 @@ def domain(geometry: str, target_radius: float, projectile_radius: float, cells_
         y_lo, ny, y_bc = 0.0, n_side, ("reflecting", "outflow")
         symmetry = "mirror plane y = 0 (reflecting), half domain y >= 0; the hand-off mirrors it"
     return {"cell_size": dx, "lo": [x_lo, y_lo, z_lo], "hi": [x_lo + nx * dx, y_lo + ny * dx, z_lo + nz * dx],
-            "cells": [nx, ny, nz], "boundaries": [("outflow", "outflow"), y_bc, ("outflow", "outflow")],
+            "cells": [nx, ny, nz], "root_cells": [nx // scale, ny // scale, nz // scale],
+            "boundaries": [("outflow", "outflow"), y_bc, ("outflow", "outflow")],
             "block_cells": bc, "symmetry": symmetry, "half_domain": not full_domain}
 
 
@@ -169,18 +180,38 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         names[1] = f"{names[1]} (projectile)"
         specs = [specs[0], dict(specs[0])]
     eos = pack_eos(specs)
+    levels = int(p["levels"])
     box = domain(geometry, tgt["radius"], prj["radius"], p["cells_per_projectile_radius"], p["margin"],
-                 block_cells, p["full_domain"])
-    mesh = BlockMesh.uniform(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"])
-    state = HydroState.empty(mesh, len(names))
+                 block_cells, p["full_domain"], levels)
+    mesh = BlockMesh.uniform(geometry, box["lo"], box["hi"], box["root_cells"], box["boundaries"],
+                             box["block_cells"], max_level=levels - 1)
     centre, velocity = projectile_start(tgt["radius"], prj["radius"], prj["velocity"], p["angle"])
     if geometry == "2d-cylindrical":  # mesh components (r, z, 0)
         centre, velocity = centre[1:], np.array([0.0, velocity[2], 0.0])
     bodies = ((tgt, np.zeros(3), np.zeros(3)), (prj, centre, velocity))
+    mesh = refine_to(mesh, lambda m: np.where(
+        np.logical_or.reduce([surface_crosses(m, c, body["radius"]) for body, c, _ in bodies]), levels - 1, 0))
+    state = HydroState.empty(mesh, len(names))
     for k, (body, body_centre, body_velocity) in enumerate(bodies):
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         frac = sphere_fraction(mesh, body_centre, body["radius"], p["subsamples"])
         state.set_material(mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
     strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
     return new_simulation(mesh, names, specs, state, cfl, strengths,
-                          strength_specs(materials, [tgt["material"], prj["material"]]))
+                          strength_specs(materials, [tgt["material"], prj["material"]]),
+                          refinement=rule_from_config(p["refinement"]))
+
+
+def surface_crosses(mesh: BlockMesh, center, radius: float) -> np.ndarray:
+    """(NB,) True for the blocks that the sphere |x - center| = radius (m) passes through.
+
+    ``center`` is (x, y, z) in 3d and (0, z) in 2d-cylindrical (as :func:`sphere_fraction`).
+    The nearest and farthest points of each block box from the centre bracket the radius.
+    """
+    ndim = mesh.ndim
+    c = np.asarray(center, dtype=float)[:ndim]
+    lo = mesh.block_lo[:, :ndim]
+    hi = mesh.block_hi[:, :ndim]
+    nearest = np.sqrt((np.maximum(np.maximum(lo - c, c - hi), 0.0) ** 2).sum(axis=1))
+    farthest = np.sqrt((np.maximum(np.abs(lo - c), np.abs(hi - c)) ** 2).sum(axis=1))
+    return (nearest <= radius) & (farthest >= radius)

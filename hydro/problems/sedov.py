@@ -6,6 +6,11 @@ half the sphere, energy / 2) or 3d on the octant [0, extent]^3 with reflecting p
 within ``deposit_cells`` cell sizes of the origin, in an ambient ideal gas at ``density``
 and ``pressure``.  Exact solution: :func:`impactpipe.hydro.exact.sedov.sedov_solution`
 with nu = 3 (a spherical blast in both geometries).
+
+``cells`` is the number of cells per axis at the finest level.  With ``max_level`` L > 0 the
+mesh is adaptive: the root level has cells / 2^L cells per axis, the blocks around the
+source start at level L, and ``refinement`` (the ``hydro.refinement`` keys of
+:class:`~impactpipe.hydro.amr.regrid.RefinementRule`) decides the rest as the blast grows.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.eos import energy_from_pressure
+from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
 from impactpipe.hydro.mesh import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
 from impactpipe.hydro.state import HydroState
@@ -27,6 +33,8 @@ DEFAULTS = {
     "extent": 1.0,
     "deposit_cells": 3.5,
     "end_time": 0.3,
+    "max_level": 0,
+    "refinement": None,
 }
 
 
@@ -39,8 +47,14 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     names, specs, eos = material_list(materials, [amb["material"]])
     ndim, share = (2, 0.5) if geometry == "2d-cylindrical" else (3, 0.125)
     n = p["cells"]
-    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["extent"]] * ndim, [n] * ndim,
-                             [("reflecting", "outflow")] * ndim, block_cells)
+    levels = int(p["max_level"])
+    if n % 2 ** levels:
+        raise ValueError(f"sedov: cells = {n} must be divisible by 2^max_level = {2 ** levels}")
+    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["extent"]] * ndim, [n // 2 ** levels] * ndim,
+                             [("reflecting", "outflow")] * ndim, block_cells, max_level=levels)
+    finest = p["extent"] / n
+    source = (p["deposit_cells"] + 2) * finest
+    mesh = refine_to(mesh, lambda m: np.where((m.block_lo[:, :ndim] < source).all(axis=1), levels, 0))
     centers = mesh.cell_centers()
     radius = np.sqrt((centers[:, :ndim] ** 2).sum(axis=1))
     hot = radius < p["deposit_cells"] * mesh.min_cell_size()
@@ -50,4 +64,4 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     state = HydroState.empty(mesh, 1)
     state.set_material(mesh, 1.0, 0, eos, amb["density"], np.zeros(3),
                        specific_energy=np.where(hot, e_hot, e_amb))
-    return new_simulation(mesh, names, specs, state, cfl)
+    return new_simulation(mesh, names, specs, state, cfl, refinement=rule_from_config(p["refinement"]))

@@ -23,7 +23,11 @@ momentum and energy are conserved to round-off.  In 2d-cylindrical (r, z, theta)
 faces have A = 2 pi r dz and the radial momentum gets the hoop term
 -S_thth (A_{i+1/2} - A_{i-1/2}) / V (the discrete -S_thth / r, the same area difference as
 the radial pressure source of the sweeps).  What crosses domain faces (wall impulse
-included) is added to the boundary counters like the sweeps' fluxes.
+included) is added to the boundary counters like the sweeps' fluxes.  Through a block face
+whose neighbour is at another refinement level the amounts -dt A S_id (momentum) and
+-dt A S_id v_i (energy) are stored in ``face_flux[d]`` (the sweeps' column layout, momentum
+from column ``col0``) so that the coarse side can be refluxed
+(:func:`impactpipe.hydro.amr.transfer.reflux`).
 """
 
 from __future__ import annotations
@@ -48,7 +52,8 @@ def stress_slot(i, j):
 
 
 @njit(cache=True, parallel=True)
-def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, work, boundary):
+def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
+                            boundary, face_flux, col0):
     """Add the deviatoric stress fluxes over dt (s) to momentum and total energy; see the module docstring."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
@@ -131,6 +136,14 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
                                 boundary[b, BND_MOMENTUM + 1] += wa * t1
                                 boundary[b, BND_MOMENTUM + 2] += wa * t2
                                 boundary[b, BND_ENERGY] += wa * power
+                            elif at_edge and neighbor_level[b, d, side] != 0:
+                                amount = -dt * (area_hi if side == 1 else area_lo)
+                                j1 = iy if d == 0 else ix
+                                j2 = iy if d == 2 else iz
+                                face_flux[d, b, side, col0, j1, j2] = amount * t0
+                                face_flux[d, b, side, col0 + 1, j1, j2] = amount * t1
+                                face_flux[d, b, side, col0 + 2, j1, j2] = amount * t2
+                                face_flux[d, b, side, col0 + 3, j1, j2] = amount * power
                     if cylindrical:
                         r_lo = block_lo[b, 0] + (ix - gx) * dx0
                         r_hi = r_lo + dx0

@@ -13,13 +13,25 @@ with the material, ``arhoq``):
 
 It exists only when some material has a yield model; a strengthless scene allocates none
 of its arrays and runs none of its kernels.
+
+Rough walls (:meth:`MaterialStrength.set_rough_wall`): a reflecting domain face can be made
+no-slip for the stress.  Its ghosts then mirror the tangential velocity with the sign
+flipped (the velocity is zero on the wall, so the velocity gradient sees the shear against
+it) and carry the shear stress unchanged (the wall takes the traction S.n of the cell next
+to it instead of none).  The traction is bounded by the material's yield strength, so the
+wall holds the material by Coulomb friction with the material's own friction coefficient, as
+a bed roughened with the same grains does.  The face velocity is zero, so the traction does
+no work: the kinetic energy it removes becomes internal energy through the stress power.
+The sweeps still see a free-slip wall (they carry the pressure only).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from impactpipe.hydro.boundary import fill_ghosts
+from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
+from impactpipe.hydro.boundary import fill_field_ghosts
 from impactpipe.hydro.mesh import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
@@ -30,6 +42,8 @@ from impactpipe.hydro.strength.update import (
 
 #: Work slots whose sign flips in a reflecting ghost, per wall-normal axis (velocity and shear stress).
 _REFLECT_FLIP = {0: (WK_V, WK_S + 3, WK_S + 4), 1: (WK_V + 1, WK_S + 3, WK_S + 5), 2: (WK_V + 2, WK_S + 4, WK_S + 5)}
+#: Work slots whose sign flips in a rough (no-slip) wall's ghost: every velocity component, no stress.
+_ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
 
 
 class MaterialStrength:
@@ -50,6 +64,35 @@ class MaterialStrength:
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
         self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
+        self.face_flux = self._face_flux_arrays(mesh)
+        #: (axis, side) of the reflecting domain faces that are rough (module docstring).
+        self.rough_walls: list[tuple[int, int]] = []
+
+    def set_rough_wall(self, axis: int, side: int) -> None:
+        """Make the reflecting domain face on ``side`` (0 low, 1 high) of ``axis`` a rough, no-slip wall."""
+        if not 0 <= axis < self.mesh.ndim or side not in (0, 1):
+            raise ValueError(f"no domain face on side {side} of axis {axis} in {self.mesh.ndim} dimensions")
+        if not (self.mesh.neighbor[:, axis, side] == REFLECTING).any():
+            raise ValueError(f"the domain face on side {side} of axis {axis} is not reflecting; only a wall can be rough")
+        if (axis, side) not in self.rough_walls:
+            self.rough_walls.append((axis, side))
+
+    def _face_flux_arrays(self, mesh: BlockMesh) -> np.ndarray:
+        """Per-axis coarse/fine face amounts of the stress divergence (empty on a uniform mesh)."""
+        one = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim, self.nmat,
+                                 self.nmat * self.nq)
+        return np.zeros((3,) + one.shape)
+
+    def mesh_changed(self, mesh: BlockMesh) -> None:
+        """Follow a regrid: new work arrays; the per-block counters' totals move to block 0."""
+        self.mesh = mesh
+        self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
+        self.face_flux = self._face_flux_arrays(mesh)
+        for name in ("counts", "amounts"):
+            old = getattr(self, name)
+            new = np.zeros((mesh.nblocks,) + old.shape[1:], dtype=old.dtype)
+            new[0] = old.sum(axis=0)
+            setattr(self, name, new)
 
     def prepare_state(self, state: HydroState) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
@@ -61,13 +104,22 @@ class MaterialStrength:
         for k in range(self.nmat):
             state.arhoq[:, k * self.nq + self.ns + 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
 
-    def advance(self, state: HydroState, dt: float, eos, boundary: np.ndarray) -> None:
-        """One strength step of ``dt`` (s) on ``state``; domain-face fluxes go to ``boundary``."""
+    def advance(self, state: HydroState, dt: float, eos, boundary: np.ndarray, floors: np.ndarray,
+                amounts: np.ndarray) -> None:
+        """One strength step of ``dt`` (s) on ``state``; domain-face fluxes go to ``boundary``.
+
+        On an adaptive mesh the coarse cells beside finer blocks are refluxed with the fine
+        blocks' stress fluxes (momentum and energy only; ``floors``, ``amounts``: the hydro
+        counters the reflux kernel reports to, untouched here since no mass moves).
+        """
         mesh = self.mesh
         ndim = mesh.ndim
         for axis in range(ndim):
             for arr, flip in ((state.alpha, -1), (state.arho, -1), (state.momentum, axis)):
-                fill_ghosts(arr, mesh.neighbor, axis, GHOST, flip)
+                fill_field_ghosts(arr, mesh, axis, flip)
+            for wall_axis, side in self.rough_walls:
+                if wall_axis == axis:
+                    self._flip_wall_ghosts(state.momentum, axis, side, [c for c in range(3) if c != axis])
         cell_velocities(state.alpha, state.arho, state.momentum, eos.kind, eos.params, eos.table, self.work)
         a = self.arrays
         update_stress(dt, mesh.geometry_code, ndim, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
@@ -75,23 +127,35 @@ class MaterialStrength:
                       a.tensile_strength, self.work, self.counts, self.amounts)
         for axis in range(ndim):
             self._fill_work_ghosts(axis)
+        self.face_flux[...] = 0.0
         apply_stress_divergence(dt, mesh.geometry_code, ndim, state.momentum, state.energy, mesh.block_lo,
-                                mesh.block_dx, mesh.neighbor, self.work, boundary)
+                                mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
+                                self.face_flux, 3 * self.nmat)
+        if mesh.adaptive:
+            for axis in range(ndim):
+                plans = axis_plans(mesh, axis)
+                reflux(axis, plans["reflux"], plans["reflux_volume"], self.face_flux[axis], state.alpha, state.arho,
+                       state.arhoe, state.arhoq, state.momentum, state.energy, floors, amounts)
 
     def _fill_work_ghosts(self, axis: int) -> None:
         mesh = self.mesh
-        fill_ghosts(self.work, mesh.neighbor, axis, GHOST, -1)
+        fill_field_ghosts(self.work, mesh, axis)
+        for side in (0, 1):
+            flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
+            self._flip_wall_ghosts(self.work, axis, side, flips)
+
+    def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components) -> None:
+        """Negate ``components`` of ``array`` in the ghost slabs of the reflecting faces on ``side`` of ``axis``."""
+        mesh = self.mesh
+        blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
+        if blocks.size == 0:
+            return
         n = mesh.interior_shape[axis]
-        for side, slab in ((0, slice(0, GHOST)), (1, slice(GHOST + n, GHOST + n + GHOST))):
-            blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
-            if blocks.size == 0:
-                continue
-            index = [slice(None)] * 5
-            index[2 + axis] = slab
-            for comp in _REFLECT_FLIP[axis]:
-                index[0] = blocks
-                index[1] = comp
-                self.work[tuple(index)] *= -1.0
+        index = [blocks, 0, slice(None), slice(None), slice(None)]
+        index[2 + axis] = slice(0, GHOST) if side == 0 else slice(GHOST + n, GHOST + n + GHOST)
+        for comp in components:
+            index[1] = comp
+            array[tuple(index)] *= -1.0
 
     # ------------------------------------------------------------------ diagnostics
 

@@ -1,0 +1,109 @@
+"""Adaptive mesh on the reference impact: cell-updates and wall time against a uniform mesh.
+
+Runs the hydro stage of a config (default configs/reference/case8c.yaml: 10 km basalt
+target, 0.83 km projectile at 1.9 km/s, GEO 'weak' strength, 20 cells per projectile
+radius, 2d-cylindrical) to its end time with the adaptive mesh of ``hydro.max_levels``
+(auto: 4 levels), then a uniform mesh at the finest cell size for ``--uniform-steps``
+steps, and reports
+
+- the adaptive run: steps, total cell-updates, wall seconds, seconds spent regridding (and
+  the share of the wall time), blocks per level at the end, mass and energy budgets;
+- the uniform run extrapolated to the same number of steps: its cells x the adaptive run's
+  steps (both meshes share the finest cell, so the CFL step is set by the same cells), and
+  its wall time per step x those steps;
+- the ratio of cell-updates (the issue's goal: at least 10) and of wall time.
+
+    python benchmarks/amr_reference.py --json [--config PATH] [--end-time T] [--uniform-steps N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numba
+import numpy as np
+
+from impactpipe.hydro.stage import build_simulation
+from impactpipe.pipeline.config import load_config
+from impactpipe.pipeline.derived import derive
+
+
+def _simulation(config_path: str, levels):
+    config = load_config(config_path)
+    if levels is not None:
+        config.hydro.max_levels = levels
+    values = derive(config)
+    return build_simulation(config, values), values
+
+
+def run(config_path: str, end_time: float | None, uniform_steps: int) -> dict:
+    """The measurements of the module docstring, as a dict."""
+    sim, values = _simulation(config_path, None)
+    end = float(end_time or values["end_time"])
+    start = sim.totals()
+    started = time.perf_counter()
+    sim.run(end)
+    wall = time.perf_counter() - started
+    done = sim.totals()
+    adaptive = {
+        "levels": int(values["levels"]),
+        "steps": sim.step_count,
+        "cell_updates": int(sim.cell_updates),
+        "wall_seconds": wall,
+        "regrid_seconds": sim.regrid_seconds,
+        "regrid_share": sim.regrid_seconds / wall,
+        "regrids": sim.regrids,
+        "blocks_refined": sim.blocks_refined,
+        "blocks_coarsened": sim.blocks_coarsened,
+        "blocks_per_level_at_end": np.bincount(sim.mesh.block_level).tolist(),
+        "cells_at_end": sim.mesh.ncells,
+        "mass_error": (done["mass_with_outflow"] - start["mass"]) / start["mass"],
+        "energy_error": (done["energy_with_outflow"] - start["energy"]) / start["energy"],
+    }
+    uniform_sim, _ = _simulation(config_path, 1)
+    uniform_sim.step()
+    started = time.perf_counter()
+    for _ in range(uniform_steps):
+        uniform_sim.step()
+    per_step = (time.perf_counter() - started) / uniform_steps
+    uniform = {
+        "cells": uniform_sim.mesh.ncells,
+        "measured_steps": uniform_steps,
+        "wall_seconds_per_step": per_step,
+        "cell_updates_extrapolated": int(uniform_sim.mesh.ncells * sim.step_count),
+        "wall_seconds_extrapolated": per_step * sim.step_count,
+    }
+    return {
+        "config": config_path,
+        "end_time": end,
+        "threads": numba.config.NUMBA_NUM_THREADS,
+        "adaptive": adaptive,
+        "uniform": uniform,
+        "cell_update_ratio": uniform["cell_updates_extrapolated"] / adaptive["cell_updates"],
+        "wall_time_ratio": uniform["wall_seconds_extrapolated"] / wall,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default="configs/reference/case8c.yaml")
+    parser.add_argument("--end-time", type=float, default=None, help="s (default: the config's hydro end time)")
+    parser.add_argument("--uniform-steps", type=int, default=50)
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    args = parser.parse_args()
+    result = run(args.config, args.end_time, args.uniform_steps)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        a, u = result["adaptive"], result["uniform"]
+        print(f"adaptive ({a['levels']} levels): {a['steps']} steps, {a['cell_updates']:.3e} cell-updates, "
+              f"{a['wall_seconds']:.0f} s ({a['regrid_share']:.1%} regridding)")
+        print(f"uniform (extrapolated): {u['cell_updates_extrapolated']:.3e} cell-updates, "
+              f"{u['wall_seconds_extrapolated']:.0f} s")
+        print(f"ratios: cell-updates {result['cell_update_ratio']:.1f}x, wall {result['wall_time_ratio']:.1f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,136 @@
+"""Where the mesh refines: per-block indicators of interfaces, shocks and user boxes.
+
+For every interior cell and used axis d, with its neighbours i - 1 and i + 1 along d (ghosts
+filled), three indicators are evaluated and their maxima over a block's cells returned:
+
+- interface: max_k |alpha_k,i+1 - alpha_k,i-1| and |phi_i+1 - phi_i-1| (phi = sum_k alpha_k,
+  so void counts): a material interface or a free surface crosses the cell;
+- pressure jump: |p_i+1 - p_i-1| / (|p_i+1| + |p_i-1| + p_floor), the relative pressure
+  difference across the cell (1 at a shock into material at rest, ~0 in smooth flow);
+  ``p_floor`` (Pa) keeps round-off and acoustic noise at near-zero pressure out;
+- density jump: |rho_i+1 - rho_i-1| / (rho_i+1 + rho_i-1) where one material fills both
+  neighbours (alpha_k >= PHI_SECOND_ORDER): compressions within a material; the density
+  steps at interfaces and free surfaces belong to the interface indicator.
+
+An interface is ``active`` where its block moves or is loaded: the block's largest |p| or
+speed exceeds ``pressure_floor`` times the largest on the mesh.  The free surface of a body
+at rest (or far from anything that happens) then does not hold the finest level; with
+``interfaces: all`` every interface does.
+
+A block is refined when an indicator exceeds its threshold (interface: INTERFACE_JUMP) and
+may be coarsened when every enabled indicator stays below half of it (hysteresis, so a block
+does not flip between levels every regrid).  The indicators look one cell beyond the block
+(its ghosts), which with a regrid every few steps keeps a moving shock inside refined blocks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from impactpipe.hydro.mesh import GHOST
+from impactpipe.hydro.sweep import PHI_SECOND_ORDER
+from impactpipe.hydro.timestep import material_state
+
+#: A volume fraction changing by more than this across a cell marks an interface or free surface.
+INTERFACE_JUMP = 0.01
+#: Indicator columns of :func:`block_indicators`: the three jumps, then the block's largest
+#: |p| (Pa) and speed (m/s).
+IND_INTERFACE, IND_PRESSURE, IND_DENSITY, IND_MAX_PRESSURE, IND_MAX_SPEED = range(5)
+NINDICATOR = 5
+
+
+@njit(cache=True, parallel=True)
+def mixture_pressure(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, out):
+    """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``."""
+    nb, nmat, nx, ny, nz = alpha.shape
+    for b in prange(nb):
+        for ix in range(nx):
+            for iy in range(ny):
+                for iz in range(nz):
+                    p = 0.0
+                    for k in range(nmat):
+                        a = alpha[b, k, ix, iy, iz]
+                        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
+                            a, arho[b, k, ix, iy, iz], arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k],
+                            eos_table, shear_modulus[k], tensile_strength[k])
+                        if present:
+                            p += a * pk
+                    out[b, ix, iy, iz] = p
+
+
+@njit(cache=True, inline="always")
+def _neighbours(ix, iy, iz, d, step):
+    if d == 0:
+        return ix + step, iy, iz
+    if d == 1:
+        return ix, iy + step, iz
+    return ix, iy, iz + step
+
+
+@njit(cache=True, parallel=True)
+def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out):
+    """Per block the largest interface, pressure-jump and density-jump indicators, |p| and speed into ``out[NB, 5]``."""
+    nb, nmat, nx, ny, nz = alpha.shape
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(nb):
+        face = 0.0
+        pjump = 0.0
+        rjump = 0.0
+        pmax = 0.0
+        vmax = 0.0
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    pmax = max(pmax, abs(pressure[b, ix, iy, iz]))
+                    rho = 0.0
+                    for k in range(nmat):
+                        rho += arho[b, k, ix, iy, iz]
+                    if rho > 0.0:
+                        speed2 = (mom[b, 0, ix, iy, iz] ** 2 + mom[b, 1, ix, iy, iz] ** 2
+                                  + mom[b, 2, ix, iy, iz] ** 2)
+                        vmax = max(vmax, np.sqrt(speed2) / rho)
+                    for d in range(ndim):
+                        lx, ly, lz = _neighbours(ix, iy, iz, d, -1)
+                        hx, hy, hz = _neighbours(ix, iy, iz, d, 1)
+                        phi_l = 0.0
+                        phi_h = 0.0
+                        rho_l = 0.0
+                        rho_h = 0.0
+                        same = False
+                        for k in range(nmat):
+                            al = alpha[b, k, lx, ly, lz]
+                            ah = alpha[b, k, hx, hy, hz]
+                            same = same or (al >= PHI_SECOND_ORDER and ah >= PHI_SECOND_ORDER)
+                            face = max(face, abs(ah - al))
+                            phi_l += al
+                            phi_h += ah
+                            rho_l += arho[b, k, lx, ly, lz]
+                            rho_h += arho[b, k, hx, hy, hz]
+                        face = max(face, abs(phi_h - phi_l))
+                        p_l = pressure[b, lx, ly, lz]
+                        p_h = pressure[b, hx, hy, hz]
+                        pjump = max(pjump, abs(p_h - p_l) / (abs(p_h) + abs(p_l) + p_floor))
+                        if same:
+                            rjump = max(rjump, abs(rho_h - rho_l) / (rho_h + rho_l))
+        out[b, IND_INTERFACE] = face
+        out[b, IND_PRESSURE] = pjump
+        out[b, IND_DENSITY] = rjump
+        out[b, IND_MAX_PRESSURE] = pmax
+        out[b, IND_MAX_SPEED] = vmax
+
+
+def box_levels(block_lo: np.ndarray, block_hi: np.ndarray, ndim: int, boxes) -> np.ndarray:
+    """(NB,) the finest level any user box asks of each block (0 where none overlaps it).
+
+    ``boxes`` is a list of (lo (ndim,), hi (ndim,), level) with lo, hi in m.
+    """
+    want = np.zeros(len(block_lo), dtype=np.int64)
+    for lo, hi, level in boxes:
+        lo = np.asarray(lo, dtype=float)[:ndim]
+        hi = np.asarray(hi, dtype=float)[:ndim]
+        overlap = ((block_lo[:, :ndim] < hi) & (block_hi[:, :ndim] > lo)).all(axis=1)
+        want = np.where(overlap, np.maximum(want, int(level)), want)
+    return want

@@ -1,0 +1,333 @@
+"""Regridding: choose the new leaf blocks (2:1 balanced) and move the state onto them.
+
+Every ``interval`` steps :func:`regrid` evaluates the refinement indicators
+(:mod:`impactpipe.hydro.amr.criteria`) and
+
+1. flags blocks to refine (an indicator above its threshold, a user box asking for a finer
+   level; only below ``max_level``) and blocks that may coarsen (every indicator below half
+   its threshold, no box asking for their level);
+2. keeps 2:1 balance across faces, edges and corners: a block to be refined forces its coarser
+   neighbours to refine too (repeated until nothing changes); a complete group of 2^ndim
+   sibling leaves coarsens only if all may and its parent would stay within one level of
+   every neighbour (groups are taken finest level first, each decision seen by the next);
+3. builds the new mesh and fills it: kept blocks are copied, new children prolonged
+   conservatively from their parent, new parents restricted from their children
+   (:mod:`impactpipe.hydro.amr.transfer`), so mass, momentum and energy are unchanged to
+   round-off.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from impactpipe.hydro.amr.criteria import (
+    IND_DENSITY,
+    IND_INTERFACE,
+    IND_MAX_PRESSURE,
+    IND_MAX_SPEED,
+    IND_PRESSURE,
+    INTERFACE_JUMP,
+    NINDICATOR,
+    block_indicators,
+    box_levels,
+    mixture_pressure,
+)
+from impactpipe.hydro.amr.plans import axis0_weights
+from impactpipe.hydro.amr.transfer import prolong_blocks, restrict_blocks
+from impactpipe.hydro.mesh import BlockMesh, block_keys
+from impactpipe.hydro.state import FIELDS, HydroState
+
+
+#: Values of :attr:`RefinementRule.interfaces`.
+INTERFACE_MODES = ("all", "active", "off")
+
+
+@dataclass(frozen=True)
+class RefinementRule:
+    """When and where the mesh refines (``hydro.refinement`` in the config).
+
+    Attributes:
+        interval: steps between regrids.
+        interfaces: where a material interface or free surface crossing a block refines it:
+            "all" (to the finest level), "active" (to the finest level where the block moves
+            or is loaded, :mod:`impactpipe.hydro.amr.criteria`, one level coarser where it is
+            quiet) or "off".
+        pressure_jump: refine where the relative pressure jump across a cell exceeds this
+            (None: off); see :mod:`impactpipe.hydro.amr.criteria`.
+        density_jump: the same for density (None: off).
+        pressure_floor: p_floor of the pressure indicator as a fraction of the largest |p|
+            on the mesh at the regrid.
+        boxes: ((lo, hi, level), ...): refine every block overlapping [lo, hi] (m) to at
+            least ``level``.
+    """
+
+    interval: int = 4
+    interfaces: str = "all"
+    pressure_jump: float | None = 0.2
+    density_jump: float | None = 0.1
+    pressure_floor: float = 1.0e-3
+    boxes: tuple = ()
+
+    def __post_init__(self):
+        if self.interval < 1:
+            raise ValueError(f"refinement interval must be >= 1 step, got {self.interval}")
+        if self.interfaces not in INTERFACE_MODES:
+            raise ValueError(f"refinement interfaces must be one of {INTERFACE_MODES}, got {self.interfaces!r}")
+        for name in ("pressure_jump", "density_jump"):
+            value = getattr(self, name)
+            if value is not None and not 0.0 < value < 1.0:
+                raise ValueError(f"refinement {name} must lie in (0, 1) or be None, got {value}")
+
+
+def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
+                rule: RefinementRule) -> tuple[np.ndarray, np.ndarray]:
+    """(refine, coarsen) flags per block; the state's ghosts along every used axis must be filled."""
+    pressure = np.zeros((mesh.nblocks,) + mesh.padded_shape)
+    mixture_pressure(state.alpha, state.arho, state.arhoe, eos.kind, eos.params, eos.table, shear_modulus,
+                     tensile_strength, pressure)
+    floor = rule.pressure_floor * max(float(np.abs(mesh.interior(pressure)).max(initial=0.0)), 1e-300)
+    ind = np.zeros((mesh.nblocks, NINDICATOR))
+    block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, ind)
+    thresholds = np.full(IND_MAX_PRESSURE, np.inf)
+    if rule.interfaces != "off":
+        thresholds[IND_INTERFACE] = INTERFACE_JUMP
+    if rule.pressure_jump is not None:
+        thresholds[IND_PRESSURE] = rule.pressure_jump
+    if rule.density_jump is not None:
+        thresholds[IND_DENSITY] = rule.density_jump
+    # the level each block's indicators ask for: the finest, or (a quiet interface under
+    # "active") one level below it; keep: the level below which it may not coarsen
+    finest = mesh.max_level
+    interface_level = np.full(mesh.nblocks, finest)
+    if rule.interfaces == "active":
+        speed_floor = rule.pressure_floor * ind[:, IND_MAX_SPEED].max(initial=0.0)
+        active = (ind[:, IND_MAX_PRESSURE] > floor) | (ind[:, IND_MAX_SPEED] > speed_floor)
+        interface_level = np.where(active, finest, max(finest - 1, 0))
+    jumps = ind[:, :IND_MAX_PRESSURE]
+    shock = np.where((jumps[:, 1:] > thresholds[1:]).any(axis=1), finest, 0)
+    shock_keep = np.where((jumps[:, 1:] > 0.5 * thresholds[1:]).any(axis=1), finest, 0)
+    face = np.where(jumps[:, IND_INTERFACE] > thresholds[IND_INTERFACE], interface_level, 0)
+    face_keep = np.where(jumps[:, IND_INTERFACE] > 0.5 * thresholds[IND_INTERFACE], interface_level, 0)
+    boxes = box_levels(mesh.block_lo, mesh.block_hi, mesh.ndim, rule.boxes)
+    level = mesh.block_level
+    want = np.maximum(_with_neighbours(mesh, shock), face)
+    keep = np.maximum(_with_neighbours(mesh, shock_keep), face_keep)
+    refine = ((want > level) | (boxes > level)) & (level < finest)
+    coarsen = (keep < level) & (boxes < level) & (level > 0)
+    return refine, coarsen
+
+
+def _with_neighbours(mesh: BlockMesh, levels: np.ndarray) -> np.ndarray:
+    """The largest of ``levels`` over each block and its neighbours across faces, edges and corners.
+
+    A buffer of one block around what the shock criteria ask for: a shock about to leave a
+    refined block finds its next block refined before it arrives (the indicators only see
+    one cell beyond a block, a regrid comes every few steps and a shock crosses up to
+    ``cfl`` cells per step).  Interfaces move with the material, well under a cell between
+    regrids, and get no buffer.  The maximum
+    spreads axis by axis through the neighbour tables, so edges and corners are reached.
+    """
+    out = levels.copy()
+    for d in range(mesh.ndim):
+        spread = out.copy()
+        for side in (0, 1):
+            nbr = mesh.neighbor[:, d, side]
+            inside = np.nonzero(nbr >= 0)[0]
+            np.maximum.at(spread, nbr[inside], out[inside])
+        out = spread
+    return out
+
+
+def _offsets(ndim: int) -> list[tuple]:
+    """Neighbour offsets across faces, edges and corners of a block."""
+    return [o + (0,) * (3 - ndim) for o in itertools.product((-1, 0, 1), repeat=ndim) if any(o)]
+
+
+def _children(ndim: int) -> list[tuple]:
+    """The (cx, cy, cz) positions of a block's 2^ndim children."""
+    return [c + (0,) * (3 - ndim) for c in itertools.product((0, 1), repeat=ndim)]
+
+
+class _Leaves:
+    """The leaf set as a dict (level, i, j, k) -> old block index, with region queries."""
+
+    def __init__(self, mesh: BlockMesh):
+        self.mesh = mesh
+        self.ndim = mesh.ndim
+        self.periodic = [mesh.boundaries[d][0] == "periodic" if d < mesh.ndim else False for d in range(3)]
+        self.leaf = {(int(lv),) + tuple(int(v) for v in ix): b
+                     for b, (lv, ix) in enumerate(zip(mesh.block_level, mesh.block_index))}
+
+    def region(self, level: int, index) -> tuple | None:
+        """The block-grid region (level, i, j, k) wrapped periodically; None outside the domain."""
+        extent = self.mesh.blocks_at_level(level)[0]
+        out = []
+        for d in range(3):
+            i = int(index[d])
+            if self.periodic[d]:
+                i %= int(extent[d])
+            elif not 0 <= i < extent[d]:
+                return None
+            out.append(i)
+        return (level,) + tuple(out)
+
+    def containing(self, key: tuple) -> tuple | None:
+        """The leaf key containing region ``key`` (itself or an ancestor); None if it is subdivided."""
+        level, *index = key
+        while level >= 0:
+            k = (level,) + tuple(index)
+            if k in self.leaf:
+                return k
+            level -= 1
+            index = [i >> 1 for i in index]
+        return None
+
+
+def plan_leaves(mesh: BlockMesh, refine: np.ndarray, coarsen: np.ndarray) -> dict | None:
+    """The new leaf set from the flags, 2:1 balanced (module docstring); None when nothing changes.
+
+    Returns a dict with ``level`` and ``index`` of the new leaves (sorted by block key),
+    ``keep`` (new, old) index pairs, ``children`` rows (new child, old parent, cx, cy, cz) and
+    ``parents`` rows (new parent, old child, cx, cy, cz).
+    """
+    leaves = _Leaves(mesh)
+    ndim = mesh.ndim
+    offsets = _offsets(ndim)
+    kids = _children(ndim)
+    to_refine = {k for k, b in leaves.leaf.items() if refine[b]}
+    queue = list(to_refine)
+    while queue:
+        level, *index = queue.pop()
+        for o in offsets:
+            key = leaves.region(level, [index[d] + o[d] for d in range(3)])
+            if key is None:
+                continue
+            holder = leaves.containing(key)
+            if holder is not None and holder[0] < level and holder not in to_refine:
+                to_refine.add(holder)
+                queue.append(holder)
+    groups = {}
+    for key, b in leaves.leaf.items():
+        if coarsen[b] and key not in to_refine:
+            level, *index = key
+            groups.setdefault((level - 1,) + tuple(i >> 1 for i in index), []).append(key)
+    merged = {}
+    for parent in sorted(groups, key=lambda k: -k[0]):
+        members = groups[parent]
+        if len(members) != len(kids):
+            continue
+        plevel, *pindex = parent
+        balanced = True
+        for o in offsets:
+            key = leaves.region(plevel, [pindex[d] + o[d] for d in range(3)])
+            if key is None:
+                continue
+            holder = leaves.containing(key)
+            if holder is not None:
+                if holder[0] < plevel - 1:
+                    balanced = False
+                continue
+            for c in kids:
+                child = (plevel + 1,) + tuple(2 * key[1 + d] + c[d] for d in range(3))
+                if child not in leaves.leaf or child in to_refine:
+                    balanced = False
+                    break
+            if not balanced:
+                break
+        if not balanced:
+            continue
+        for key in members:
+            del leaves.leaf[key]
+        leaves.leaf[parent] = -1
+        merged[parent] = members
+    if not to_refine and not merged:
+        return None
+    entries = []  # (level, index, kind, payload)
+    for key, b in leaves.leaf.items():
+        if b < 0:
+            continue
+        if key in to_refine:
+            level, *index = key
+            for c in kids:
+                entries.append((level + 1, [2 * index[d] + c[d] for d in range(3)], "child", (b,) + c))
+        else:
+            entries.append((key[0], list(key[1:]), "keep", b))
+    for parent, members in merged.items():
+        entries.append((parent[0], list(parent[1:]), "parent", members))
+    level = np.array([e[0] for e in entries], dtype=np.int64)
+    index = np.array([e[1] for e in entries], dtype=np.int64).reshape(-1, 3)
+    order = np.argsort(block_keys(level, index), kind="stable")
+    keep, children, parents = [], [], []
+    for new, e in enumerate(entries[i] for i in order):
+        if e[2] == "keep":
+            keep.append((new, e[3]))
+        elif e[2] == "child":
+            children.append((new,) + e[3])
+        else:
+            for key in e[3]:
+                old = leaves_index(mesh, key)
+                parents.append((new, old) + tuple(key[1 + d] & 1 for d in range(3)))
+    return {"level": level[order], "index": index[order],
+            "keep": np.array(keep, dtype=np.int64).reshape(-1, 2),
+            "children": np.array(children, dtype=np.int64).reshape(-1, 5),
+            "parents": np.array(parents, dtype=np.int64).reshape(-1, 5)}
+
+
+def leaves_index(mesh: BlockMesh, key: tuple) -> int:
+    """Index of the leaf block with key (level, i, j, k) in ``mesh``."""
+    return int(mesh.lookup(np.array([key[0]]), np.array([key[1:]]))[0])
+
+
+def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, HydroState]:
+    """The new mesh of ``plan`` and the state moved onto it (ghosts of ``state`` filled on every axis)."""
+    new_mesh = BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, mesh.domain_hi, mesh.blocks_per_axis,
+                                     mesh.block_cells, mesh.boundaries, plan["level"], plan["index"],
+                                     mesh.max_level)
+    nq = state.arhoq.shape[1] // state.nmat
+    new = HydroState.empty(new_mesh, state.nmat, nq)
+    keep = plan["keep"]
+    for name in FIELDS:
+        getattr(new, name)[keep[:, 0]] = getattr(state, name)[keep[:, 1]]
+    src = tuple(getattr(state, name) for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"))
+    dst = tuple(getattr(new, name) for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"))
+    if len(plan["children"]):
+        prolong_blocks(src, dst, plan["children"], mesh.block_lo, mesh.block_dx, new_mesh.block_lo,
+                       new_mesh.block_dx, mesh.geometry_code, mesh.ndim)
+    parents = plan["parents"]
+    if len(parents):
+        half = mesh.block_cells // 2
+        rows = np.arange(half)
+        parent_row = new_mesh.block_index[parents[:, 0], 0, None] * mesh.block_cells + parents[:, 2, None] * half + rows
+        fine_level = np.repeat(new_mesh.block_level[parents[:, 0]] + 1, half)
+        weight0 = axis0_weights(new_mesh, fine_level, 2 * parent_row.reshape(-1)).reshape(len(parents), half, 2)
+        restrict_blocks(src, dst, parents, np.ascontiguousarray(weight0))
+    return new_mesh, new
+
+
+def refine_to(mesh: BlockMesh, wanted_level) -> BlockMesh:
+    """A mesh (no state) whose blocks are refined until each reaches ``wanted_level(mesh)``.
+
+    ``wanted_level`` maps a mesh to the (NB,) level each of its blocks should have at least
+    (capped by ``max_level``); 2:1 balance may refine further.  Used to build the initial
+    mesh of a problem before its state is set.
+    """
+    for _ in range(mesh.max_level):
+        refine = (np.asarray(wanted_level(mesh)) > mesh.block_level) & (mesh.block_level < mesh.max_level)
+        plan = plan_leaves(mesh, refine, np.zeros(mesh.nblocks, dtype=bool))
+        if plan is None:
+            break
+        mesh = BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, mesh.domain_hi, mesh.blocks_per_axis,
+                                     mesh.block_cells, mesh.boundaries, plan["level"], plan["index"], mesh.max_level)
+    return mesh
+
+
+def rule_from_config(refinement: dict | None) -> RefinementRule:
+    """A :class:`RefinementRule` from the ``hydro.refinement`` mapping (missing keys: defaults)."""
+    if not refinement:
+        return RefinementRule()
+    values = dict(refinement)
+    values["boxes"] = tuple((tuple(b["lo"]), tuple(b["hi"]), int(b["level"])) for b in values.get("boxes", ()))
+    return RefinementRule(**values)

@@ -1,0 +1,462 @@
+"""Moving data between refinement levels: restriction, prolongation and refluxing (numba kernels).
+
+Restriction (fine -> coarse) is the volume-weighted mean of the 2^ndim fine cells that make
+up a coarse cell,
+
+    U_c = sum_f V_f U_f / V_c,
+
+for every conserved field (partial densities, momentum, total energy, material internal
+energies, volume fractions, transported scalars), so it conserves every amount exactly.  In
+2d-cylindrical the two radial children of a cell weigh by their annulus volumes.
+
+Prolongation (coarse -> fine) places a child at offset o (in coarse cells, per axis, between
+the child's and the parent's volume centroids: +-1/4 in planar axes, the annulus centroids
+2 (r_+^3 - r_-^3) / (3 (r_+^2 - r_-^2)) along r) on a limited linear profile, with minmod
+slopes s_d(q) = minmod(q_c - q_c-1, q_c+1 - q_c) along each used axis d:
+
+- where one material fills the parent and its neighbours (alpha >= PHI_SECOND_ORDER, as for
+  the sweeps' second-order reconstruction), every conserved amount U except the volume
+  fractions is linear, U_f = U_c + sum_d s_d(U) o_d (second order in smooth flow), unless
+  that leaves a child with negative internal energy (E < |m|^2 / 2 rho);
+- elsewhere (interfaces, free surfaces, and the exception above) only the volume fractions
+  are linear, alpha_k,f = alpha_k,c + lambda sum_d s_d(alpha_k) o_d, and each material keeps
+  its density rho_k, specific internal energy e_k and transported scalars, the cell its
+  velocity u:  alpha_k rho_k,f = alpha_k,f rho_k,  E_f = sum_k alpha_k,f rho_k e_k
+  + rho_f |u|^2 / 2 + (E_c - sum_k alpha_k rho_k e_k - rho_c |u|^2 / 2) rho_f / rho_c.
+  Pressure and velocity stay exactly those of the parent (a moving interface at uniform p
+  and u stays so across a coarse/fine face), and the interface stays as sharp as the coarse
+  profile allows (copying the parent into both fine ghost layers would blind the sweeps'
+  compressive volume-fraction limiter and smear every interface that crosses a level
+  boundary).  lambda in [0, 1] is the largest factor that keeps sum_k alpha_k,f <= 1.
+
+Both conserve every amount (the children's volume-weighted offsets sum to zero; the choice
+is made per parent cell for all its children) and are monotone: a child's volume fractions
+and amounts lie between its parent's neighbours'.
+
+Refluxing: a sweep advances a coarse cell beside finer blocks with its own flux through the
+coarse/fine face; the fine blocks' fluxes through the same face (area-weighted sum over the
+2^(ndim-1) fine faces) are the better ones, so the coarse cell gets
+
+    Delta U_c = +-(sum_f dt A_f F_f - dt A_c F_c) / V_c      (+ on its low face, - on its high face)
+
+which makes what left the fine blocks exactly what entered the coarse one.  The amounts
+dt A F per face come from :func:`impactpipe.hydro.sweep.sweep` (``face_flux``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
+from impactpipe.hydro.reconstruct import minmod_slope
+from impactpipe.hydro.sweep import AMOUNT_MASS_FLOOR, AMOUNT_MASS_VOID, FLOOR_PARTIAL_DENSITY, PHI_SECOND_ORDER
+
+# Plan columns: destination block and padded cell, source block and padded cell.
+P_DST, P_DX, P_DY, P_DZ, P_SRC, P_SX, P_SY, P_SZ = range(8)
+# Reflux plan columns: coarse block, its side, the coarse cell, the fine block, first fine face cell.
+R_COARSE, R_SIDE, R_CX, R_CY, R_CZ, R_FINE, R_F1, R_F2 = range(8)
+
+
+@njit(cache=True)
+def _centroid(lo, dx, i, radial):
+    """Volume centroid (m) of padded cell ``i`` of a block starting at ``lo`` with cell size ``dx``."""
+    a = lo + (i - GHOST) * dx
+    b = a + dx
+    if radial:
+        a = abs(a)
+        b = abs(b)
+        if b * b - a * a > 0.0:
+            return 2.0 * (b * b * b - a * a * a) / (3.0 * (b * b - a * a))
+    return a + 0.5 * dx
+
+
+@njit(cache=True)
+def _offset(src_lo, src_dx, si, dst_lo, dst_dx, di, radial):
+    """Offset of a destination cell's centroid from a source cell's, in source cells."""
+    if src_dx == 0.0:
+        return 0.0
+    return (_centroid(dst_lo, dst_dx, di, radial) - _centroid(src_lo, src_dx, si, radial)) / src_dx
+
+
+@njit(cache=True)
+def _linear(f, b, c, ix, iy, iz, o0, o1, o2, ndim):
+    """f[b, c] at offsets (o0, o1, o2) cells from cell (ix, iy, iz) with minmod slopes."""
+    q = f[b, c, ix, iy, iz]
+    v = q + o0 * minmod_slope(f[b, c, ix - 1, iy, iz], q, f[b, c, ix + 1, iy, iz])
+    if ndim > 1:
+        v += o1 * minmod_slope(f[b, c, ix, iy - 1, iz], q, f[b, c, ix, iy + 1, iz])
+    if ndim > 2:
+        v += o2 * minmod_slope(f[b, c, ix, iy, iz - 1], q, f[b, c, ix, iy, iz + 1])
+    return v
+
+
+@njit(cache=True)
+def _single_material(alpha, b, ix, iy, iz, ndim):
+    """True when one material fills cell (ix, iy, iz) of block b and its face neighbours."""
+    for k in range(alpha.shape[1]):
+        full = alpha[b, k, ix, iy, iz] >= PHI_SECOND_ORDER
+        full = full and alpha[b, k, ix - 1, iy, iz] >= PHI_SECOND_ORDER and alpha[b, k, ix + 1, iy, iz] >= PHI_SECOND_ORDER
+        if ndim > 1:
+            full = full and alpha[b, k, ix, iy - 1, iz] >= PHI_SECOND_ORDER
+            full = full and alpha[b, k, ix, iy + 1, iz] >= PHI_SECOND_ORDER
+        if ndim > 2:
+            full = full and alpha[b, k, ix, iy, iz - 1] >= PHI_SECOND_ORDER
+            full = full and alpha[b, k, ix, iy, iz + 1] >= PHI_SECOND_ORDER
+        if full:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _child_internal_energy(arho, mom, energy, b, ix, iy, iz, o0, o1, o2, ndim):
+    """Internal energy density E - |m|^2 / (2 rho) (J/m^3) of the linear profile at an offset."""
+    rho = 0.0
+    for k in range(arho.shape[1]):
+        rho += _linear(arho, b, k, ix, iy, iz, o0, o1, o2, ndim)
+    if rho <= 0.0:
+        return -1.0
+    m2 = 0.0
+    for c in range(3):
+        m = _linear(mom, b, c, ix, iy, iz, o0, o1, o2, ndim)
+        m2 += m * m
+    return _linear(energy, b, 0, ix, iy, iz, o0, o1, o2, ndim) - 0.5 * m2 / rho
+
+
+@njit(cache=True)
+def _fraction_growth(alpha, b, ix, iy, iz, o0, o1, o2, ndim):
+    """sum_k (alpha_k,f - alpha_k,c) of the linear volume-fraction profile at an offset."""
+    grow = 0.0
+    for k in range(alpha.shape[1]):
+        grow += _linear(alpha, b, k, ix, iy, iz, o0, o1, o2, ndim) - alpha[b, k, ix, iy, iz]
+    return grow
+
+
+@njit(cache=True)
+def _fraction_limit(alpha, b, ix, iy, iz, grow):
+    """The factor lambda <= 1 that keeps a child's volume fractions summing to at most 1."""
+    if grow <= 0.0:
+        return 1.0
+    room = 1.0
+    for k in range(alpha.shape[1]):
+        room -= alpha[b, k, ix, iy, iz]
+    return min(1.0, max(room, 0.0) / grow)
+
+
+@njit(cache=True)
+def _put_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, linear):
+    """dst[db, :, cell] = src[b, :, cell] prolonged (linear or copied) to the offsets."""
+    for c in range(src.shape[1]):
+        if linear:
+            dst[db, c, dx_, dy, dz] = _linear(src, b, c, ix, iy, iz, o0, o1, o2, ndim)
+        else:
+            dst[db, c, dx_, dy, dz] = src[b, c, ix, iy, iz]
+
+
+@njit(cache=True)
+def _put_fraction_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, lam):
+    """A child with linear volume fractions and the parent's material states (module docstring)."""
+    alpha, arho, arhoe, mom, energy, arhoq = src
+    n_alpha, n_arho, n_arhoe, n_mom, n_energy, n_arhoq = dst
+    nmat = alpha.shape[1]
+    nq = arhoq.shape[1] // nmat
+    rho_c = 0.0
+    rho_f = 0.0
+    eint_f = 0.0
+    eint_c = 0.0
+    for k in range(nmat):
+        a = alpha[b, k, ix, iy, iz]
+        a_f = a + lam * (_linear(alpha, b, k, ix, iy, iz, o0, o1, o2, ndim) - a)
+        ratio = a_f / a if a > 0.0 else 1.0
+        n_alpha[db, k, dx_, dy, dz] = a_f
+        n_arho[db, k, dx_, dy, dz] = ratio * arho[b, k, ix, iy, iz]
+        n_arhoe[db, k, dx_, dy, dz] = ratio * arhoe[b, k, ix, iy, iz]
+        for j in range(nq):
+            n_arhoq[db, nq * k + j, dx_, dy, dz] = ratio * arhoq[b, nq * k + j, ix, iy, iz]
+        rho_c += arho[b, k, ix, iy, iz]
+        rho_f += ratio * arho[b, k, ix, iy, iz]
+        eint_c += arhoe[b, k, ix, iy, iz]
+        eint_f += ratio * arhoe[b, k, ix, iy, iz]
+    if rho_c <= 0.0:
+        for c in range(3):
+            n_mom[db, c, dx_, dy, dz] = mom[b, c, ix, iy, iz]
+        n_energy[db, 0, dx_, dy, dz] = energy[b, 0, ix, iy, iz]
+        return
+    share = rho_f / rho_c
+    m2 = 0.0
+    for c in range(3):
+        m = mom[b, c, ix, iy, iz]
+        n_mom[db, c, dx_, dy, dz] = share * m
+        m2 += m * m
+    kinetic = 0.5 * m2 / rho_c
+    residual = energy[b, 0, ix, iy, iz] - eint_c - kinetic
+    n_energy[db, 0, dx_, dy, dz] = eint_f + share * (kinetic + residual)
+
+
+@njit(cache=True)
+def _put_state_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, linear, lam):
+    """Prolong every conserved field to one child: conserved-linear or fraction-linear."""
+    if linear:
+        alpha, arho, arhoe, mom, energy, arhoq = src
+        n_alpha, n_arho, n_arhoe, n_mom, n_energy, n_arhoq = dst
+        _put_child(alpha, n_alpha, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, False)
+        _put_child(arhoq, n_arhoq, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, False)
+        _put_child(arho, n_arho, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
+        _put_child(arhoe, n_arhoe, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
+        _put_child(mom, n_mom, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
+        _put_child(energy, n_energy, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
+    else:
+        _put_fraction_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, 0.0 * lam)
+
+
+@njit(cache=True)
+def restrict_ghosts(field, plan, weight0):
+    """Fill coarse cells ``plan[:, P_DST..P_DZ]`` of ``field[NB, C, NX, NY, NZ]`` with fine means.
+
+    The fine cells are the 2^ndim cells from ``plan[:, P_SRC..P_SZ]`` (their lowest corner)
+    in block ``plan[:, P_SRC]``; ``weight0[e, a]`` is the share of the axis-0 child ``a``
+    (1/2, or its annulus volume fraction in 2d-cylindrical).
+    """
+    nx, ny, nz = field.shape[2], field.shape[3], field.shape[4]
+    ay = 2 if ny > 1 else 1
+    az = 2 if nz > 1 else 1
+    ax = 2 if nx > 1 else 1
+    wy = 1.0 / ay
+    wz = 1.0 / az
+    for e in range(plan.shape[0]):
+        sb = plan[e, P_SRC]
+        for c in range(field.shape[1]):
+            acc = 0.0
+            for a in range(ax):
+                for j in range(ay):
+                    for k in range(az):
+                        acc += weight0[e, a] * wy * wz * field[sb, c, plan[e, P_SX] + a, plan[e, P_SY] + j,
+                                                              plan[e, P_SZ] + k]
+            field[plan[e, P_DST], c, plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]] = acc
+
+
+@njit(cache=True)
+def prolong_field_ghosts(field, plan):
+    """Fill fine cells of ``field`` with copies of the coarse cells that contain them (plan as above)."""
+    for e in range(plan.shape[0]):
+        for c in range(field.shape[1]):
+            field[plan[e, P_DST], c, plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]] = \
+                field[plan[e, P_SRC], c, plan[e, P_SX], plan[e, P_SY], plan[e, P_SZ]]
+
+
+@njit(cache=True)
+def prolong_state_ghosts(state, plan, block_lo, block_dx, geometry, ndim):
+    """Fill fine ghost cells of every conserved field by prolongation (module docstring).
+
+    ``state`` is the tuple (alpha, arho, arhoe, mom, energy, arhoq).  Each destination cell is
+    set from the coarse source cell that contains it, at the offset between their centroids.
+    The source cells' neighbours along every used axis must hold valid values (interior
+    cells, or ghosts filled before).
+    """
+    alpha, arho, arhoe, mom, energy, arhoq = state
+    radial = geometry == CYLINDRICAL
+    for e in range(plan.shape[0]):
+        db = plan[e, P_DST]
+        sb = plan[e, P_SRC]
+        dxi, dyi, dzi = plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]
+        sx, sy, sz = plan[e, P_SX], plan[e, P_SY], plan[e, P_SZ]
+        o0 = _offset(block_lo[sb, 0], block_dx[sb, 0], sx, block_lo[db, 0], block_dx[db, 0], dxi, radial)
+        o1 = _offset(block_lo[sb, 1], block_dx[sb, 1], sy, block_lo[db, 1], block_dx[db, 1], dyi, False)
+        o2 = _offset(block_lo[sb, 2], block_dx[sb, 2], sz, block_lo[db, 2], block_dx[db, 2], dzi, False)
+        linear = _single_material(alpha, sb, sx, sy, sz, ndim)
+        if linear and _child_internal_energy(arho, mom, energy, sb, sx, sy, sz, o0, o1, o2, ndim) < 0.0:
+            linear = False
+        lam = _fraction_limit(alpha, sb, sx, sy, sz, _fraction_growth(alpha, sb, sx, sy, sz, o0, o1, o2, ndim))
+        _put_state_child(state, state, sb, sx, sy, sz, db, dxi, dyi, dzi, o0, o1, o2, ndim, linear, lam)
+
+
+@njit(cache=True, parallel=True)
+def prolong_blocks(src, dst, pairs, old_lo, old_dx, new_lo, new_dx, geometry, ndim):
+    """Fill new child blocks from their parents, conservatively (module docstring).
+
+    ``src`` and ``dst`` are tuples (alpha, arho, arhoe, mom, energy, arhoq) of the old and
+    new meshes; ``pairs[e] = (child, parent, cx, cy, cz)``: new block ``child`` is the
+    (cx, cy, cz) half of old block ``parent``, whose ghosts along every used axis are filled.
+    The profile (and the volume-fraction factor lambda) is chosen per parent cell, for all its
+    children together, so each parent cell's amounts are kept exactly.
+    """
+    alpha, arho, arhoe, mom, energy, arhoq = src
+    radial = geometry == CYLINDRICAL
+    nx, ny, nz = alpha.shape[2], alpha.shape[3], alpha.shape[4]
+    half = (nx - 2 * GHOST) // 2
+    hy = (ny - 2 * GHOST) // 2 if ny > 1 else 1
+    hz = (nz - 2 * GHOST) // 2 if nz > 1 else 1
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    ay = 2 if ny > 1 else 1
+    az = 2 if nz > 1 else 1
+    for e in prange(pairs.shape[0]):
+        cb = pairs[e, 0]
+        pb = pairs[e, 1]
+        for px in range(half):
+            for py in range(hy):
+                for pz in range(hz):
+                    sx = GHOST + pairs[e, 2] * half + px
+                    sy = gy + pairs[e, 3] * hy + py
+                    sz = gz + pairs[e, 4] * hz + pz
+                    linear = _single_material(alpha, pb, sx, sy, sz, ndim)
+                    lam = 1.0
+                    for a in range(2):
+                        for j in range(ay):
+                            for k in range(az):
+                                dxi = GHOST + 2 * px + a
+                                dyi = gy + 2 * py + j if ny > 1 else 0
+                                dzi = gz + 2 * pz + k if nz > 1 else 0
+                                o0 = _offset(old_lo[pb, 0], old_dx[pb, 0], sx, new_lo[cb, 0], new_dx[cb, 0], dxi, radial)
+                                o1 = _offset(old_lo[pb, 1], old_dx[pb, 1], sy, new_lo[cb, 1], new_dx[cb, 1], dyi, False)
+                                o2 = _offset(old_lo[pb, 2], old_dx[pb, 2], sz, new_lo[cb, 2], new_dx[cb, 2], dzi, False)
+                                if linear and _child_internal_energy(arho, mom, energy, pb, sx, sy, sz, o0, o1, o2,
+                                                                     ndim) < 0.0:
+                                    linear = False
+                                grow = _fraction_growth(alpha, pb, sx, sy, sz, o0, o1, o2, ndim)
+                                lam = min(lam, _fraction_limit(alpha, pb, sx, sy, sz, grow))
+                    for a in range(2):
+                        for j in range(ay):
+                            for k in range(az):
+                                dxi = GHOST + 2 * px + a
+                                dyi = gy + 2 * py + j if ny > 1 else 0
+                                dzi = gz + 2 * pz + k if nz > 1 else 0
+                                o0 = _offset(old_lo[pb, 0], old_dx[pb, 0], sx, new_lo[cb, 0], new_dx[cb, 0], dxi, radial)
+                                o1 = _offset(old_lo[pb, 1], old_dx[pb, 1], sy, new_lo[cb, 1], new_dx[cb, 1], dyi, False)
+                                o2 = _offset(old_lo[pb, 2], old_dx[pb, 2], sz, new_lo[cb, 2], new_dx[cb, 2], dzi, False)
+                                _put_state_child(src, dst, pb, sx, sy, sz, cb, dxi, dyi, dzi, o0, o1, o2, ndim, linear,
+                                                 lam)
+
+
+@njit(cache=True, parallel=True)
+def restrict_blocks(src, dst, pairs, weight0):
+    """Fill new parent blocks with the volume-weighted means of their old children.
+
+    ``pairs[e] = (parent, child, cx, cy, cz)``: old block ``child`` is the (cx, cy, cz) half
+    of new block ``parent``; ``weight0[e, i, a]`` is the share of axis-0 child ``a`` of the
+    parent's interior cell row ``i`` (see :func:`restrict_ghosts`).
+    """
+    nx, ny, nz = src[0].shape[2], src[0].shape[3], src[0].shape[4]
+    half = (nx - 2 * GHOST) // 2
+    hy = (ny - 2 * GHOST) // 2 if ny > 1 else 1
+    hz = (nz - 2 * GHOST) // 2 if nz > 1 else 1
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    ay = 2 if ny > 1 else 1
+    az = 2 if nz > 1 else 1
+    wyz = 1.0 / (ay * az)
+    for e in prange(pairs.shape[0]):
+        pb = pairs[e, 0]
+        cb = pairs[e, 1]
+        for f in range(len(src)):
+            fsrc = src[f]
+            fdst = dst[f]
+            for px in range(half):
+                for py in range(hy):
+                    for pz in range(hz):
+                        dxi = GHOST + pairs[e, 2] * half + px
+                        dyi = gy + pairs[e, 3] * hy + py
+                        dzi = gz + pairs[e, 4] * hz + pz
+                        for c in range(fsrc.shape[1]):
+                            acc = 0.0
+                            for a in range(2):
+                                for j in range(ay):
+                                    for k in range(az):
+                                        acc += weight0[e, px, a] * wyz * fsrc[cb, c, GHOST + 2 * px + a,
+                                                                             gy + 2 * py + j, gz + 2 * pz + k]
+                            fdst[pb, c, dxi, dyi, dzi] = acc
+
+
+@njit(cache=True)
+def _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, q, a1, a2):
+    """sum_f dt A_f F_f - dt A_c F_c of face-flux column q (fine sum over the fine face cells)."""
+    fine = 0.0
+    for a in range(a1):
+        for c in range(a2):
+            fine += face_flux[fb, 1 - side, q, f1 + a, f2 + c]
+    return fine - face_flux[cb, side, q, j1, j2]
+
+
+@njit(cache=True)
+def reflux(axis, plan, volume, face_flux, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts):
+    """Correct coarse cells beside finer blocks with the fine face fluxes (module docstring).
+
+    ``face_flux[NB, 2, NQ, N1, N2]`` holds dt A F through each block's low and high faces
+    along ``axis`` (columns: volume, mass, internal energy of each material, momentum x y z,
+    total energy, transported scalars).  ``plan`` rows are (coarse block, side, coarse cell,
+    fine block, first fine face cell); ``volume`` the coarse cells' volumes V (m^3).
+
+    Mass, momentum, total energy and transported scalars get the exact flux difference.  A
+    material already in the cell keeps its density and specific internal energy (its volume
+    fraction changes by Delta(alpha_k rho_k) / rho_k, its internal energy by
+    e_k Delta(alpha_k rho_k)), so the correction moves no cell off pressure equilibrium; a
+    material new to the cell takes the volume and energy differences of the fluxes.  The
+    total energy stays exact; the sweeps reconcile the material energies with it.  A
+    material driven below zero leaves the cell: the mass that brings it to zero is counted as
+    added by the floors, or what remains of it as removed by the void cleanup (``floors``,
+    ``amounts``).
+    Serial: a plan touches a few hundred cells.
+    """
+    nmat = alpha.shape[1]
+    n1 = face_flux.shape[3]
+    n2 = face_flux.shape[4]
+    a1 = 2 if n1 > 1 else 1
+    a2 = 2 if n2 > 1 else 1
+    for e in range(plan.shape[0]):
+        cb = plan[e, R_COARSE]
+        side = plan[e, R_SIDE]
+        ix, iy, iz = plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ]
+        fb, f1, f2 = plan[e, R_FINE], plan[e, R_F1], plan[e, R_F2]
+        if axis == 0:
+            j1, j2 = iy, iz
+        elif axis == 1:
+            j1, j2 = ix, iz
+        else:
+            j1, j2 = ix, iy
+        sign = 1.0 / volume[e] if side == 0 else -1.0 / volume[e]
+        for k in range(nmat):
+            d_vol = sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, k, a1, a2)
+            d_mass = sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, nmat + k, a1, a2)
+            d_eint = sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, 2 * nmat + k, a1, a2)
+            a = alpha[cb, k, ix, iy, iz]
+            ar = arho[cb, k, ix, iy, iz]
+            if a > 0.0 and ar > 0.0:
+                d_vol = d_mass * a / ar
+                d_eint = d_mass * arhoe[cb, k, ix, iy, iz] / ar
+            ar += d_mass
+            if ar < 0.0 or a + d_vol < 0.0:
+                if ar < 0.0:
+                    amounts[cb, AMOUNT_MASS_FLOOR] -= ar * volume[e]
+                else:
+                    amounts[cb, AMOUNT_MASS_VOID] += ar * volume[e]
+                floors[cb, FLOOR_PARTIAL_DENSITY] += 1
+                alpha[cb, k, ix, iy, iz] = 0.0
+                arho[cb, k, ix, iy, iz] = 0.0
+                arhoe[cb, k, ix, iy, iz] = 0.0
+            else:
+                alpha[cb, k, ix, iy, iz] = a + d_vol
+                arho[cb, k, ix, iy, iz] = ar
+                arhoe[cb, k, ix, iy, iz] += d_eint
+        for c in range(3):
+            mom[cb, c, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
+                                                              3 * nmat + c, a1, a2)
+        energy[cb, 0, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
+                                                             3 * nmat + 3, a1, a2)
+        for c in range(arhoq.shape[1]):
+            arhoq[cb, c, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
+                                                                3 * nmat + 4 + c, a1, a2)
+
+
+def face_flux_columns(nmat: int, nq_total: int) -> int:
+    """Number of face-flux columns: 3 per material, momentum (3), total energy, the scalars."""
+    return 3 * nmat + 4 + nq_total
+
+
+def allocate_face_flux(nblocks: int, padded_shape, ndim: int, nmat: int, nq_total: int) -> np.ndarray:
+    """Zeroed ``face_flux[NB, 2, NQ, N1, N2]`` for :func:`impactpipe.hydro.sweep.sweep`.
+
+    N1, N2 are the padded sizes of a sweep's two transverse axes (1 where unused), the same
+    for every sweep axis since all used axes have the same padded size.
+    """
+    n = max(padded_shape)
+    return np.zeros((nblocks, 2, face_flux_columns(nmat, nq_total), n if ndim > 1 else 1, n if ndim == 3 else 1))
