@@ -124,9 +124,9 @@ def test_cli_rejects_bad_ladders_before_any_work(tmp_path):
                                   "--vary", "hydro.cells_per_projectile_radius=2,-4,8"])
     assert result.exit_code == 2 and "values must be numbers > 0 (got [2, -4, 8])" in result.output
     result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
-                                  "--vary", "hydro.max_levels=1,3"])
+                                  "--vary", "hydro.max_levels=1,0"])
     assert result.exit_code == 2
-    assert "--vary hydro.max_levels=3: hydro.max_levels: 3 refinement levels are not available" in result.output
+    assert "--vary hydro.max_levels=0: " in result.output and "integer >= 1 (got 0)" in result.output
     result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
                                   "--vary", "hydro.cfl=0.2,0.4", "--depths", "1,x"])
     assert result.exit_code == 2 and "--depths: expected comma-separated numbers (got '1,x')" in result.output
