@@ -112,6 +112,8 @@ class Simulation:
         self.blocks_coarsened = 0
         #: Wall seconds spent in :meth:`regrid` (flagging, balancing, moving the state).
         self.regrid_seconds = 0.0
+        #: Largest |p| (Pa) the regrids have seen: the scale of the refinement's pressure floor.
+        self.peak_pressure = 0.0
         if not 0.0 < cfl <= 1.0:
             raise ValueError(f"cfl must be in (0, 1], got {cfl}")
         if len(material_names) != state.nmat or len(eos_specs) != state.nmat:
@@ -271,8 +273,8 @@ class Simulation:
         mesh, st = self.mesh, self.state
         for axis in range(mesh.ndim):
             fill_state_ghosts(st, mesh, axis)
-        refine, coarsen = flag_blocks(mesh, st, self.eos, self.shear_modulus, self.tensile_strength,
-                                      self.refinement)
+        refine, coarsen, self.peak_pressure = flag_blocks(mesh, st, self.eos, self.shear_modulus,
+                                                          self.tensile_strength, self.refinement, self.peak_pressure)
         plan = plan_leaves(mesh, refine, coarsen)
         if plan is None:
             return False
@@ -437,6 +439,7 @@ class Simulation:
                 fh.attrs["regrids"] = self.regrids
                 fh.attrs["blocks_refined"] = self.blocks_refined
                 fh.attrs["blocks_coarsened"] = self.blocks_coarsened
+                fh.attrs["peak_pressure"] = self.peak_pressure
                 mesh_grp = fh.create_group("mesh")
                 for key, value in self.mesh.to_arrays().items():
                     if isinstance(value, (str, int)):
@@ -484,6 +487,7 @@ class Simulation:
             sim.regrids = int(fh.attrs.get("regrids", 0))
             sim.blocks_refined = int(fh.attrs.get("blocks_refined", 0))
             sim.blocks_coarsened = int(fh.attrs.get("blocks_coarsened", 0))
+            sim.peak_pressure = float(fh.attrs.get("peak_pressure", 0.0))
             sim.step_count = int(fh.attrs["step_count"])
             sim.cell_updates = int(fh.attrs["cell_updates"])
             dt_first = float(fh.attrs["dt_first"])

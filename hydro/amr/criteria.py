@@ -4,16 +4,21 @@ For every interior cell and used axis d, with its neighbours i - 1 and i + 1 alo
 filled), three indicators are evaluated and their maxima over a block's cells returned:
 
 - interface: max_k |alpha_k,i+1 - alpha_k,i-1| and |phi_i+1 - phi_i-1| (phi = sum_k alpha_k,
-  so void counts): a material interface or a free surface crosses the cell;
-- pressure jump: |p_i+1 - p_i-1| / (|p_i+1| + |p_i-1| + p_floor), the relative pressure
-  difference across the cell (1 at a shock into material at rest, ~0 in smooth flow);
-  ``p_floor`` (Pa) keeps round-off and acoustic noise at near-zero pressure out;
+  so void counts) above INTERFACE_JUMP = 0.1: a material interface or a free surface crosses
+  the cell;
+- pressure jump: |p_i+1 - p_i-1| / (|p_i+1| + |p_i-1| + p_floor) where material fills both
+  neighbours (sum_k alpha_k >= PHI_SECOND_ORDER), the relative pressure difference across
+  the cell (1 at a shock into material at rest, ~0 in smooth flow; the step to zero at a
+  loaded free surface belongs to the interface indicator);
+  ``p_floor`` (Pa, a fraction of the largest |p| of the run) keeps round-off and the
+  acoustic noise left behind a decayed shock out;
 - density jump: |rho_i+1 - rho_i-1| / (rho_i+1 + rho_i-1) where one material fills both
   neighbours (alpha_k >= PHI_SECOND_ORDER): compressions within a material; the density
   steps at interfaces and free surfaces belong to the interface indicator.
 
 An interface is ``active`` where its block moves or is loaded: the block's largest |p| or
-speed exceeds ``pressure_floor`` times the largest on the mesh.  The free surface of a body
+speed exceeds ``pressure_floor`` times the largest |p| of the run / the largest speed on the
+mesh.  The free surface of a body
 at rest (or far from anything that happens) then does not hold the finest level; with
 ``interfaces: all`` every interface does.
 
@@ -32,8 +37,9 @@ from impactpipe.hydro.mesh import GHOST
 from impactpipe.hydro.sweep import PHI_SECOND_ORDER
 from impactpipe.hydro.timestep import material_state
 
-#: A volume fraction changing by more than this across a cell marks an interface or free surface.
-INTERFACE_JUMP = 0.01
+#: A volume fraction changing by more than this across a cell marks an interface or free
+#: surface (not the percent-level void that tensile failure opens inside a body).
+INTERFACE_JUMP = 0.1
 #: Indicator columns of :func:`block_indicators`: the three jumps, then the block's largest
 #: |p| (Pa) and speed (m/s).
 IND_INTERFACE, IND_PRESSURE, IND_DENSITY, IND_MAX_PRESSURE, IND_MAX_SPEED = range(5)
@@ -110,9 +116,10 @@ def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out):
                             rho_l += arho[b, k, lx, ly, lz]
                             rho_h += arho[b, k, hx, hy, hz]
                         face = max(face, abs(phi_h - phi_l))
-                        p_l = pressure[b, lx, ly, lz]
-                        p_h = pressure[b, hx, hy, hz]
-                        pjump = max(pjump, abs(p_h - p_l) / (abs(p_h) + abs(p_l) + p_floor))
+                        if phi_l >= PHI_SECOND_ORDER and phi_h >= PHI_SECOND_ORDER:
+                            p_l = pressure[b, lx, ly, lz]
+                            p_h = pressure[b, hx, hy, hz]
+                            pjump = max(pjump, abs(p_h - p_l) / (abs(p_h) + abs(p_l) + p_floor))
                         if same:
                             rjump = max(rjump, abs(rho_h - rho_l) / (rho_h + rho_l))
         out[b, IND_INTERFACE] = face

@@ -58,8 +58,8 @@ class RefinementRule:
         pressure_jump: refine where the relative pressure jump across a cell exceeds this
             (None: off); see :mod:`impactpipe.hydro.amr.criteria`.
         density_jump: the same for density (None: off).
-        pressure_floor: p_floor of the pressure indicator as a fraction of the largest |p|
-            on the mesh at the regrid.
+        pressure_floor: p_floor of the pressure indicator (and the activity threshold of
+            ``interfaces: active``) as a fraction of the largest |p| on the mesh so far.
         boxes: ((lo, hi, level), ...): refine every block overlapping [lo, hi] (m) to at
             least ``level``.
     """
@@ -83,12 +83,19 @@ class RefinementRule:
 
 
 def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
-                rule: RefinementRule) -> tuple[np.ndarray, np.ndarray]:
-    """(refine, coarsen) flags per block; the state's ghosts along every used axis must be filled."""
+                rule: RefinementRule, peak_pressure: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
+    """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
+
+    The state's ghosts along every used axis must be filled.  ``peak_pressure`` is the largest
+    |p| of earlier regrids: the pressure floor is ``pressure_floor`` times the largest |p|
+    ever on the mesh, so the waves left behind once the impact's shock has decayed (acoustic
+    noise on the scale of the event) do not keep the whole body refined.
+    """
     pressure = np.zeros((mesh.nblocks,) + mesh.padded_shape)
     mixture_pressure(state.alpha, state.arho, state.arhoe, eos.kind, eos.params, eos.table, shear_modulus,
                      tensile_strength, pressure)
-    floor = rule.pressure_floor * max(float(np.abs(mesh.interior(pressure)).max(initial=0.0)), 1e-300)
+    peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)).max(initial=0.0)))
+    floor = rule.pressure_floor * max(peak_pressure, 1e-300)
     ind = np.zeros((mesh.nblocks, NINDICATOR))
     block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, ind)
     thresholds = np.full(IND_MAX_PRESSURE, np.inf)
@@ -117,7 +124,7 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     keep = np.maximum(_with_neighbours(mesh, shock_keep), face_keep)
     refine = ((want > level) | (boxes > level)) & (level < finest)
     coarsen = (keep < level) & (boxes < level) & (level > 0)
-    return refine, coarsen
+    return refine, coarsen, peak_pressure
 
 
 def _with_neighbours(mesh: BlockMesh, levels: np.ndarray) -> np.ndarray:
