@@ -171,7 +171,8 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     finally:
         progress.close()
     wall = time.perf_counter() - t_wall
-    budget = conservation_budget(initial, sim.totals(), sim.floor_amounts)
+    budget = conservation_budget(initial, sim.totals(), sim.floor_amounts,
+                                 sim.gravity.work if sim.gravity is not None else 0.0)
     with h5py.File(work, "a") as f:
         runstore.write_provenance(f, ctx.provenance(started, wall))
         group = f.require_group("budget")
@@ -199,19 +200,23 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     }
 
 
-def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: dict[str, float]) -> dict[str, float]:
+def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: dict[str, float],
+                        gravity_work: float = 0.0) -> dict[str, float]:
     """Mass, momentum and energy: at the start, on the mesh at the end, what left it, what floors changed (SI).
 
-    ``*_error`` is (mesh + left - initial) relative to the initial value: what the
-    scheme failed to conserve, floors included.
+    ``*_error`` is (mesh + left - initial - added) relative to the initial value: what the
+    scheme failed to conserve, floors included; ``added`` is the work done by external
+    gravity for the energy (``energy_added_by_gravity``, J; :mod:`impactpipe.hydro.gravity`)
+    and 0 for the mass.  A run starting with zero energy is measured against the gravity work.
     """
-    out: dict[str, float] = {}
+    out: dict[str, float] = {"energy_added_by_gravity": float(gravity_work)}
     for key in ("mass", "energy"):
+        added = gravity_work if key == "energy" else 0.0
         out[f"{key}_initial"] = float(initial[key])
         out[f"{key}_on_mesh"] = float(final[key])
         out[f"{key}_left_mesh"] = float(final[f"outflow_{key}"])
-        scale = abs(float(initial[key])) or 1.0
-        out[f"{key}_error"] = float((final[key] + final[f"outflow_{key}"] - initial[key]) / scale)
+        scale = abs(float(initial[key])) or abs(added) or 1.0
+        out[f"{key}_error"] = float((final[key] + final[f"outflow_{key}"] - initial[key] - added) / scale)
     for axis, name in enumerate("xyz"):
         out[f"momentum_{name}_initial"] = float(initial["momentum"][axis])
         out[f"momentum_{name}_on_mesh"] = float(final["momentum"][axis])
@@ -234,6 +239,10 @@ def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: s
         with h5py.File(work, "r") as f:
             same = f.attrs.get("stage_hash") == stage_hash
             initial = {key: f.attrs[f"initial_{key}"] for key in INITIAL_KEYS} if same else None
+        if same and not getattr(PROBLEMS[config.scene.problem], "RESUMABLE", True):
+            log.info("hydro: the %s scene restarts from t = 0 (its checkpoints do not carry external gravity)",
+                     config.scene.problem)
+            same = False
         if same:
             sim = Simulation.from_checkpoint(checkpoint)
             _trim_snapshots(work, sim.time)

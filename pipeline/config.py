@@ -20,7 +20,16 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from impactpipe.hydro.amr.regrid import RefinementRule
-from impactpipe.hydro.problems import advection, impact, interface_advection, noh, planar_impact, sedov, shock_tube
+from impactpipe.hydro.problems import (
+    advection,
+    column_collapse,
+    impact,
+    interface_advection,
+    noh,
+    planar_impact,
+    sedov,
+    shock_tube,
+)
 
 from . import presets
 
@@ -280,9 +289,22 @@ class InterfaceAdvectionScene(Strict):
     end_time: float = Field(_default(interface_advection, "end_time"), gt=0, description="s")
 
 
+class ColumnCollapseScene(Strict):
+    problem: Literal["column_collapse"]
+    geometry: Geometry = "auto"
+    material: str
+    height: float = Field(_default(column_collapse, "height"), gt=0, description="initial column height H0 (m)")
+    width: float = Field(_default(column_collapse, "width"), gt=0,
+                         description="initial column width L0 from the wall x = 0 (m)")
+    gravity: float = Field(_default(column_collapse, "gravity"), gt=0, description="downward acceleration g (m/s^2)")
+    cells_per_height: int = Field(_default(column_collapse, "cells_per_height"), ge=column_collapse.MIN_CELLS_PER_HEIGHT,
+                                  description="cells across the initial height")
+    end_time: float = Field(_default(column_collapse, "end_time"), gt=0, description="s")
+
+
 Scene = Annotated[
     Union[ImpactScene, ShockTubeScene, SedovScene, PlanarImpactScene, AdvectionScene, NohScene,
-          InterfaceAdvectionScene],
+          InterfaceAdvectionScene, ColumnCollapseScene],
     Field(discriminator="problem"),
 ]
 
@@ -527,6 +549,18 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
                 allowed = ", ".join(defined) if defined else "none defined"
                 errors.append((("scene", key, "material"),
                                f"'{name}' is not defined under materials (defined: {allowed}){_did_you_mean(name, defined)}"))
+    if isinstance(scene.get("material"), str) and scene["material"] not in materials:
+        allowed = ", ".join(defined) if defined else "none defined"
+        errors.append((("scene", "material"), f"'{scene['material']}' is not defined under materials "
+                                              f"(defined: {allowed}){_did_you_mean(scene['material'], defined)}"))
+    if scene.get("problem") == "column_collapse":
+        hydro = data.get("hydro") if isinstance(data.get("hydro"), dict) else {}
+        cfl = hydro.get("cfl", Hydro.model_fields["cfl"].default)
+        if isinstance(cfl, (int, float)) and cfl > column_collapse.MAX_CFL:
+            errors.append((("hydro", "cfl"), f"must be <= {column_collapse.MAX_CFL:g} for the column_collapse scene "
+                                             f"(got {cfl:g}{'' if 'cfl' in hydro else ', the default'}): at larger "
+                                             f"steps a deposit at rest under gravity does not stay at rest "
+                                             f"(docs/validation.md, granular column collapse)"))
     if scene.get("problem", "impact") == "impact":
         rt = (scene.get("target") or {}).get("radius") if isinstance(scene.get("target"), dict) else None
         rp = (scene.get("projectile") or {}).get("radius") if isinstance(scene.get("projectile"), dict) else None

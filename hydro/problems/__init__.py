@@ -8,6 +8,7 @@ choice.  Unknown parameter keys raise ``KeyError``.
 
 from impactpipe.hydro.problems import (
     advection,
+    column_collapse,
     impact,
     interface_advection,
     noh,
@@ -24,6 +25,7 @@ PROBLEMS = {
     "noh": noh,
     "interface_advection": interface_advection,
     "impact": impact,
+    "column_collapse": column_collapse,
 }
 
 __all__ = ["PROBLEMS"]

@@ -1,0 +1,194 @@
+"""Collapse of a granular column under gravity onto a rough floor (2d-planar).
+
+A column of ``material``, ``width`` L0 (m) wide and ``height`` H0 (m) tall, stands on the
+floor z = 0 against the wall x = 0 and is released at t = 0 in uniform gravity
+g = (0, -``gravity``, 0) m/s^2 (mesh axis 1 is the vertical z).  It collapses, spreads
+along +x and stops; the deposit's run-out L_f and height H_f are compared with the
+laboratory scaling laws of quasi-two-dimensional collapses (:func:`scaling_runout`,
+:func:`scaling_height`), which depend on the aspect ratio a = H0 / L0 only.
+
+Boundaries: x = 0 reflecting (the back wall, free slip: a mirror plane), z = 0 reflecting
+and rough (:meth:`impactpipe.hydro.strength.model.MaterialStrength.set_rough_wall`: the
+floor holds the material by its own friction, as a bed glued with the same grains does),
+outflow at x_max and z_max.  Mesh (:func:`domain`): square cells dx = H0 /
+``cells_per_height``; x spans L0 plus twice the run-out the scaling law predicts, z spans H0
+plus one cell, each rounded up to whole blocks.
+
+Initial state: the material at its reference density rho0, at rest, with the hydrostatic
+pressure p = rho0 g (H0 - z_m) (z_m the centroid height of the material in the cell) put in
+as internal energy at rho0, so the column starts in vertical equilibrium with no
+deviatoric stress; void elsewhere.
+
+The material should carry a pressure-dependent yield strength with no tensile strength (a
+Drucker-Prager / Coulomb granular material): the GEO model with Y_T = 0, mu_i = tan(phi),
+a large Y_M and a small cohesion Y0, sqrt(J2) <= Y0 + mu_i P.  The cohesion holds the
+partly filled surface cells, whose pressure the free-surface closure relaxes to zero: a
+cohesionless material has no strength there and a skin one cell thick flows down any slope
+(docs/validation.md, "Granular column collapse").  A strengthless material collapses as a
+fluid (dam break) on a free-slip floor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impactpipe.hydro.eos import reference_density
+from impactpipe.hydro.gravity import ExternalGravity
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.problems.common import (
+    check_geometry,
+    material_list,
+    merged,
+    strength_specs,
+    tensile_strengths,
+)
+from impactpipe.hydro.solver import Simulation
+from impactpipe.hydro.state import HydroState
+
+#: Geometries this problem runs in.
+GEOMETRIES = ('2d-planar',)
+
+#: Cells per block edge unless the hydro options give one (the column is small; 8 wastes less void).
+BLOCK_CELLS = 8
+
+#: Mesh axis of the vertical (gravity points along -z).
+VERTICAL_AXIS = 1
+
+#: Fewest cells across the initial height the setup accepts.
+MIN_CELLS_PER_HEIGHT = 4
+
+#: Largest Courant number the setup accepts: at 0.4 the split strength step lets a deposit at rest
+#: under gravity ring and creep (docs/validation.md, "Granular column collapse").
+MAX_CFL = 0.2
+
+#: Checkpoints do not carry the external gravity or the rough floor (Simulation.save_checkpoint),
+#: so the hydro stage restarts an interrupted run of this problem from t = 0.
+RESUMABLE = False
+
+#: The deposit ends where its thickness falls below this fraction of a cell (:func:`deposit`).
+FRONT_THICKNESS_CELLS = 0.5
+
+DEFAULTS = {
+    "material": "sand",
+    "height": 1000.0,
+    "width": 1000.0,
+    "gravity": 9.81,
+    "cells_per_height": 16,
+    "end_time": 120.0,
+}
+
+
+def scaling_runout(aspect_ratio: float) -> float:
+    """Normalised run-out (L_f - L0) / L0 of a quasi-2d collapse (Lube et al. 2005), for a = H0 / L0.
+
+    1.2 a for a <= 2.3 (the column's flank slides off), 1.9 a^(2/3) above (the column falls
+    and spreads), as quoted by Kumar (2015, PhD thesis, Cambridge, ch. 2).
+    """
+    a = float(aspect_ratio)
+    return 1.2 * a if a <= 2.3 else 1.9 * a ** (2.0 / 3.0)
+
+
+def scaling_height(aspect_ratio: float) -> float:
+    """Normalised final height H_f / L0 of a quasi-2d collapse (Lajeunesse et al. 2005), for a = H0 / L0.
+
+    a for a <= 0.7 (the top of the column is not reached by the failure), a^(1/3) above, as
+    quoted by Kumar (2015, PhD thesis, Cambridge, ch. 2).
+    """
+    a = float(aspect_ratio)
+    return a if a <= 0.7 else a ** (1.0 / 3.0)
+
+
+def domain(height: float, width: float, cells_per_height: int, block_cells: int | None = None) -> dict:
+    """The mesh box (see the module docstring); lengths in m.
+
+    Returns ``cell_size``, ``lo``, ``hi``, ``cells`` (per axis, multiples of ``block_cells``),
+    ``boundaries`` and ``block_cells``.
+    """
+    bc = int(block_cells or BLOCK_CELLS)
+    dx = height / cells_per_height
+    room = 2.0 * scaling_runout(height / width) * width
+
+    def whole_blocks(length: float) -> int:
+        return int(np.ceil(length / dx / bc - 1e-9)) * bc
+
+    nx = whole_blocks(width + room)
+    nz = whole_blocks(height + dx)
+    return {"cell_size": dx, "lo": [0.0, 0.0], "hi": [nx * dx, nz * dx], "cells": [nx, nz],
+            "boundaries": [("reflecting", "outflow"), ("reflecting", "outflow")], "block_cells": bc}
+
+
+def _overlap(lo: np.ndarray, hi: np.ndarray, a: float, b: float) -> np.ndarray:
+    """Length of [lo, hi] inside [a, b] (m), elementwise."""
+    return np.clip(np.minimum(hi, b) - np.maximum(lo, a), 0.0, None)
+
+
+def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = MAX_CFL,
+          geometry: str = "2d-planar") -> Simulation:
+    """Build the column-collapse :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring)."""
+    check_geometry("column_collapse", GEOMETRIES, geometry)
+    p = merged(DEFAULTS, params)
+    for key in ("height", "width", "gravity"):
+        if not p[key] > 0.0:
+            raise ValueError(f"{key}: must be > 0 (got {p[key]})")
+    if int(p["cells_per_height"]) < MIN_CELLS_PER_HEIGHT:
+        raise ValueError(f"cells_per_height: must be >= {MIN_CELLS_PER_HEIGHT} (got {p['cells_per_height']})")
+    if cfl > MAX_CFL:
+        raise ValueError(f"cfl: must be <= {MAX_CFL:g} for a column collapse (got {cfl:g}); see MAX_CFL")
+    names, specs, eos = material_list(materials, [p["material"]])
+    box = domain(p["height"], p["width"], int(p["cells_per_height"]), block_cells)
+    mesh = BlockMesh.uniform(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"])
+    dx = box["cell_size"]
+    centres = mesh.cell_centers()
+    x, z = centres[:, 0], centres[:, 1]
+    depth = _overlap(z - 0.5 * dx, z + 0.5 * dx, 0.0, p["height"])
+    fraction = _overlap(x - 0.5 * dx, x + 0.5 * dx, 0.0, p["width"]) * depth / (dx * dx)
+    rho0 = float(reference_density(eos.kind[0], eos.params[0], eos.table))
+    centroid = (z - 0.5 * dx) + 0.5 * depth
+    pressure = rho0 * p["gravity"] * np.clip(p["height"] - centroid, 0.0, None)
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, fraction, 0, eos, rho0, np.zeros(3), pressure=pressure)
+    gravity = ExternalGravity([0.0, -p["gravity"], 0.0], mesh)
+    sim = Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strengths(materials, names),
+                     strength=strength_specs(materials, names), gravity=gravity)
+    if sim.strength is not None:
+        sim.strength.set_rough_wall(VERTICAL_AXIS, 0)
+    return sim
+
+
+def kinetic_energy(snapshot) -> float:
+    """Kinetic energy sum over cells of rho |u|^2 / 2 V of a 2d-planar ``snapshot`` (J, per m of depth)."""
+    widths = (snapshot.block_hi - snapshot.block_lo)[:, :2] / np.asarray(snapshot.volume_fraction.shape[2:4])
+    volume = (widths[:, 0] * widths[:, 1])[:, None, None, None]
+    rho = snapshot.partial_density.sum(axis=1)
+    return float((0.5 * rho * (snapshot.velocity ** 2).sum(axis=1) * volume).sum())
+
+
+def deposit(snapshot) -> dict:
+    """Run-out and height of the material in a 2d-planar ``snapshot`` of this problem (m).
+
+    The thickness profile h(x) = sum_z alpha dz (m, alpha the material volume fraction summed
+    over the materials) is taken per cell column.  ``runout`` L_f: going out from the wall, the
+    right edge of the last column of the continuous deposit (h >= FRONT_THICKNESS_CELLS cell
+    sizes) plus dx h_next / (FRONT_THICKNESS_CELLS dx) for the thinner column beyond it
+    (at most one cell); detached spray further out is left out.  ``height`` H_f is the largest
+    h(x) (at the wall in a deposit).  Also ``x`` (cell centres, m) and ``thickness`` h (m),
+    arrays over the cell columns.
+    """
+    lo = snapshot.block_lo
+    nx = snapshot.volume_fraction.shape[2]
+    dx = float(snapshot.block_hi[0, 0] - lo[0, 0]) / nx
+    fill = snapshot.volume_fraction[:, :, :, :, 0].sum(axis=1)
+    first = float(lo[:, 0].min())
+    column = np.rint((lo[:, 0] - first) / dx).astype(int)
+    ncols = int(column.max()) + nx
+    thickness = np.zeros(ncols)
+    for b in range(lo.shape[0]):
+        thickness[column[b]:column[b] + nx] += fill[b].sum(axis=1) * dx
+    x = first + (np.arange(ncols) + 0.5) * dx
+    threshold = FRONT_THICKNESS_CELLS * dx
+    thin = np.nonzero(thickness < threshold)[0]
+    edge = int(thin[0]) if thin.size else ncols
+    runout = first + edge * dx
+    if edge < ncols:
+        runout += dx * min(thickness[edge] / threshold, 1.0)
+    return {"runout": runout, "height": float(thickness.max()), "x": x, "thickness": thickness}

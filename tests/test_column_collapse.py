@@ -1,0 +1,177 @@
+"""External gravity and the granular column collapse (docs/validation.md, "Granular column collapse")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.gravity import ExternalGravity
+from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.problems import column_collapse
+from impactpipe.hydro.problems.common import preset_material
+from impactpipe.hydro.stage import conservation_budget
+from impactpipe.hydro.state import HydroState
+from impactpipe.pipeline.config import ConfigError, parse_config
+
+G = 9.81
+HEIGHT = 1000.0
+#: sqrt(H0 / g), the collapse's time unit (s).
+TAU = math.sqrt(HEIGHT / G)
+
+
+def granular(cohesion: float = 2.0e5) -> dict:
+    """Basalt EOS with a Drucker-Prager strength: sqrt(J2) <= Y0 + tan(25 deg) P, no tension."""
+    material = preset_material("basalt")
+    material["strength"] = {"model": "geo", "Y0": cohesion, "Y_M": 1.0e12, "Y_T": 0.0,
+                            "mu_i": math.tan(math.radians(25.0)), "poisson": 0.3, "T_melt": 1474.0, "xi": 1.2}
+    return material
+
+
+def test_gravity_kick_adds_rho_g_dt_and_its_work_to_the_bulk_motion_only():
+    mesh = BlockMesh.uniform("2d-planar", [0.0, 0.0], [4.0, 4.0], [8, 8], [("outflow", "outflow")] * 2, 4)
+    eos = pack_eos([preset_material("basalt")["eos"]])
+    state = HydroState.empty(mesh, 1)
+    rng = np.random.default_rng(3)
+    shape = (mesh.nblocks, 3) + mesh.interior_shape
+    velocity = rng.normal(0.0, 5.0, shape)
+    velocity[:, 2] = 0.0
+    state.set_material(mesh, 0.5, 0, eos, 2700.0, velocity, specific_energy=1.0e3)
+    rho = mesh.interior(state.arho).sum(axis=1)
+
+    def internal_energy():
+        return mesh.interior(state.energy)[:, 0] - 0.5 * (mesh.interior(state.momentum) ** 2).sum(axis=1) / rho
+
+    internal_before = internal_energy()
+    momentum_before = mesh.interior(state.momentum).copy()
+    energy_before = float((mesh.interior(state.energy)[:, 0] * mesh.cell_volumes()).sum())
+    gravity = ExternalGravity([0.0, -G, 0.0], mesh)
+    dt = 0.01
+    gravity.advance(state, dt, mesh.block_lo, mesh.block_dx)
+    gravity.advance(state, dt, mesh.block_lo, mesh.block_dx)
+    kick = mesh.interior(state.momentum) - momentum_before
+    np.testing.assert_allclose(kick[:, 1], -2.0 * rho * G * dt, rtol=1e-13)
+    assert np.abs(kick[:, 0]).max() == 0.0
+    np.testing.assert_allclose(internal_energy(), internal_before, rtol=1e-11)
+    energy_after = float((mesh.interior(state.energy)[:, 0] * mesh.cell_volumes()).sum())
+    assert gravity.work == pytest.approx(energy_after - energy_before, abs=1e-13 * energy_before)
+    assert gravity.work != 0.0
+
+
+def test_gravity_rejects_components_the_geometry_cannot_carry():
+    cyl = BlockMesh.uniform("2d-cylindrical", [0.0, 0.0], [1.0, 1.0], [4, 4],
+                            [("reflecting", "outflow"), ("outflow", "outflow")], 4)
+    with pytest.raises(ValueError, match="g_r must be 0"):
+        ExternalGravity([1.0, -G, 0.0], cyl)
+    with pytest.raises(ValueError, match="does not use"):
+        ExternalGravity([0.0, -G, 1.0], cyl)
+    assert ExternalGravity([0.0, -G, 0.0], cyl).work == 0.0
+
+
+def test_budget_counts_the_work_of_gravity():
+    initial = {"mass": 1.0, "energy": 10.0, "momentum": np.zeros(3)}
+    final = {"mass": 1.0, "energy": 14.0, "momentum": np.array([0.0, -2.0, 0.0]), "outflow_mass": 0.0,
+             "outflow_energy": 1.0, "outflow_momentum": np.zeros(3)}
+    budget = conservation_budget(initial, final, {}, gravity_work=5.0)
+    assert budget["energy_added_by_gravity"] == 5.0
+    assert budget["energy_error"] == 0.0
+    assert conservation_budget(initial, final, {})["energy_error"] == pytest.approx(0.5)
+
+
+def scene_yaml(**hydro) -> str:
+    lines = "".join(f"  {key}: {value}\n" for key, value in hydro.items())
+    return ("name: cc\nscene:\n  problem: column_collapse\n  material: sand\n  height: 1000.0\n  width: 500.0\n"
+            "materials:\n  sand:\n    eos: {model: tillotson, preset: basalt}\n"
+            "    strength: {model: geo, Y0: 2.0e5, Y_M: 1.0e12, Y_T: 0.0, mu_i: 0.4663, poisson: 0.3}\n"
+            + (f"hydro:\n{lines}" if lines else ""))
+
+
+def test_config_accepts_the_scene_and_refuses_a_large_courant_number_and_an_unknown_material():
+    config = parse_config(scene_yaml(cfl=0.2))
+    assert (config.scene.height, config.scene.width, config.scene.gravity) == (1000.0, 500.0, 9.81)
+    with pytest.raises(ConfigError) as err:
+        parse_config(scene_yaml())
+    assert "hydro.cfl: must be <= 0.2 for the column_collapse scene (got 0.4, the default)" in str(err.value)
+    with pytest.raises(ConfigError) as err:
+        parse_config(scene_yaml(cfl=0.2).replace("material: sand", "material: snad"))
+    assert "scene.material: 'snad' is not defined under materials (defined: sand); did you mean 'sand'?" in str(err.value)
+    with pytest.raises(ConfigError, match="cells_per_height: must be >= 4"):
+        parse_config(scene_yaml(cfl=0.2).replace("width: 500.0", "width: 500.0\n  cells_per_height: 2"))
+
+
+def test_setup_starts_in_hydrostatic_equilibrium_with_the_column_in_place():
+    sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": 500.0, "cells_per_height": 8},
+                                {"sand": granular()}, cfl=0.2)
+    snap = sim.snapshot()
+    deposit = column_collapse.deposit(snap)
+    assert deposit["runout"] == pytest.approx(500.0, abs=1e-9)
+    assert deposit["height"] == pytest.approx(HEIGHT, rel=1e-12)
+    z = sim.mesh.cell_centers()[:, 1]
+    inside = snap.volume_fraction[:, 0] == 1.0
+    np.testing.assert_allclose(snap.pressure[inside], 2700.0 * G * (HEIGHT - z[inside]), rtol=1e-9)
+    assert sim.strength.rough_walls == [(column_collapse.VERTICAL_AXIS, 0)]
+    with pytest.raises(ValueError, match="cfl: must be <= 0.2"):
+        column_collapse.setup({"material": "sand"}, {"sand": granular()}, cfl=0.4)
+
+
+@pytest.fixture(scope="module")
+def collapse():
+    """Aspect ratio 1 at 16 cells per height, Courant number 0.2, run to 8 TAU (25 937 steps, 17 s idle).
+
+    Returns the samples (time in units of TAU, kinetic energy, deposit) every TAU / 4, the
+    initial totals, the simulation and L0.
+    """
+    width = HEIGHT
+    sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": width, "cells_per_height": 16},
+                                {"sand": granular()}, cfl=0.2)
+    initial = sim.totals()
+    samples = []
+    for k in range(1, 33):
+        sim.run(k * TAU / 4)
+        snap = sim.snapshot()
+        samples.append((sim.time / TAU, column_collapse.kinetic_energy(snap), column_collapse.deposit(snap)))
+    return samples, initial, sim, width
+
+
+def test_column_comes_to_rest_and_stays_at_rest(collapse):
+    """Measured: the peak (KE = 0.031 m g H0 / 2) at 1.5 TAU; KE below 1e-3 of it from 5.25 TAU
+    on, at most 4.2e-4 of it over [6, 8] TAU."""
+    samples, _, _, width = collapse
+    times = np.array([t for t, _, _ in samples])
+    kinetic = np.array([k for _, k, _ in samples])
+    peak = kinetic.max()
+    assert 0.5 < times[np.argmax(kinetic)] < 3.0
+    late = times >= 6.0
+    assert kinetic[late].max() < 1.0e-3 * peak
+    # no creep: over the last 2 TAU the front moves less than one cell, L0 / 16 (measured 0.035 L0)
+    runouts = [d["runout"] for t, _, d in samples if t >= 6.0]
+    assert 0.0 <= runouts[-1] - runouts[0] < width / 16
+
+
+def test_deposit_against_the_laboratory_scaling_laws(collapse):
+    """Run-out (L_f - L0) / L0 and height H_f / L0 within 25 % of the quasi-2d laws at a = 1.
+
+    Measured at 8 TAU: run-out 1.035 (law 1.2, -14 %), height 0.830 (law 1.0, -17 %).  25 %: the
+    laws' prefactors depend on the granular material (Balmforth & Kerswell 2005 found the
+    run-out prefactor to vary with the friction angle between their four materials), and the
+    run-out here is 12 % shorter at Courant number 0.2 than at 0.1 (docs/validation.md).
+    """
+    samples, _, _, width = collapse
+    final = samples[-1][2]
+    aspect = HEIGHT / width
+    runout = (final["runout"] - width) / width
+    assert runout == pytest.approx(column_collapse.scaling_runout(aspect), rel=0.25)
+    assert final["height"] / width == pytest.approx(column_collapse.scaling_height(aspect), rel=0.25)
+
+
+def test_collapse_conserves_mass_and_closes_the_energy_budget(collapse):
+    """Measured: mass (mesh + outflow) to 4e-16; energy error 3.3e-5 of the gravity work."""
+    _, initial, sim, _ = collapse
+    final = sim.totals()
+    assert final["mass_with_outflow"] == pytest.approx(initial["mass"], rel=1e-12)
+    assert final["outflow_mass"] == 0.0
+    budget = conservation_budget(initial, final, sim.floor_amounts, sim.gravity.work)
+    assert sim.gravity.work > 0.0
+    assert abs(budget["energy_error"] * initial["energy"]) < 1e-3 * sim.gravity.work
