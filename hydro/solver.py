@@ -24,7 +24,7 @@ import numba
 import numpy as np
 
 from impactpipe.hydro.amr.plans import axis_plans
-from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh
+from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
@@ -283,7 +283,7 @@ class Simulation:
         for axis in range(new_mesh.ndim):
             fill_state_ghosts(new_state, new_mesh, axis)
         nb = new_mesh.nblocks
-        self.boundary, self.floors, self.amounts = (_summed_rows(a, nb) for a in (self.boundary, self.floors,
+        self.boundary, self.floors, self.amounts = (summed_rows(a, nb) for a in (self.boundary, self.floors,
                                                                                  self.amounts))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
@@ -512,13 +512,6 @@ def _rule_from_json(text) -> RefinementRule | None:
     values = json.loads(text)
     values["boxes"] = tuple((tuple(lo), tuple(hi), int(level)) for lo, hi, level in values.get("boxes", ()))
     return RefinementRule(**values)
-
-
-def _summed_rows(counters: np.ndarray, nblocks: int) -> np.ndarray:
-    """Per-block counters for a new mesh of ``nblocks`` blocks: the old totals in row 0."""
-    out = np.zeros((nblocks,) + counters.shape[1:], dtype=counters.dtype)
-    out[0] = counters.sum(axis=0)
-    return out
 
 
 def _load_named_columns(dataset, names: tuple[str, ...], out: np.ndarray) -> None:

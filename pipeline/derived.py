@@ -279,6 +279,20 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     if config.hydro.max_levels not in ("auto", 1) and config.scene.problem != "impact":
         errors.append(f"hydro.max_levels: {config.hydro.max_levels} levels; only impact scenes refine adaptively "
                       f"in this version (scene.problem is {config.scene.problem}); use 'auto' or 1")
+    levels = values.get("levels", 1)
+    if levels > 1:
+        block = config.hydro.block_cells or DEFAULT_BLOCK_CELLS[GEOMETRY_DIMENSIONS.get(values["geometry"], 2)]
+        if block % 4:
+            errors.append(f"hydro.block_cells: {block} cells per block edge on an adaptive mesh ({levels} levels); "
+                          f"refinement splits blocks in halves and tracers need quarters: use a multiple of 4")
+    ndim = GEOMETRY_DIMENSIONS.get(values["geometry"], 0)
+    for i, box in enumerate(config.hydro.refinement.boxes):
+        if ndim and len(box.lo) != ndim:
+            errors.append(f"hydro.refinement.boxes[{i}]: lo and hi need {ndim} values for {values['geometry']} "
+                          f"(got {len(box.lo)})")
+        if box.level > levels - 1:
+            errors.append(f"hydro.refinement.boxes[{i}].level: {box.level} is finer than the finest level "
+                          f"{levels - 1} (hydro.max_levels resolves to {levels}); use 0 to {levels - 1}")
     if values.get("self_gravity"):
         errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
                       f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")

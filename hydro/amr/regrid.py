@@ -331,6 +331,13 @@ def refine_to(mesh: BlockMesh, wanted_level) -> BlockMesh:
     return mesh
 
 
+def summed_rows(counters: np.ndarray, nblocks: int) -> np.ndarray:
+    """Per-block counters for a new mesh of ``nblocks`` blocks: the old totals in row 0."""
+    out = np.zeros((nblocks,) + counters.shape[1:], dtype=counters.dtype)
+    out[0] = counters.sum(axis=0)
+    return out
+
+
 def rule_from_config(refinement: dict | None) -> RefinementRule:
     """A :class:`RefinementRule` from the ``hydro.refinement`` mapping (missing keys: defaults)."""
     if not refinement:

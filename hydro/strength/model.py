@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.boundary import fill_field_ghosts
 from impactpipe.hydro.mesh import GHOST, REFLECTING, BlockMesh
@@ -88,11 +89,8 @@ class MaterialStrength:
         self.mesh = mesh
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         self.face_flux = self._face_flux_arrays(mesh)
-        for name in ("counts", "amounts"):
-            old = getattr(self, name)
-            new = np.zeros((mesh.nblocks,) + old.shape[1:], dtype=old.dtype)
-            new[0] = old.sum(axis=0)
-            setattr(self, name, new)
+        self.counts = summed_rows(self.counts, mesh.nblocks)
+        self.amounts = summed_rows(self.amounts, mesh.nblocks)
 
     def prepare_state(self, state: HydroState) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
