@@ -1,7 +1,8 @@
 """Uniform external gravity as an operator-split momentum and energy source.
 
-Once per time step, after the sweeps and the strength step, every interior cell with
-mass gets
+After the sweeps, in two half steps around the stress update (half the impulse before it
+and half after it, :meth:`impactpipe.hydro.solver.Simulation._momentum_sources`), every
+interior cell with mass gets, over each part dt,
 
     (rho u)_new = (rho u)_old + rho g dt
     E_new       = E_old + g . ((rho u)_old + (rho u)_new) / 2 dt

@@ -94,7 +94,7 @@ class Simulation:
             ``save(h5group)`` and ``mesh_changed(mesh)`` (see :mod:`impactpipe.hydro.tracers`).
         refinement: when and where an adaptive mesh (``mesh.max_level`` > 0) refines; the
             default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
-        gravity: external gravity applied once per step after the strength step, or None: an
+        gravity: external gravity, applied in two half kicks around the stress update, or None: an
             object with ``advance(state, dt, block_lo, block_dx)`` and ``work`` (J), see
             :class:`impactpipe.hydro.gravity.ExternalGravity`.
     """
@@ -214,12 +214,8 @@ class Simulation:
                 plans = axis_plans(self.mesh, axis)
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self._face_flux, st.alpha, st.arho, st.arhoe,
                        st.arhoq, st.momentum, st.energy, self.floors, self.amounts)
-        if self.strength is not None:
-            self.strength.advance(st, dt, self.eos, self.boundary, self.floors, self.amounts)
-            if not np.isfinite(st.momentum).all():
-                raise HydroFailure("NaN in the momentum after the strength step", self._good_clock[0], -1, None, {})
-        if self.gravity is not None:
-            self.gravity.advance(st, dt, self.mesh.block_lo, self.mesh.block_dx)
+        if self.strength is not None or self.gravity is not None:
+            self._momentum_sources(dt)
         self.time += dt
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
@@ -227,6 +223,30 @@ class Simulation:
         if self.tracers is not None:
             self.tracers.after_step(self, dt)
         return dt
+
+    def _momentum_sources(self, dt: float) -> None:
+        """Stress divergence and gravity over ``dt`` (s), kick - stress update - kick.
+
+        Half of each impulse before the stress update and half after it
+        (:mod:`impactpipe.hydro.strength.model`), so the stress sees the half-step velocity: a
+        body at rest in equilibrium between its stress and gravity feels no net kick before
+        the update and is not strained by it.
+        """
+        st = self.state
+        half = 0.5 * dt
+        if self.strength is not None:
+            self.strength.load_stress(st, self.eos)
+            self.strength.kick(st, half, self.boundary, self.floors, self.amounts)
+        if self.gravity is not None:
+            self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx)
+        if self.strength is not None:
+            self.strength.update(st, dt, self.eos)
+            self.strength.kick(st, half, self.boundary, self.floors, self.amounts)
+        if self.gravity is not None:
+            self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx)
+        if not np.isfinite(st.momentum).all():
+            raise HydroFailure("NaN in the momentum after the strength and gravity step", self._good_clock[0], -1,
+                               None, {})
 
     def run(self, end_time: float, output_times: Iterable[float] = (), on_output: Callable | None = None,
             progress: Callable[[float], None] | None = None, max_steps: int | None = None) -> int:

@@ -23,8 +23,11 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    below STRENGTH_MIN_DENSITY_FRACTION of its reference density (fragmented or vapour: a
    deviatoric stress held by it would put S:D / rho_k of work into very little mass); radial return to sqrt(3 J2) <= Y
    (``yield_return``), equivalent plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_k);
-5. internal energy alpha_k rho_k e_k += dt alpha_k S_k : D_rate (stress power; elastic and
-   plastic work, so total energy stays consistent with the conservative stress fluxes).
+5. internal energy alpha_k rho_k e_k += dt alpha_k (S_k,old + S_k,new) / 2 : D_rate (stress
+   power; elastic and plastic work).  The momentum kicks around this update use S_old for the
+   first half step and S_new for the second (docs/strength.md, "Time integration"), so the
+   mean stress is the one that does the work on the bulk motion and the internal energy stays
+   consistent with the conservative stress fluxes.
 
 The cell's mixture deviatoric stress S = sum_k alpha_k S_k (void and strengthless materials
 carry none) goes to ``work`` for the stress-divergence fluxes.
@@ -98,6 +101,39 @@ def cell_velocities(alpha, arho, mom, eos_kind, eos_params, eos_table, work):
                         for d in range(3):
                             work[b, WK_V + d, ix, iy, iz] = 0.0
                         work[b, WK_PHI, ix, iy, iz] = 0.0
+
+
+@njit(cache=True, parallel=True)
+def mixture_stress(alpha, arho, arhoq, model, work):
+    """Mixture deviatoric stress S = sum_k alpha_k S_k (Pa) of every interior cell into ``work``.
+
+    S_k = (alpha_k rho_k S_k) / (alpha_k rho_k) from the transported amounts ``arhoq``;
+    void cells (``work`` fill 0, from :func:`cell_velocities`), cells without the material
+    and strengthless materials add nothing.  This is the stress the first half of the
+    momentum kick uses (:meth:`impactpipe.hydro.strength.model.MaterialStrength.advance`).
+    """
+    nb, nmat, nx, ny, nz = alpha.shape
+    nq = arhoq.shape[1] // nmat
+    ns = nq - 2
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(nb):
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    for c in range(6):
+                        work[b, WK_S + c, ix, iy, iz] = 0.0
+                    if work[b, WK_PHI, ix, iy, iz] <= 0.0:
+                        continue
+                    for k in range(nmat):
+                        ar = arho[b, k, ix, iy, iz]
+                        a = alpha[b, k, ix, iy, iz]
+                        if model[k] == NONE or not (a > ALPHA_MIN and ar > 0.0):
+                            continue
+                        scale = a / ar
+                        for c in range(ns):
+                            work[b, WK_S + c, ix, iy, iz] += scale * arhoq[b, k * nq + c, ix, iy, iz]
 
 
 @njit(cache=True, inline="always")
@@ -199,6 +235,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                 counts[b, CNT_TENSILE_FAILURE] += 1
                                 dmg = 1.0
                         g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0)
+                        sxx0, syy0, szz0, sxy0, sxz0, syz0 = sxx, syy, szz, sxy, sxz, syz
                         sxx, syy, szz, sxy, sxz, syz = jaumann_update(
                             sxx, syy, szz, sxy, sxz, syz, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz, dt, g)
                         if ns < 6:
@@ -216,8 +253,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             eps_p += dep
                             if model[k] == ROCK and dmg < 1.0:
                                 dmg = min(1.0, dmg + shear_damage_increment(dep, pk, params[k, P_BD], params[k, P_BP]))
-                        power = (sxx * lxx + syy * lyy + szz * lzz + sxy * (lxy + lyx) + sxz * (lxz + lzx)
-                                 + syz * (lyz + lzy))
+                        power = 0.5 * ((sxx + sxx0) * lxx + (syy + syy0) * lyy + (szz + szz0) * lzz
+                                       + (sxy + sxy0) * (lxy + lyx) + (sxz + sxz0) * (lxz + lzx)
+                                       + (syz + syz0) * (lyz + lzy))
                         work_done = dt * a * power
                         arhoe[b, k, ix, iy, iz] += work_done
                         amounts[b, AMT_PLASTIC_WORK] += work_done * vol
