@@ -23,6 +23,17 @@ from typing import Any
 import numpy as np
 
 TEMP_PREFIX = ".tmp-"
+
+
+def _process_umask() -> int:
+    """The process umask (read by setting and restoring it, at import, before any threads)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: Permission bits a new output file gets: what ``open(path, "w")`` would give it.
+FILE_MODE = 0o666 & ~_process_umask()
 DEPENDENCIES = ("numpy", "numba", "rebound", "h5py", "scipy", "click", "pyyaml", "pydantic", "tqdm")
 
 
@@ -31,7 +42,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
 
     On an exception (including KeyboardInterrupt) the temporary file is removed and
-    ``path`` is left as it was.  The rename is atomic on POSIX file systems.
+    ``path`` is left as it was.  The rename is atomic on POSIX file systems.  The file gets
+    the permissions of the file it replaces, or those of a new file under the process umask
+    (the temporary file starts private, mode 0600).
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -42,6 +55,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         yield tmp
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
+        mode = target.stat().st_mode & 0o777 if target.exists() else FILE_MODE
+        os.chmod(tmp, mode)
         os.replace(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)

@@ -179,3 +179,23 @@ def test_atomic_path_replaces_only_on_success(tmp_path):
             raise RuntimeError("writer failed")
     assert json.loads(target.read_text()) == {"old": True}
     assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]
+
+
+def test_atomic_path_gives_new_files_the_umask_mode_and_keeps_a_replaced_files_mode(tmp_path):
+    """The temporary file starts at mode 0600 (mkstemp); outputs must not stay private."""
+    fresh = tmp_path / "hydro.h5"
+    with atomic_path(fresh) as tmp:
+        tmp.write_text("new")
+    mask = os.umask(0o022)
+    os.umask(mask)
+    assert fresh.stat().st_mode & 0o777 == 0o666 & ~mask
+    plain = tmp_path / "plain.txt"
+    plain.write_text("as open() makes it")
+    assert fresh.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
+    kept = tmp_path / "summary.json"
+    kept.write_text("old")
+    kept.chmod(0o640)
+    with atomic_path(kept) as tmp:
+        tmp.write_text("new")
+    assert kept.stat().st_mode & 0o777 == 0o640
+    assert kept.read_text() == "new"
