@@ -328,6 +328,15 @@ def _base(x, b, lev, d, ndim, block_lo, block_dx, block_index, block_level, bloc
     return i, s - i
 
 
+@njit(cache=True)
+def _stencil_base(x, y, z, b, lev, ndim, block_lo, block_dx, block_index, block_level, block_cells):
+    """(i0, fx, j0, fy, k0, fz): :func:`_base` along the three axes for the point (x, y, z)."""
+    i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+    j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+    k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+    return i0, fx, j0, fy, k0, fz
+
+
 @njit(cache=True, inline="always")
 def _global_cell(i, b, lev, d, block_index, block_level, block_cells):
     """Global index on the level-``lev`` cell grid of cell ``i`` counted as in :func:`_base`."""
@@ -432,9 +441,8 @@ def _adaptive_velocity_sums(x, y, z, b, k, ndim, block_lo, block_dx, block_index
     each with W / n^ndim (their mean stands for the coarser cell)."""
     lev = block_level[b]
     while True:
-        i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-        j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-        k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        i0, fx, j0, fy, k0, fz = _stencil_base(x, y, z, b, lev, ndim, block_lo, block_dx, block_index,
+                                                block_level, block_cells)
         num0 = 0.0
         num1 = 0.0
         num2 = 0.0
@@ -484,9 +492,8 @@ def _sample_velocity(position, sign, material, skip, block, block_lo, block_dx, 
         k = material[t]
         x, y, z = position[t, 0], position[t, 1], position[t, 2]
         lev = block_level[b]
-        i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-        j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-        k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        i0, fx, j0, fy, k0, fz = _stencil_base(x, y, z, b, lev, ndim, block_lo, block_dx, block_index,
+                                                block_level, block_cells)
         num0 = 0.0
         num1 = 0.0
         num2 = 0.0
@@ -531,9 +538,8 @@ def _adaptive_best_cell(x, y, z, b, k, ndim, block_lo, block_dx, block_index, bl
     over the level-aware stencil of :func:`_adaptive_velocity_sums` (block -1: none)."""
     lev = block_level[b]
     while True:
-        i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-        j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-        k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+        i0, fx, j0, fy, k0, fz = _stencil_base(x, y, z, b, lev, ndim, block_lo, block_dx, block_index,
+                                                block_level, block_cells)
         best = 0.0
         cb, cx, cy, cz = -1, 0, 0, 0
         complete = True
@@ -583,9 +589,8 @@ def _record_peaks(position, material, skip, block, unrecorded_only, time, block_
         cx, cy, cz = _containing_cell(x, y, z, b, block_lo, block_dx, ncell, ndim)
         if not (alpha[cb, k, cx, cy, cz] > ALPHA_MIN and arho[cb, k, cx, cy, cz] > 0.0):
             lev = block_level[b]
-            i0, fx = _base(x, b, lev, 0, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-            j0, fy = _base(y, b, lev, 1, ndim, block_lo, block_dx, block_index, block_level, block_cells)
-            k0, fz = _base(z, b, lev, 2, ndim, block_lo, block_dx, block_index, block_level, block_cells)
+            i0, fx, j0, fy, k0, fz = _stencil_base(x, y, z, b, lev, ndim, block_lo, block_dx, block_index,
+                                                    block_level, block_cells)
             best = 0.0
             cb = -1
             for c in range(1 << ndim):

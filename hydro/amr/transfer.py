@@ -80,6 +80,21 @@ def _offset(src_lo, src_dx, si, dst_lo, dst_dx, di, radial):
 
 
 @njit(cache=True)
+def _child_cell(px, py, pz, a, j, k, gy, gz, ny, nz):
+    """Padded index of child cell (a, j, k) of the parent cell at interior offset (px, py, pz)."""
+    return GHOST + 2 * px + a, (gy + 2 * py + j if ny > 1 else 0), (gz + 2 * pz + k if nz > 1 else 0)
+
+
+@njit(cache=True)
+def _child_offsets(old_lo, old_dx, new_lo, new_dx, pb, cb, sx, sy, sz, dxi, dyi, dzi, radial):
+    """Offsets (in parent cells, per axis) of child cell (dxi, dyi, dzi) of block cb from the
+    centroid of parent cell (sx, sy, sz) of old block pb (the radial axis by volume centroid)."""
+    return (_offset(old_lo[pb, 0], old_dx[pb, 0], sx, new_lo[cb, 0], new_dx[cb, 0], dxi, radial),
+            _offset(old_lo[pb, 1], old_dx[pb, 1], sy, new_lo[cb, 1], new_dx[cb, 1], dyi, False),
+            _offset(old_lo[pb, 2], old_dx[pb, 2], sz, new_lo[cb, 2], new_dx[cb, 2], dzi, False))
+
+
+@njit(cache=True)
 def _linear(f, b, c, ix, iy, iz, o0, o1, o2, ndim):
     """f[b, c] at offsets (o0, o1, o2) cells from cell (ix, iy, iz) with minmod slopes."""
     q = f[b, c, ix, iy, iz]
@@ -260,9 +275,7 @@ def prolong_state_ghosts(state, plan, block_lo, block_dx, geometry, ndim):
         sb = plan[e, P_SRC]
         dxi, dyi, dzi = plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]
         sx, sy, sz = plan[e, P_SX], plan[e, P_SY], plan[e, P_SZ]
-        o0 = _offset(block_lo[sb, 0], block_dx[sb, 0], sx, block_lo[db, 0], block_dx[db, 0], dxi, radial)
-        o1 = _offset(block_lo[sb, 1], block_dx[sb, 1], sy, block_lo[db, 1], block_dx[db, 1], dyi, False)
-        o2 = _offset(block_lo[sb, 2], block_dx[sb, 2], sz, block_lo[db, 2], block_dx[db, 2], dzi, False)
+        o0, o1, o2 = _child_offsets(block_lo, block_dx, block_lo, block_dx, sb, db, sx, sy, sz, dxi, dyi, dzi, radial)
         linear = _single_material(alpha, sb, sx, sy, sz, ndim)
         if linear and _child_internal_energy(arho, mom, energy, sb, sx, sy, sz, o0, o1, o2, ndim) < 0.0:
             linear = False
@@ -304,12 +317,9 @@ def prolong_blocks(src, dst, pairs, old_lo, old_dx, new_lo, new_dx, geometry, nd
                     for a in range(2):
                         for j in range(ay):
                             for k in range(az):
-                                dxi = GHOST + 2 * px + a
-                                dyi = gy + 2 * py + j if ny > 1 else 0
-                                dzi = gz + 2 * pz + k if nz > 1 else 0
-                                o0 = _offset(old_lo[pb, 0], old_dx[pb, 0], sx, new_lo[cb, 0], new_dx[cb, 0], dxi, radial)
-                                o1 = _offset(old_lo[pb, 1], old_dx[pb, 1], sy, new_lo[cb, 1], new_dx[cb, 1], dyi, False)
-                                o2 = _offset(old_lo[pb, 2], old_dx[pb, 2], sz, new_lo[cb, 2], new_dx[cb, 2], dzi, False)
+                                dxi, dyi, dzi = _child_cell(px, py, pz, a, j, k, gy, gz, ny, nz)
+                                o0, o1, o2 = _child_offsets(old_lo, old_dx, new_lo, new_dx, pb, cb, sx, sy, sz, dxi,
+                                                            dyi, dzi, radial)
                                 if linear and _child_internal_energy(arho, mom, energy, pb, sx, sy, sz, o0, o1, o2,
                                                                      ndim) < 0.0:
                                     linear = False
@@ -318,12 +328,9 @@ def prolong_blocks(src, dst, pairs, old_lo, old_dx, new_lo, new_dx, geometry, nd
                     for a in range(2):
                         for j in range(ay):
                             for k in range(az):
-                                dxi = GHOST + 2 * px + a
-                                dyi = gy + 2 * py + j if ny > 1 else 0
-                                dzi = gz + 2 * pz + k if nz > 1 else 0
-                                o0 = _offset(old_lo[pb, 0], old_dx[pb, 0], sx, new_lo[cb, 0], new_dx[cb, 0], dxi, radial)
-                                o1 = _offset(old_lo[pb, 1], old_dx[pb, 1], sy, new_lo[cb, 1], new_dx[cb, 1], dyi, False)
-                                o2 = _offset(old_lo[pb, 2], old_dx[pb, 2], sz, new_lo[cb, 2], new_dx[cb, 2], dzi, False)
+                                dxi, dyi, dzi = _child_cell(px, py, pz, a, j, k, gy, gz, ny, nz)
+                                o0, o1, o2 = _child_offsets(old_lo, old_dx, new_lo, new_dx, pb, cb, sx, sy, sz, dxi,
+                                                            dyi, dzi, radial)
                                 _put_state_child(src, dst, pb, sx, sy, sz, cb, dxi, dyi, dzi, o0, o1, o2, ndim, linear,
                                                  lam)
 
