@@ -417,7 +417,7 @@ class Simulation:
         sound = np.zeros(shape)
         eint = np.zeros(shape)
         temp = np.zeros(shape)
-        cell_thermodynamics(st.alpha, st.arho, st.arhoe, self.eos.kind, self.eos.params, self.eos.table,
+        cell_thermodynamics(st.alpha, st.arho, st.arhoe, st.arhoq, self.eos.kind, self.eos.params, self.eos.table,
                             self.shear_modulus, self.tensile_strength, pressure, sound, eint, temp)
         arho = mesh.interior(st.arho).copy()
         rho = arho.sum(axis=1)

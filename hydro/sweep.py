@@ -68,7 +68,7 @@ from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
 from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE, hllc_face
-from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, material_state
+from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, damaged_tensile_strength, material_state
 
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
@@ -145,8 +145,8 @@ FAIL_NEGATIVE_DENSITY = 2
 
 # Rows of the per-thread scratch: cell values W, face states FM/FP, face fluxes F.
 W_RHO, W_UN, W_UT1, W_UT2, W_P, W_C, W_K, W_PHI, W_VOL, W_IVL, W_IVR = range(11)
-W_MAT = 11          # + W_STRIDE k: alpha_k, rho_k, e_k, p_k, K_k = rho_k c_K,k^2
-W_STRIDE = 5
+W_MAT = 11          # + W_STRIDE k: alpha_k, rho_k, e_k, p_k, K_k = rho_k c_K,k^2, Y_T,k (1 - D_k)
+W_STRIDE = 6
 Q_UN, Q_UT1, Q_UT2, Q_P = range(4)
 Q_MAT = 4           # + 3 k: alpha_k, rho_k, e_k
 F_MN, F_MT1, F_MT2, F_E, F_S = range(5)
@@ -256,15 +256,17 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         phi += a
                         rho += ar
                         row = W_MAT + W_STRIDE * k
+                        ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
                         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
                             a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
-                            shear_modulus[k], tensile_strength[k])
+                            shear_modulus[k], ytk)
                         if present and i >= g and i < g + n:
                             if flag != 0:
                                 floors[b, FLOOR_EOS_CLAMP] += 1
                             if limited:
                                 floors[b, FLOOR_TENSILE_LIMIT] += 1
                         sc[row + 4, i] = rk * c2b
+                        sc[row + 5, i] = ytk
                         if present:
                             p += a * pk
                             kmod += ar * c2k
@@ -272,8 +274,10 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         sc[row + 1, i] = rk
                         sc[row + 2, i] = ek
                         sc[row + 3, i] = pk
-                        for j in range(nq):
-                            sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] / ar if ar > 0.0 else 0.0
+                        if nq > 0:
+                            inv_ar = 1.0 / ar if ar > 0.0 else 0.0
+                            for j in range(nq):
+                                sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
                     sc[W_PHI, i] = phi
                     sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
                     if rho > 0.0 and phi >= PHI_VOID:
@@ -293,8 +297,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         sc[W_UT2, i] = 0.0
                 # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                 for i in range(1, ncell - 1):
-                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n,
-                                      tensile_strength)
+                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                 # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
                 for f in range(g, g + n + 1):
                     _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
@@ -330,15 +333,15 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     ix, iy, iz = _cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
-                                 tensile_strength, eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
+                                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
 
 
 @njit(cache=True, inline="always")
-def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior, tensile_strength):
+def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
     """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i.
 
     The face pressures must stay admissible: not below the most tension the cell's materials
-    hold, p_min = -sum_k alpha_k Y_T,k (Pa), and not from p > 0 to below -TENSION_TOLERANCE K.
+    hold, p_min = -sum_k alpha_k Y_T,k (1 - D_k) (Pa), and not from p > 0 to below -TENSION_TOLERANCE K.
     A predictor that leaves that range (the Hancock term K du/dx of a cell at its tensile
     limit can predict tens of MPa of tension, which would pull a light neighbour to many
     km/s) falls back to the cell values (first order, counted).
@@ -375,7 +378,7 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior, te
             first_order = True
         p_min = 0.0
         for k in range(nmat):
-            p_min -= sc[W_MAT + W_STRIDE * k, i] * tensile_strength[k]
+            p_min -= sc[W_MAT + W_STRIDE * k, i] * sc[W_MAT + W_STRIDE * k + 5, i]
         if p_face < p_min and p_face < p:
             first_order = True
         for k in range(nmat):
@@ -518,11 +521,12 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
 
 @njit(cache=True, inline="always")
 def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
-                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure, tensile_strength,
+                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row):
     """Flux-form update of cell i with volume closure, energy reconciliation and floors.
 
-    A material at its tensile limit (pressure <= -Y_T, Y_T = ``tensile_strength[k]``) does
+    A material at its tensile limit (pressure <= -Y_T (1 - D), the damaged tensile strength
+    the gather put in scratch row 5 of the material; a failed material, D = 1, holds none) does
     not share the expansion of a full cell: the cell opens void instead (tensile failure
     by void insertion, as CTH does), so no material is stretched beyond its strength.
     """
@@ -558,7 +562,7 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         work_pressure = sc[row + 3, i]
         if asum > 1.0:
             a_new = a_flux / asum
-        elif dv > 0.0 and full and sc[row + 3, i] > -tensile_strength[k]:
+        elif dv > 0.0 and full and sc[row + 3, i] > -sc[row + 5, i]:
             a_new = a_flux + sc[row, i] * dv
         elif relax > 0.0 and sc[row + 3, i] > 0.0 and sc[row + 4, i] > 0.0:
             a_new = a_flux * (1.0 + relax * sc[row + 3, i] / sc[row + 4, i])

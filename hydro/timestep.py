@@ -48,6 +48,21 @@ def signal_speed_squared(c2_bulk, rho, shear):
     return c2_bulk
 
 
+@njit(cache=True)
+def damaged_tensile_strength(tensile_strength, arhoq, nq, b, k, ix, iy, iz, ar):
+    """Y_T (1 - D) (Pa): the tension material k still holds in a cell, D its damage (-).
+
+    D = (alpha_k rho_k D_k) / (alpha_k rho_k) from the last of the ``nq`` transported
+    scalars of material k in ``arhoq`` (:mod:`impactpipe.hydro.strength.update`; ``ar`` =
+    alpha_k rho_k, kg/m^3): a failed material (D = 1) holds no tension.  Without transported
+    scalars (nq = 0, no strength in the scene) Y_T itself.
+    """
+    if nq == 0 or not ar > 0.0:
+        return tensile_strength
+    damage = arhoq[b, nq * k + nq - 1, ix, iy, iz] / ar
+    return tensile_strength * min(max(1.0 - damage, 0.0), 1.0)
+
+
 @njit(cache=True, inline="always")
 def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
     """Thermodynamic state of one material in one cell from its conserved amounts.
@@ -110,17 +125,19 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
 
 
 @njit(cache=True, parallel=True)
-def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
+def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
                         pressure, sound_speed, specific_energy, temp):
     """Interior-cell mixture thermodynamics into ``(NB, nx, ny, nz)`` outputs.
 
-    pressure = sum_k alpha_k max(p_k, -Y_T,k) (Pa), the material pressures limited by the
-    tensile strengths as in the sweeps; sound_speed = sqrt(sum_k alpha_k rho_k c_k^2 / rho) (m/s),
+    pressure = sum_k alpha_k max(p_k, -Y_T,k (1 - D_k)) (Pa), the material pressures limited
+    by the tensile strengths left by the damage D_k (:func:`damaged_tensile_strength`) as in
+    the sweeps; sound_speed = sqrt(sum_k alpha_k rho_k c_k^2 / rho) (m/s),
     the equal-strain mixture's;
     specific_energy = sum_k alpha_k rho_k e_k / rho (J/kg); temp = sum_k alpha_k rho_k T_k / rho (K).
     Void cells get zeros.
     """
     nb, nmat, nx, ny, nz = alpha.shape
+    nq = arhoq.shape[1] // nmat
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
@@ -137,9 +154,10 @@ def cell_thermodynamics(alpha, arho, arhoe, eos_kind, eos_params, eos_table, she
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
                         rho += ar
+                        ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
                         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
                             a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
-                            shear_modulus[k], tensile_strength[k])
+                            shear_modulus[k], ytk)
                         if present:
                             p += a * pk
                             kmod += ar * c2k

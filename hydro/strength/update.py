@@ -15,9 +15,9 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
 2. tensile failure: when the EOS pressure p_k < -Y_T (1 - D) the material fails (D = 1,
    counted once as ``tensile_failure``); from then on its yield strength in tension is zero
    (the tensile taper of :mod:`impactpipe.hydro.strength.yield_strength` with Y_T (1 - D)).
-   Its mean stress stays limited to -Y_T by the sweeps, which open void instead of
-   stretching it (docs/hydro.md, "Tensile limit"); see docs/strength.md for why the
-   failed material is not relaxed to zero tension here;
+   The sweeps limit its mean stress to -Y_T (1 - D), zero once failed, and open void
+   instead of stretching it (docs/hydro.md, "Tensile limit";
+   :func:`impactpipe.hydro.timestep.damaged_tensile_strength`);
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
 4. Y = yield_strength(p_k, T_k, D) with T_k from the EOS, and Y = 0 for material expanded
    below STRENGTH_MIN_DENSITY_FRACTION of its reference density (fragmented or vapour: a
@@ -229,7 +229,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] * inv
                         pk, c2b, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                        # tensile failure and relaxation of tension in failed material
+                        # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
                         if pk < -tensile_strength[k] * (1.0 - dmg):
                             if dmg < 1.0:
                                 counts[b, CNT_TENSILE_FAILURE] += 1
