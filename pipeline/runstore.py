@@ -117,6 +117,12 @@ def git_commit() -> str | None:
         return None
 
 
+#: The commit of the source this process imported (read once, at import): a long-lived process
+#: (a sweep's worker) keeps running the code it imported even if the tree changes later, so
+#: provenance must not read the commit again when it writes an output.
+SOURCE_COMMIT = git_commit()
+
+
 def utc_now() -> str:
     """Current UTC time as an ISO-8601 string."""
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
@@ -127,7 +133,7 @@ def provenance(resolved_config_yaml: str, started: str, wall_seconds: float) -> 
     return {
         "resolved_config": resolved_config_yaml,
         "versions": json.dumps(package_versions()),
-        "git_commit": git_commit() or "unknown",
+        "git_commit": SOURCE_COMMIT or "unknown",
         "host": platform.node(),
         "start_time": started,
         "end_time": utc_now(),

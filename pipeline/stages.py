@@ -230,7 +230,7 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
     summary_path = run_dir / SUMMARY_FILE
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     summary.update({"name": config.name, "problem": config.scene.problem, "run_dir": str(run_dir.resolve()),
-                    "versions": runstore.package_versions(), "git_commit": runstore.git_commit()})
+                    "versions": runstore.package_versions(), "git_commit": runstore.SOURCE_COMMIT})
     summary.setdefault("stages", {})
     ctx = StageContext(config=config, run_dir=run_dir, show_progress=show_progress, summary=summary)
     with _signals_raise():

@@ -199,3 +199,14 @@ def test_atomic_path_gives_new_files_the_umask_mode_and_keeps_a_replaced_files_m
         tmp.write_text("new")
     assert kept.stat().st_mode & 0o777 == 0o640
     assert kept.read_text() == "new"
+
+
+def test_provenance_records_the_commit_of_the_imported_source(monkeypatch):
+    """A sweep worker keeps running the code it imported; a commit made meanwhile must not
+    appear in the provenance of its later outputs."""
+    from impactpipe.pipeline import runstore
+
+    imported = runstore.SOURCE_COMMIT
+    monkeypatch.setattr(runstore, "git_commit", lambda: "0123456789abcdef-made-after-import")
+    attrs = runstore.provenance("name: x\n", runstore.utc_now(), 1.0)
+    assert attrs["git_commit"] == (imported or "unknown")
