@@ -18,7 +18,7 @@ momentum sources with a kick - update - kick splitting (velocity Verlet; docs/st
 The stress ghosts are filled after steps 1 and 3 (reflecting walls mirror the stress: shear
 components with one index normal to the wall change sign).  Updating the stress between two
 half kicks is neutral for elastic waves up to the CFL limit; updating it before one full kick
-(the scheme this replaced) amplified them by up to 1 % per step at cfl 0.4.
+(the scheme this replaced) amplified them by 2 % per step at cfl 0.4 (docs/strength.md).
 
 It exists only when some material has a yield model; a strengthless scene allocates none
 of its arrays and runs none of its kernels.
