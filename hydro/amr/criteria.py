@@ -35,7 +35,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh import GHOST
 from impactpipe.hydro.sweep import PHI_SECOND_ORDER
-from impactpipe.hydro.timestep import material_state
+from impactpipe.hydro.timestep import damaged_tensile_strength, material_state
 
 #: A volume fraction changing by more than this across a cell marks an interface or free
 #: surface (not the percent-level void that tensile failure opens inside a body).
@@ -47,9 +47,15 @@ NINDICATOR = 5
 
 
 @njit(cache=True, parallel=True)
-def mixture_pressure(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, out):
-    """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``."""
+def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
+                     out):
+    """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``.
+
+    p_k is limited by the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps
+    (:func:`impactpipe.hydro.timestep.damaged_tensile_strength`).
+    """
     nb, nmat, nx, ny, nz = alpha.shape
+    nq = arhoq.shape[1] // nmat
     for b in prange(nb):
         for ix in range(nx):
             for iy in range(ny):
@@ -57,9 +63,11 @@ def mixture_pressure(alpha, arho, arhoe, eos_kind, eos_params, eos_table, shear_
                     p = 0.0
                     for k in range(nmat):
                         a = alpha[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
                         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
-                            a, arho[b, k, ix, iy, iz], arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k],
-                            eos_table, shear_modulus[k], tensile_strength[k])
+                            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k],
+                            ytk)
                         if present:
                             p += a * pk
                     out[b, ix, iy, iz] = p

@@ -92,8 +92,8 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     noise on the scale of the event) do not keep the whole body refined.
     """
     pressure = np.zeros((mesh.nblocks,) + mesh.padded_shape)
-    mixture_pressure(state.alpha, state.arho, state.arhoe, eos.kind, eos.params, eos.table, shear_modulus,
-                     tensile_strength, pressure)
+    mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,
+                     shear_modulus, tensile_strength, pressure)
     peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)).max(initial=0.0)))
     floor = rule.pressure_floor * max(peak_pressure, 1e-300)
     ind = np.zeros((mesh.nblocks, NINDICATOR))
