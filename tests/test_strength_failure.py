@@ -1,10 +1,16 @@
-"""Tensile failure (spall in a planar impact) and shock decay in weak and strong targets."""
+"""Tensile failure (spall in a planar impact, the strength of failed material) and shock decay in
+weak and strong targets."""
 
 import numpy as np
 import pytest
 
-from impactpipe.hydro import PROBLEMS
+from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState
+from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, temperature
+from impactpipe.hydro.mesh import GHOST
 from impactpipe.hydro.problems.common import preset_material
+from impactpipe.hydro.strength import MaterialStrength, pack_strength
+from impactpipe.hydro.strength.update import WK_PHI, update_stress
+from impactpipe.hydro.strength.yield_strength import yield_strength
 from impactpipe.pipeline.presets import resolve_strength
 
 
@@ -75,3 +81,40 @@ def test_strong_target_decays_the_shock_faster_than_weak():
     # decay from the first 100 m to 200-350 m is steeper in the strong target
     near = depth < 100.0
     assert np.median(strong[deep]) / strong[near].max() < 0.9 * np.median(weak[deep]) / weak[near].max()
+
+
+def test_failed_material_at_zero_pressure_keeps_its_cohesion():
+    """Failed GEO material whose EOS pressure is slightly tensile bears p = 0 (the sweeps open
+    void instead of stretching it), so it yields at its cohesion, sqrt(3 J2) = sqrt(3) Y0, not at
+    the zero strength of the tensile taper (before: 84 % of the failed mass of case 8b at 10 cells
+    per projectile radius carried no deviatoric stress)."""
+    mesh = BlockMesh.uniform("2d-planar", [0.0, 0.0], [1.0, 1.0], [16, 16], [("outflow", "outflow")] * 2, 16)
+    spec = preset_material("basalt")["eos"]
+    eos = pack_eos([spec])
+    weak = resolve_strength("geo", "weak", {})
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, 1.0, 0, eos, spec["rho0"] * (1.0 - 1e-6), np.zeros(3), specific_energy=0.0)
+    strength = MaterialStrength(pack_strength([weak]), mesh, 1)
+    strength.prepare_state(state)
+    ns = strength.ns
+    state.arhoq[:, ns + 1] = state.arho[:, 0]                       # damage 1: failed
+    p, _, _ = pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, spec["rho0"] * (1.0 - 1e-6), 0.0)
+    assert -1e6 < p < 0.0                                            # slightly tensile EOS state
+    arrays = strength.arrays
+    shear_rate = 1.0                                                 # v_x = shear_rate * y (1/s)
+    ys = (np.arange(20) - GHOST + 0.5) / 16.0
+    for _ in range(200):
+        strength.work[:] = 0.0
+        strength.work[0, 0, :, :, 0] = shear_rate * ys[None, :]
+        strength.work[0, WK_PHI] = 1.0
+        update_stress(1e-6, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
+                      mesh.block_dx, eos.kind, eos.params, eos.table, arrays.model, arrays.params, arrays.shear,
+                      arrays.tensile_strength, strength.work, strength.counts, strength.amounts)
+    s = mesh.interior(state.arhoq)[0, :4, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
+    von_mises = np.sqrt(1.5 * (s[0] ** 2 + s[1] ** 2 + s[2] ** 2 + 2.0 * s[3] ** 2))
+    t = temperature(eos.kind[0], eos.params[0], eos.table, spec["rho0"] * (1.0 - 1e-6), 0.0)
+    at_zero = yield_strength(arrays.model[0], arrays.params[0], 0.0, t, 1.0)      # Y0 x thermal softening
+    assert at_zero == pytest.approx(weak["Y0"], rel=1e-3)
+    assert yield_strength(arrays.model[0], arrays.params[0], p, t, 1.0) == 0.0   # at the raw EOS pressure
+    assert strength.count_totals["yield_return"] > 0
+    assert von_mises == pytest.approx(np.sqrt(3.0) * at_zero, rel=1e-9)

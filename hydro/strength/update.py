@@ -19,10 +19,12 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    instead of stretching it (docs/hydro.md, "Tensile limit";
    :func:`impactpipe.hydro.timestep.damaged_tensile_strength`);
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
-4. Y = yield_strength(p_k, T_k, D) with T_k from the EOS, and Y = 0 for material expanded
+4. Y = yield_strength(p_held, T_k, D) at the pressure the material bears,
+   p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed material
+   at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0), T_k from the EOS, and Y = 0 for material expanded
    below STRENGTH_MIN_DENSITY_FRACTION of its reference density (fragmented or vapour: a
    deviatoric stress held by it would put S:D / rho_k of work into very little mass); radial return to sqrt(3 J2) <= Y
-   (``yield_return``), equivalent plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_k);
+   (``yield_return``), equivalent plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_held);
 5. internal energy alpha_k rho_k e_k += dt alpha_k (S_k,old + S_k,new) / 2 : D_rate (stress
    power; elastic and plastic work).  The momentum kicks around this update use S_old for the
    first half step and S_new for the second (docs/strength.md, "Time integration"), so the
@@ -242,8 +244,11 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             sxz = syz = 0.0
                         if ns < 4:
                             sxy = 0.0
+                        # the mean stress the material bears: no more tension than it still holds,
+                        # as in the sweeps, which open void instead of stretching it further
+                        p_held = max(pk, -tensile_strength[k] * (1.0 - dmg))
                         tk = temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                        y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], pk, tk, dmg))
+                        y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk, dmg))
                         if rk < STRENGTH_MIN_DENSITY_FRACTION * reference_density(eos_kind[k], eos_params[k], eos_table):
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
@@ -252,7 +257,8 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             counts[b, CNT_YIELD] += 1
                             eps_p += dep
                             if model[k] == ROCK and dmg < 1.0:
-                                dmg = min(1.0, dmg + shear_damage_increment(dep, pk, params[k, P_BD], params[k, P_BP]))
+                                dmg = min(1.0, dmg + shear_damage_increment(dep, p_held, params[k, P_BD],
+                                                                            params[k, P_BP]))
                         power = 0.5 * ((sxx + sxx0) * lxx + (syy + syy0) * lyy + (szz + szz0) * lzz
                                        + (sxy + sxy0) * (lxy + lyx) + (sxz + sxz0) * (lxz + lzx)
                                        + (syz + syz0) * (lyz + lzy))
