@@ -192,7 +192,11 @@ def unbound_mass(position, velocity, mass) -> float:
     kinetic term is the reduced-mass form mu |v_i - V_rest|^2 / (2 m_i), exact for a pair).
     One pass, no iteration: the hand-off diagnostic ``initial_unbound_mass`` of
     ``reaccumulate``.  Collisions can still bind such mass by dissipating its energy; perfect
-    merging binds any touching pair whatever its speed.
+    merging binds any touching pair whatever its speed.  The converse does not hold: each
+    particle is weighed against the potential of all the others, so the mass counted bound
+    is not a bound body.  Summed over the particles the test compares K with 2 |W|, not |W|:
+    a cloud with |W| < K < 2 |W| is bound particle by particle and still disperses
+    (docs/validation.md, "Why case 8b is low": 68 % counted bound, 92 % escaped).
     """
     if mass.shape[0] < 2:
         return 0.0

@@ -20,11 +20,12 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    :func:`impactpipe.hydro.timestep.damaged_tensile_strength`);
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
 4. Y = yield_strength(p_held, T_k, D) at the pressure the material bears,
-   p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed material
-   at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0), T_k from the EOS, and Y = 0 for material expanded
-   below STRENGTH_MIN_DENSITY_FRACTION of its reference density (fragmented or vapour: a
-   deviatoric stress held by it would put S:D / rho_k of work into very little mass); radial return to sqrt(3 J2) <= Y
-   (``yield_return``), equivalent plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_held);
+   p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed
+   material at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0), T_k from the EOS, and
+   Y = 0 for material expanded below STRENGTH_MIN_DENSITY_FRACTION of its reference density
+   (fragmented or vapour: a deviatoric stress held by it would put S:D / rho_k of work into
+   very little mass); radial return to sqrt(3 J2) <= Y (``yield_return``), equivalent
+   plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_held);
 5. internal energy alpha_k rho_k e_k += dt alpha_k (S_k,old + S_k,new) / 2 : D_rate (stress
    power; elastic and plastic work).  The momentum kicks around this update use S_old for the
    first half step and S_new for the second (docs/strength.md, "Time integration"), so the
@@ -249,7 +250,8 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         p_held = max(pk, -tensile_strength[k] * (1.0 - dmg))
                         tk = temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
                         y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk, dmg))
-                        if rk < STRENGTH_MIN_DENSITY_FRACTION * reference_density(eos_kind[k], eos_params[k], eos_table):
+                        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
+                        if rk < STRENGTH_MIN_DENSITY_FRACTION * rho0:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
                         sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz, y, g)
