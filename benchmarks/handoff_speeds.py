@@ -2,9 +2,12 @@
 
 For each `handoff.h5` given, prints the fraction of the hand-off mass whose speed relative
 to the centre of mass exceeds the escape speed from the mass enclosed within its radius
-(sqrt(2 G M(<r) / r)), the fractions above 12, 30 and 100 m/s, and per radius shell (in
+(sqrt(2 G M(<r) / r)), the fractions above 12, 30 and 100 m/s, per radius shell (in
 units of ``--radius``, the target radius) the shell's mass fraction and the fraction of it
-faster than 12 m/s (docs/validation.md, case 8):
+faster than 12 m/s, and for the particles within 0.5, 0.75 and 1 target radius their kinetic
+energy in their own centre-of-mass frame over their mutual potential energy, K / |W| (direct
+sum; a body with K > |W| cannot stay together without losing energy in collisions;
+docs/validation.md, case 8):
 
     python benchmarks/handoff_speeds.py RUN_DIR/handoff.h5 [...] --radius 1e4
 """
@@ -14,8 +17,11 @@ import argparse
 import h5py
 import numpy as np
 
+from impactpipe.nbody.diagnostics import potential_energy
+
 G = 6.674e-11
 SHELLS = ((0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, np.inf))
+VIRIAL_RADII = (0.5, 0.75, 1.0)
 
 
 def main() -> None:
@@ -43,6 +49,13 @@ def main() -> None:
             mass = m[shell].sum()
             fast = m[shell & (speed > 12.0)].sum() / mass if mass > 0 else 0.0
             print(f"  r / R_T in [{lo:g}, {hi:g}): mass fraction {mass / total:.3f}, of it faster than 12 m/s {fast:.3f}")
+        for radius in VIRIAL_RADII:
+            inside = r < radius * args.radius
+            mi = m[inside]
+            vi = u[inside] - (mi[:, None] * u[inside]).sum(0) / mi.sum()
+            kinetic = 0.5 * (mi * (vi ** 2).sum(axis=1)).sum()
+            potential = potential_energy(np.ascontiguousarray(x[inside]), np.ascontiguousarray(mi), G)
+            print(f"  within {radius:g} R_T: mass fraction {mi.sum() / total:.3f}, K / |W| {kinetic / abs(potential):.2f}")
 
 
 if __name__ == "__main__":
