@@ -20,8 +20,10 @@ drawn with replacement (numpy Generator seeded with ``seed``), refitted with
 their weights, and samples with fewer than two distinct Q or a non-negative slope
 are discarded.  ``qstar_err`` is the standard deviation of the valid samples and
 ``qstar_interval`` their 16th-84th percentiles.  With few runs the bootstrap
-underestimates the error (a two-run set has no scatter to resample); the method's
-own error, about +-0.1 in M_lr/M_T from the hand-off time, is not included.
+underestimates the error; a line through two runs has no scatter to resample, so with
+fewer than three distinct Q the errors and the interval are NaN (not the zero the
+bootstrap would give).  The method's own error, about +-0.1 in M_lr/M_T from the
+hand-off time, is not included.
 
 The slope against the normalised energy, d(M_lr/M_T)/d(Q/Q*_D) = b Q*_D, is
 reported with its bootstrap error (about -0.5 in the reference study).
@@ -204,8 +206,10 @@ def fit_qstar(
         logger.warning("only %d of %d bootstrap samples were usable (%d fitted runs)", n_valid, n_bootstrap,
                        xu.size)
 
+    resamplable = np.unique(xu).size >= 3
+
     def spread(samples):
-        return float(np.std(samples, ddof=1)) if samples.size > 1 else float("nan")
+        return float(np.std(samples, ddof=1)) if resamplable and samples.size > 1 else float("nan")
 
     extra: dict[str, float] = {}
     if velocity is not None:
@@ -217,7 +221,8 @@ def fit_qstar(
         extra["critical_radius"] = float(np.cbrt(qstar / k))
         extra["critical_radius_err"] = spread(np.cbrt(q_boot / k))
 
-    interval = tuple(np.percentile(q_boot, [16.0, 84.0])) if q_boot.size else (float("nan"), float("nan"))
+    interval = (tuple(np.percentile(q_boot, [16.0, 84.0])) if resamplable and q_boot.size
+                else (float("nan"), float("nan")))
     return QStarFit(
         qstar=qstar,
         qstar_err=spread(q_boot),

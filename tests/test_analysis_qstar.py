@@ -92,6 +92,14 @@ def test_flags_runs_that_do_not_bracket_half(caplog):
     assert "bracket" in caplog.text
 
 
+def test_two_runs_give_no_uncertainty():
+    """A line through two runs fits them exactly: Q*_D without an error bar, not with a zero one."""
+    fit = fit_qstar([1000.0, 2000.0], [0.7, 0.3], [1500, 1500], velocity=[1900.0, 1900.0 * np.sqrt(2.0)])
+    assert fit.qstar == pytest.approx(1500.0)
+    assert np.isnan(fit.qstar_err) and np.isnan(fit.normalized_slope_err) and np.isnan(fit.critical_velocity_err)
+    assert all(np.isnan(fit.qstar_interval))
+
+
 def test_degenerate_sets_raise():
     with pytest.raises(ValueError, match="two runs"):
         fit_qstar([1000.0, 2000.0], [0.6, 0.05], [500, 500])
