@@ -403,6 +403,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
     answers = _answer_names(depths)
     extrapolations: dict[str, dict[str, Extrapolation]] = {}
     cheapest: dict[str, int | None] = {}
+    reference: dict[str, tuple[str, float]] = {}
     for key in ladders:
         ladder = [r for r in rungs if r.ladder == key]
         h = np.array([r.step for r in ladder])
@@ -418,10 +419,37 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
                     f"{key} has no step size: no extrapolation (changes between rungs are listed)",
                     errors=np.full(len(ladder), np.nan))
         mlr = extrapolations[key]["M_lr_over_M_T"]
-        index = cheapest_within(h, [r.answers.get("M_lr_over_M_T", np.nan) for r in ladder], mlr.value, tolerance)
-        cheapest[key] = index
-    files = _write_outputs(out, rungs, ladders, extrapolations, cheapest, answers, tolerance, base)
-    return {"rungs": rungs, "richardson": extrapolations, "cheapest": cheapest, "files": files}
+        f_mlr = np.array([r.answers.get("M_lr_over_M_T", np.nan) for r in ladder])
+        reference[key] = _tolerance_reference(key, h, f_mlr, mlr)
+        cheapest[key] = cheapest_within(h, f_mlr, reference[key][1], tolerance)
+    files = _write_outputs(out, rungs, ladders, extrapolations, cheapest, reference, answers, tolerance, base)
+    return {"rungs": rungs, "richardson": extrapolations, "cheapest": cheapest, "reference": reference,
+            "files": files}
+
+
+def _tolerance_reference(key: str, h: np.ndarray, f: np.ndarray, mlr: Extrapolation) -> tuple[str, float]:
+    """What the cheapest rung is measured against: ("extrapolated", the Richardson value), or,
+    when there is none, ("finest rung", its M_lr/M_T) for a ladder with a step size and at
+    least two answers, else ("none", NaN)."""
+    if mlr.ok:
+        return "extrapolated", float(mlr.value)
+    finite = np.flatnonzero(np.isfinite(f) & np.isfinite(h))
+    if key in STEP_SIZE and finite.size >= 2:
+        return "finest rung", float(f[finite[np.argmin(h[finite])]])
+    return "none", float("nan")
+
+
+def _cheapest_text(key: str, ladder: list, index: int | None, reference: tuple[str, float], mlr: Extrapolation,
+                   tolerance: float) -> str:
+    """One line: the cheapest rung within ``tolerance`` and what it was measured against."""
+    basis, value = reference
+    if index is None:
+        return f"{key}: no rung shown within +-{tolerance:g} of a converged M_lr/M_T ({mlr.status})"
+    if basis == "extrapolated":
+        return (f"{key}: cheapest rung within +-{tolerance:g} of the extrapolated M_lr/M_T {value:.4g}: "
+                f"{key} = {ladder[index].value}")
+    return (f"{key}: no extrapolation ({mlr.status}); cheapest rung within +-{tolerance:g} of the finest rung's "
+            f"M_lr/M_T {value:.4g}: {key} = {ladder[index].value}")
 
 
 def _fill(rung: Rung, result: Any, point: dict[str, Any], sweep: Sweep, depths: list[float]) -> None:
@@ -489,7 +517,8 @@ def rung_rows(rungs: list[Rung], extrapolations: dict[str, dict[str, Extrapolati
 
 def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                    extrapolations: dict[str, dict[str, Extrapolation]], cheapest: dict[str, int | None],
-                   answers: list[str], tolerance: float, base: Any) -> list[Path]:
+                   reference: dict[str, tuple[str, float]], answers: list[str], tolerance: float,
+                   base: Any) -> list[Path]:
     rows = rung_rows(rungs, extrapolations, answers)
     extra = [f"{a}_{s}" for a in answers if a != "N_lr" for s in ("error_estimate", "change_from_previous")]
     columns = ["ladder", "value", "step_size", "status", *answers, *extra, *COSTS, "run", "hydro_from", "error"]
@@ -500,12 +529,8 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                  "a rung that reused another rung's hydro run (hydro_from) reports that run's hydro cost"]
     for key, index in cheapest.items():
         ladder = [r for r in rungs if r.ladder == key]
-        mlr = extrapolations[key]["M_lr_over_M_T"]
-        if index is None:
-            comments.append(f"{key}: no rung shown within +-{tolerance:g} of a converged M_lr/M_T ({mlr.status})")
-        else:
-            comments.append(f"{key}: cheapest rung within +-{tolerance:g} of the extrapolated M_lr/M_T "
-                            f"{mlr.value:.4g}: {key} = {ladder[index].value}")
+        comments.append(_cheapest_text(key, ladder, index, reference[key], extrapolations[key]["M_lr_over_M_T"],
+                                       tolerance))
     files = [out / TABLE_FILE, out / RICHARDSON_FILE, out / JSON_FILE]
     runstore.write_text_atomic(out / TABLE_FILE, _csv(columns, rows, comments))
     rich_rows = []
@@ -522,6 +547,8 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
         "rows": rows, "richardson": rich_rows,
         "cheapest_within_tolerance": {k: (None if i is None else [r for r in rungs if r.ladder == k][i].value)
                                       for k, i in cheapest.items()},
+        "cheapest_measured_against": {k: (None if cheapest[k] is None else {"basis": b, "M_lr_over_M_T": v})
+                                      for k, (b, v) in reference.items()},
     })
     for key in ladders:
         path = out / f"convergence_{key.split('.')[-1]}.png"
@@ -620,6 +647,6 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
             lines.append(f"  Richardson {name}: {text}")
         index = result["cheapest"][key]
         ladder = [r for r in result["rungs"] if r.ladder == key]
-        lines.append(f"  cheapest within +-{tolerance:g} of the extrapolated M_lr/M_T: "
-                     + ("none shown" if index is None else f"{key} = {ladder[index].value}"))
+        lines.append("  " + _cheapest_text(key, ladder, index, result["reference"][key],
+                                           by_answer["M_lr_over_M_T"], tolerance))
     return lines

@@ -174,8 +174,14 @@ def test_ladders_through_the_sweep_machinery(tmp_path):
     table = (out / "convergence.csv").read_text()
     assert "cheapest rung within +-0.05 of the extrapolated M_lr/M_T 0.7: hydro.cells_per_projectile_radius = 4.0" \
         in table
-    assert json.loads((out / "convergence.json").read_text())["cheapest_within_tolerance"] == {
-        "hydro.cells_per_projectile_radius": 4.0, "nbody.opening_angle": None}
+    # the angle rungs agree exactly: no extrapolation, so the cheapest rung is measured against the finest one
+    assert "nbody.opening_angle: no extrapolation (the three finest rungs agree exactly" in table
+    assert "cheapest rung within +-0.05 of the finest rung's M_lr/M_T" in table
+    summary = json.loads((out / "convergence.json").read_text())
+    assert summary["cheapest_within_tolerance"] == {"hydro.cells_per_projectile_radius": 4.0,
+                                                    "nbody.opening_angle": 1.0}
+    assert summary["cheapest_measured_against"]["hydro.cells_per_projectile_radius"]["basis"] == "extrapolated"
+    assert summary["cheapest_measured_against"]["nbody.opening_angle"]["basis"] == "finest rung"
     for name in ("convergence_cells_per_projectile_radius.png", "convergence_opening_angle.png"):
         assert (out / name).stat().st_size > 0
     assert (out / "points.json").is_file() and (out / "results.csv").is_file()
