@@ -443,6 +443,9 @@ def _cheapest_text(key: str, ladder: list, index: int | None, reference: tuple[s
                    tolerance: float) -> str:
     """One line: the cheapest rung within ``tolerance`` and what it was measured against."""
     basis, value = reference
+    if index is None and basis == "extrapolated":
+        return (f"{key}: no rung within +-{tolerance:g} of the extrapolated M_lr/M_T {value:.4g} "
+                f"(observed order {mlr.order:.3g})")
     if index is None:
         return f"{key}: no rung shown within +-{tolerance:g} of a converged M_lr/M_T ({mlr.status})"
     if basis == "extrapolated":
