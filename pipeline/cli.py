@@ -362,7 +362,7 @@ def export_cmd(run_dir: str, at_time: float | None, every: bool, file_format: st
 def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers: int | None, verbose: int,
                      quiet: bool) -> None:
     """Run the hydro stage once, hand off at each of --times, reaccumulate and analyse each."""
-    from .handoff_scan import handoff_scan
+    from .handoff_scan import handoff_scan, slope_text
     from .sweep import SweepError
 
     _setup_logging(verbose, quiet)
@@ -381,7 +381,7 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
         sys.exit(2)
     for t, m in zip(result["times"], result["mlr_over_mt"]):
         click.echo(f"t = {t:g} s: M_lr/M_T = {m:.4g}")
-    click.echo(f"slope over t >= {result['late_from']:.4g} s: {result['slope']:.4g} +- {result['slope_err']:.2g} /s")
+    click.echo(slope_text(result["slope"], result["slope_err"], result["n_late"], result["late_from"]))
     click.echo(f"wrote {out / 'handoff_scan.csv'} and {out / 'handoff_scan.png'}")
 
 

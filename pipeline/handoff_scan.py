@@ -74,14 +74,24 @@ def handoff_scan(config_path: str | Path, times: list[float], out_dir: str | Pat
     elif late.sum() == 2:
         slope = float((mlr[late][1] - mlr[late][0]) / (t[late][1] - t[late][0]))
     lines = ["# hand-off scan of " + str(config_path),
-             f"# slope of M_lr/M_T over hand-offs at t >= {late_from:.4g} s ({LATE_CROSSING_TIMES:g} crossing "
-             f"times): {slope:.4g} +- {slope_err:.2g} per s",
+             "# " + slope_text(slope, slope_err, int(late.sum()), late_from),
              "handoff_time_s,M_lr_over_M_T,N_lr,late,status"]
     lines += [f"{ti:.6g},{mi:.6g},{ni:.0f},{int(li)},{r[3]}" for ti, mi, ni, li, r in zip(t, mlr, n_lr, late, rows)]
     runstore.write_text_atomic(out / TABLE_FILE, "\n".join(lines) + "\n")
     _figure(out / FIGURE_FILE, t, mlr, late, late_from, slope)
     return {"times": t, "mlr_over_mt": mlr, "n_lr": n_lr, "slope": slope, "slope_err": slope_err,
-            "late_from": late_from, "points": result["points"]}
+            "late_from": late_from, "n_late": int(late.sum()), "points": result["points"]}
+
+
+def slope_text(slope: float, slope_err: float, n_late: int, late_from: float) -> str:
+    """One line on the late-time slope of M_lr/M_T: the value, or why there is none."""
+    where = f"over hand-offs at t >= {late_from:.4g} s ({LATE_CROSSING_TIMES:g} crossing times)"
+    if n_late < 2:
+        return (f"no slope of M_lr/M_T {where}: {n_late} hand-off time(s) there, at least 2 needed "
+                "(scan later times)")
+    if n_late == 2:
+        return f"slope of M_lr/M_T {where}: {slope:.4g} per s (two hand-offs: no error bar)"
+    return f"slope of M_lr/M_T {where}: {slope:.4g} +- {slope_err:.2g} per s"
 
 
 def _figure(path: Path, t, mlr, late, late_from: float, slope: float) -> None:

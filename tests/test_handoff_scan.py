@@ -8,7 +8,7 @@ import numpy as np
 from click.testing import CliRunner
 
 from impactpipe.pipeline.cli import main
-from impactpipe.pipeline.handoff_scan import handoff_scan
+from impactpipe.pipeline.handoff_scan import handoff_scan, slope_text
 
 HERE = Path(__file__).parent
 
@@ -35,6 +35,10 @@ def test_scan_runs_hydro_once_and_hands_off_at_each_time(tmp_path):
     assert np.all((result["mlr_over_mt"] > 0) & (result["mlr_over_mt"] <= (1 + gamma) * (1 + 1e-3)))
     table = (tmp_path / "scan" / "handoff_scan.csv").read_text().splitlines()
     assert len([l for l in table if not l.startswith("#")]) == 4
+    late = int(np.sum(result["times"] >= result["late_from"]))
+    assert result["n_late"] == late
+    if late < 2:
+        assert np.isnan(result["slope"]) and any(l.startswith("# no slope of M_lr/M_T") for l in table)
     assert (tmp_path / "scan" / "handoff_scan.png").stat().st_size > 0
 
 
@@ -43,3 +47,9 @@ def test_handoff_time_without_snapshot_is_rejected(tmp_path):
     config.write_text(config.read_text().replace("handoff: {", "handoff: {time: 0.5, "))
     result = CliRunner().invoke(main, ["validate", str(config)])
     assert result.exit_code == 2 and "handoff.time: 0.5 s has no hydro snapshot" in result.output
+
+
+def test_slope_text_says_why_there_is_no_slope():
+    assert slope_text(float("nan"), float("nan"), 1, 12.7).startswith("no slope of M_lr/M_T over hand-offs at t >= 12.7 s")
+    assert "two hand-offs: no error bar" in slope_text(-0.01, float("nan"), 2, 12.7)
+    assert slope_text(-0.01, 0.004, 3, 12.7).endswith("-0.01 +- 0.004 per s")
