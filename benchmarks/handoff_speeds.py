@@ -55,7 +55,8 @@ def main() -> None:
             vi = u[inside] - (mi[:, None] * u[inside]).sum(0) / mi.sum()
             kinetic = 0.5 * (mi * (vi ** 2).sum(axis=1)).sum()
             potential = potential_energy(np.ascontiguousarray(x[inside]), np.ascontiguousarray(mi), G)
-            print(f"  within {radius:g} R_T: mass fraction {mi.sum() / total:.3f}, K / |W| {kinetic / abs(potential):.2f}")
+            print(f"  within {radius:g} R_T: mass fraction {mi.sum() / total:.3f}, "
+                  f"K / |W| {kinetic / abs(potential):.2f}")
 
 
 if __name__ == "__main__":

@@ -50,6 +50,7 @@ def test_handoff_time_without_snapshot_is_rejected(tmp_path):
 
 
 def test_slope_text_says_why_there_is_no_slope():
-    assert slope_text(float("nan"), float("nan"), 1, 12.7).startswith("no slope of M_lr/M_T over hand-offs at t >= 12.7 s")
+    none = slope_text(float("nan"), float("nan"), 1, 12.7)
+    assert none.startswith("no slope of M_lr/M_T over hand-offs at t >= 12.7 s")
     assert "two hand-offs: no error bar" in slope_text(-0.01, float("nan"), 2, 12.7)
     assert slope_text(-0.01, 0.004, 3, 12.7).endswith("-0.01 +- 0.004 per s")
