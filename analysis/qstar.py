@@ -242,6 +242,14 @@ def fit_qstar(
     )
 
 
+def plus_minus(value: float, error: float, fmt: str = ".3g") -> str:
+    """``value +- error`` for reports, or the value marked "(no error bar)" when the error is
+    not finite (a fit through fewer than three distinct Q, :func:`fit_qstar`)."""
+    if np.isfinite(error):
+        return f"{value:{fmt}} +- {error:.2g}"
+    return f"{value:{fmt}} (no error bar)"
+
+
 def write_qstar_table(
     path: str | os.PathLike,
     Q,

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from impactpipe.analysis.qstar import fit_qstar
+from impactpipe.analysis.qstar import fit_qstar, plus_minus
 from impactpipe.pipeline import runstore
 from impactpipe.pipeline.config import ConfigError, load_config
 from impactpipe.pipeline.handoff_scan import handoff_scan
@@ -343,13 +343,6 @@ def _g(value: Any, digits: int = 3) -> str:
     return str(value)
 
 
-def _pm(value: float, error: float, digits: int = 3) -> str:
-    """``value +- error``, or the value alone marked as having no error bar (a fit through two runs)."""
-    if math.isfinite(error):
-        return f"{_g(value, digits)} +- {_g(error, 2)}"
-    return f"{_g(value, digits)} (no error bar)"
-
-
 def format_report(report: dict[str, Any]) -> list[str]:
     """The report as Markdown lines."""
     s = report["settings"]
@@ -384,9 +377,9 @@ def format_report(report: dict[str, Any]) -> list[str]:
             continue
         note = "" if f["brackets"] else " (extrapolated: runs do not bracket 0.5)"
         lines.append(f"| {f['family']} | {f['model']} | {f['fitted_runs']} of {f['runs']} | "
-                     f"{_pm(f['qstar'], f['qstar_err'])}{note} | {pub_q} | "
-                     f"{_pm(f['velocity'] / 1e3, f['velocity_err'] / 1e3)} | {pub_v} | "
-                     f"{_pm(f['slope'], f['slope_err'])} | {pub_s} |")
+                     f"{plus_minus(f['qstar'], f['qstar_err'])}{note} | {pub_q} | "
+                     f"{plus_minus(f['velocity'] / 1e3, f['velocity_err'] / 1e3)} | {pub_v} | "
+                     f"{plus_minus(f['slope'], f['slope_err'])} | {pub_s} |")
     if report["collision_models"]:
         lines += ["", "## Case 8: collision model against perfect merging", "",
                   "| case | model | M_lr/M_T | with merge | change |", "|---|---|---|---|---|"]

@@ -7,7 +7,6 @@ written), 130 interrupted (SIGINT/SIGTERM; finished stages and checkpoints are k
 from __future__ import annotations
 
 import logging
-import math
 import sys
 from pathlib import Path
 
@@ -182,13 +181,6 @@ def analyze_cmd(run_dir: str, verbose: int, quiet: bool) -> None:
             click.echo(f"{key} = {summary[key]:.4g}")
 
 
-def _plus_minus(value: float, error: float, fmt: str) -> str:
-    """``value +- error``, or the value marked as having no error bar (a fit through two runs)."""
-    if math.isfinite(error):
-        return f"{value:{fmt}} +- {error:.2g}"
-    return f"{value:{fmt}} (no error bar)"
-
-
 @main.command("qstar")
 @click.argument("run_dirs", metavar="RUN_DIR...", nargs=-1, required=True,
                 type=click.Path(file_okay=False, exists=True))
@@ -209,7 +201,7 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
 
     from impactpipe.analysis.energies import comparison_laws, fit_qstar_size_law, scale_qstar_to_velocity
     from impactpipe.analysis.plots import plot_qstar
-    from impactpipe.analysis.qstar import fit_qstar, write_qstar_table
+    from impactpipe.analysis.qstar import fit_qstar, plus_minus, write_qstar_table
 
     from .stages import read_summary
 
@@ -248,14 +240,14 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
         write_qstar_table(out / f"qstar{suffix}.csv", q, mlr, n_lr, fit, labels=[r["dir"].name for r in group],
                           **{by: swept})
         plot_qstar(out / f"qstar{suffix}.png", q, mlr, n_lr, fit, target_radius=radius, comparisons=laws)
-        click.echo(f"R_T = {radius:g} m: Q*_D = {_plus_minus(fit.qstar, fit.qstar_err, '.4g')} J/kg "
+        click.echo(f"R_T = {radius:g} m: Q*_D = {plus_minus(fit.qstar, fit.qstar_err, '.4g')} J/kg "
                    f"from {int(np.sum(fit.used))} of {len(q)} runs")
         critical = fit.critical_velocity if by == "velocity" else fit.critical_radius
         critical_err = fit.critical_velocity_err if by == "velocity" else fit.critical_radius_err
         unit = "m/s" if by == "velocity" else "m"
-        click.echo(f"critical {by.replace('_', ' ')} = {_plus_minus(critical, critical_err, '.4g')} {unit}")
+        click.echo(f"critical {by.replace('_', ' ')} = {plus_minus(critical, critical_err, '.4g')} {unit}")
         click.echo("slope of M_lr/M_T against Q/Q*_D = "
-                   f"{_plus_minus(fit.normalized_slope, fit.normalized_slope_err, '.3f')}")
+                   f"{plus_minus(fit.normalized_slope, fit.normalized_slope_err, '.3f')}")
         if common_velocity is not None:
             v_from = critical if by == "velocity" else float(group[0]["config"].scene.impact.velocity)
             moved = float(scale_qstar_to_velocity(fit.qstar, v_from, common_velocity, mu))

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from impactpipe.analysis import fit_qstar, write_qstar_table
+from impactpipe.analysis.qstar import plus_minus
 
 QSTAR = 1790.0  # J/kg, case 8 of method.md section 6
 GAMMA = 0.083**3  # (R_P/R_T)^3, equal densities
@@ -98,6 +99,8 @@ def test_two_runs_give_no_uncertainty():
     assert fit.qstar == pytest.approx(1500.0)
     assert np.isnan(fit.qstar_err) and np.isnan(fit.normalized_slope_err) and np.isnan(fit.critical_velocity_err)
     assert all(np.isnan(fit.qstar_interval))
+    assert plus_minus(fit.qstar, fit.qstar_err) == "1.5e+03 (no error bar)"
+    assert plus_minus(1790.0, 60.0, ".4g") == "1790 +- 60"
 
 
 def test_degenerate_sets_raise():

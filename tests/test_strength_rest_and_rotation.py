@@ -146,6 +146,20 @@ def test_strength_fields_in_snapshots_with_units(tmp_path):
         assert group["damage"].attrs["units"] == "dimensionless"
 
 
+def _elastic_noise_box(cfl, poisson):
+    """(Simulation, mesh, packed EOS): periodic 1D box of 64 cells of basalt at 0.1 GPa with random
+    0.1 m/s velocities (seeded) and a von Mises strength too high to yield (elastic only)."""
+    mesh = BlockMesh.uniform("1d-planar", [0.0], [1.0], [64], [("periodic", "periodic")], 16)
+    spec = preset_material("basalt")["eos"]
+    eos = pack_eos([spec])
+    velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
+    velocity[:, 0] = 0.1 * np.random.default_rng(1).standard_normal(velocity[:, 0].shape)
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, 1.0, 0, eos, spec["rho0"], velocity, pressure=1.0e8)
+    elastic = {"model": "von_mises", "yield_strength": 1.0e12, "poisson": poisson}
+    return Simulation(mesh, ["basalt"], [spec], state, cfl=cfl, strength=[elastic]), mesh, eos
+
+
 @pytest.mark.parametrize("cfl", [0.4, 0.5])
 def test_elastic_noise_in_a_periodic_box_does_not_grow(cfl):
     """Random 0.1 m/s velocities in elastic basalt (periodic 1D box, 64 cells) over 1000 steps.
@@ -156,15 +170,7 @@ def test_elastic_noise_in_a_periodic_box_does_not_grow(cfl):
     (cfl 0.5) of its start after 100 steps, 0.9 % and 0.8 % after 1000 (the sweeps damp the shortest
     waves, the rest ring without growing); total energy constant to 1e-15.
     """
-    mesh = BlockMesh.uniform("1d-planar", [0.0], [1.0], [64], [("periodic", "periodic")], 16)
-    spec = preset_material("basalt")["eos"]
-    eos = pack_eos([spec])
-    velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
-    velocity[:, 0] = 0.1 * np.random.default_rng(1).standard_normal(velocity[:, 0].shape)
-    state = HydroState.empty(mesh, 1)
-    state.set_material(mesh, 1.0, 0, eos, spec["rho0"], velocity, pressure=1.0e8)
-    elastic = {"model": "von_mises", "yield_strength": 1.0e12, "poisson": 0.25}
-    sim = Simulation(mesh, ["basalt"], [spec], state, cfl=cfl, strength=[elastic])
+    sim, mesh, _ = _elastic_noise_box(cfl, 0.25)
 
     def kinetic():
         rho = mesh.interior(sim.state.arho).sum(axis=1)
@@ -190,16 +196,8 @@ def test_elastic_stress_work_equals_the_stored_strain_energy():
     this box.  Measured: equal within 1e-3 at 20 steps and 1.3e-3 at 1000 (G follows the
     density, so S:S / (4 G) at the end is not exactly the integral of the power).
     """
-    mesh = BlockMesh.uniform("1d-planar", [0.0], [1.0], [64], [("periodic", "periodic")], 16)
-    spec = preset_material("basalt")["eos"]
-    eos = pack_eos([spec])
-    velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
-    velocity[:, 0] = 0.1 * np.random.default_rng(1).standard_normal(velocity[:, 0].shape)
-    state = HydroState.empty(mesh, 1)
-    state.set_material(mesh, 1.0, 0, eos, spec["rho0"], velocity, pressure=1.0e8)
     poisson = 0.25
-    elastic = {"model": "von_mises", "yield_strength": 1.0e12, "poisson": poisson}
-    sim = Simulation(mesh, ["basalt"], [spec], state, cfl=0.4, strength=[elastic])
+    sim, mesh, eos = _elastic_noise_box(0.4, poisson)
     for steps in (20, 1000):
         sim.run(np.inf, max_steps=steps - sim.step_count)
         snap = sim.snapshot()
