@@ -32,7 +32,8 @@ from impactpipe.hydro.mesh import BlockMesh
 from impactpipe.hydro.snapshot import Snapshot
 from impactpipe.hydro.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
-from impactpipe.hydro.sweep import (
+from impactpipe.hydro.sweep import sweep
+from impactpipe.hydro.sweep_layout import (
     AMOUNT_NAMES,
     BND_ENERGY,
     BND_MASS,
@@ -42,7 +43,6 @@ from impactpipe.hydro.sweep import (
     NAMOUNT,
     NFLOOR,
     allocate_scratch,
-    sweep,
 )
 from impactpipe.hydro.timestep import cell_thermodynamics, max_signal_rate
 from impactpipe.pipeline.runstore import atomic_path
@@ -141,6 +141,10 @@ class Simulation:
         self.tracers = tracers
         self.step_count = 0
         self.cell_updates = 0
+        #: Pencils that one material fills alone take the sweep's plain path
+        #: (:mod:`impactpipe.hydro.sweep_plain`); False sends every pencil through the general
+        #: path, which gives the same answer to round-off at about twice the cost.
+        self.plain_pencils = True
         self.dt_first: float | None = None
         self.last_dt = 0.0
         nb = mesh.nblocks
@@ -207,7 +211,7 @@ class Simulation:
             sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
                   self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.mesh.neighbor_level,
                   self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary, self.floors, self.amounts, self._failure,
-                  self._face_flux)
+                  self._face_flux, self.plain_pencils)
             if self._failure[:, 0].any():
                 self._raise_sweep_failure()
             if self.mesh.adaptive:

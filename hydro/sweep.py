@@ -68,114 +68,79 @@ from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
 from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE, hllc_face
+from impactpipe.hydro.sweep_layout import (
+    AMOUNT_ENERGY_CAP,
+    AMOUNT_ENERGY_FLOOR,
+    AMOUNT_ENERGY_LIMITER,
+    AMOUNT_ENERGY_RECONCILED,
+    AMOUNT_ENERGY_VOID,
+    AMOUNT_MASS_FLOOR,
+    AMOUNT_MASS_VOID,
+    AMOUNT_MOMENTUM_LIMITER,
+    AMOUNT_MOMENTUM_VOID,
+    BND_ENERGY,
+    BND_MASS,
+    BND_MATERIAL,
+    BND_MOMENTUM,
+    DISCARD_FRACTION,
+    EMPTIED_FRACTION,
+    F_E,
+    F_MAT,
+    F_MN,
+    F_MT1,
+    F_MT2,
+    F_S,
+    FAIL_NAN,
+    FAIL_NEGATIVE_DENSITY,
+    FAIL_NEGATIVE_FRACTION,
+    FLOOR_ALPHA,
+    FLOOR_ENERGY_LIMIT,
+    FLOOR_EOS_CLAMP,
+    FLOOR_FIRST_ORDER,
+    FLOOR_INTERNAL_ENERGY,
+    FLOOR_PARTIAL_DENSITY,
+    FLOOR_TENSILE_LIMIT,
+    FLOOR_VELOCITY_LIMIT,
+    FLOOR_VOID_CLEANUP,
+    FULL_TOLERANCE,
+    PHI_SECOND_ORDER,
+    PHI_SMALL,
+    Q_MAT,
+    Q_P,
+    Q_UN,
+    Q_UT1,
+    Q_UT2,
+    TENSION_TOLERANCE,
+    W_C,
+    W_IVL,
+    W_IVR,
+    W_K,
+    W_MAT,
+    W_P,
+    W_PHI,
+    W_RHO,
+    W_STRIDE,
+    W_UN,
+    W_UT1,
+    W_UT2,
+    W_VOL,
+    pencil_cell_index,
+)
+from impactpipe.hydro.sweep_plain import (
+    EMPTY_PENCIL,
+    face_flux_plain,
+    gather_plain,
+    plain_material,
+    reconstruct_plain,
+    update_plain,
+)
 from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, damaged_tensile_strength, material_state
-
-#: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
-#: positive pressure is non-physical: the cell falls back to first order.
-TENSION_TOLERANCE = 1.0e-3
-#: Only cells that one material fills to PHI_SECOND_ORDER or more, and whose neighbours are such
-#: cells, reconstruct at second order; mixed and partly void cells (interfaces, free surfaces)
-#: and their neighbours use their cell values.  The limited slope of a volume fraction takes
-#: the face density towards the lighter side (void, or a vapour at 1e-6 of the other's
-#: density) while the face pressure keeps the mixture's, and that face state (p > 0 on a
-#: vanishing density) gives an unbounded face velocity p / (rho c): 1.3e5 m/s in case 8c
-#: next to void, 2.2e5 m/s for ice vapour beside compressed iron in an ice-on-iron impact.
-PHI_SECOND_ORDER = 1.0 - 1.0e-3
-#: A cell whose materials fill more than 1 - FULL_TOLERANCE of it has no void.
-FULL_TOLERANCE = 1.0e-8
-#: A mixture density below -FAIL_NEGATIVE_FRACTION * (previous density) is a failure.
-FAIL_NEGATIVE_FRACTION = 1.0e-3
-#: A cell whose material nearly all left in a sweep (new density below EMPTIED_FRACTION
-#: times the old, and volume fraction below PHI_VOID) holds only round-off residue of
-#: the fluxes; it becomes void and the residue's mass, momentum and energy are counted.
-EMPTIED_FRACTION = 1.0e-8
-#: In a cell filled below PHI_SMALL (by volume, or by mass: sum_k alpha_k rho_k / rho0_k)
-#: the velocity may not exceed the fastest speed of the material around it (the pencil neighbours and the face speeds): momentum residues of
-#: the fluxes would otherwise give the small mass an unbounded velocity.  The momentum
-#: and kinetic energy removed are counted.
-PHI_SMALL = 1.0e-3
-#: In the same small cells the specific total energy E / rho may not exceed the largest
-#: specific total enthalpy (E + max(p, 0)) / rho of the cell and its pencil neighbours before
-#: the sweep: mixing cannot exceed it, so only the face work p* s of a full neighbour
-#: concentrated into a vanishing mass can, and that is the path by which spray and vapour
-#: reached 1e9 - 1e14 J/kg in case 8c.  The energy removed is counted.
-#: Material thinner than DISCARD_FRACTION of its reference density rho0 is discarded from
-#: the cell (as CTH's discard density does): its mass, momentum share and energy are
-#: counted with the void cleanup.  Materials without a reference density (gases) are kept.
-DISCARD_FRACTION = 1.0e-6
-
-# Floor counter slots (``floors[NB, NFLOOR]``).
-FLOOR_ALPHA = 0
-FLOOR_PARTIAL_DENSITY = 1
-FLOOR_INTERNAL_ENERGY = 2
-FLOOR_VOID_CLEANUP = 3
-FLOOR_FIRST_ORDER = 4
-FLOOR_EOS_CLAMP = 5
-FLOOR_VELOCITY_LIMIT = 6
-FLOOR_TENSILE_LIMIT = 7
-FLOOR_ENERGY_LIMIT = 8
-NFLOOR = 9
-FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
-               "void_cleanup", "first_order_fallback", "eos_clamp", "small_cell_velocity_limit",
-               "tensile_limit", "small_cell_energy_limit")
-# Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
-AMOUNT_MASS_FLOOR = 0
-AMOUNT_ENERGY_FLOOR = 1
-AMOUNT_ENERGY_RECONCILED = 2
-AMOUNT_ENERGY_VOID = 3
-AMOUNT_MASS_VOID = 4
-AMOUNT_MOMENTUM_VOID = 5
-AMOUNT_MOMENTUM_LIMITER = 6
-AMOUNT_ENERGY_LIMITER = 7
-AMOUNT_ENERGY_CAP = 8
-NAMOUNT = 9
-AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
-                "energy_removed_by_void_cleanup", "mass_removed_by_void_cleanup",
-                "momentum_removed_by_void_cleanup", "momentum_removed_by_velocity_limit",
-                "energy_removed_by_velocity_limit", "energy_removed_by_energy_limit")
-# Boundary counter slots (``boundary[NB, 5 + M]``): what left the domain (kg, kg m/s, J).
-BND_MASS = 0
-BND_MOMENTUM = 1
-BND_ENERGY = 4
-BND_MATERIAL = 5
-
-# Failure record (``failure[NB, 4]``): code, ix, iy, iz.
-FAIL_NAN = 1
-FAIL_NEGATIVE_DENSITY = 2
-
-# Rows of the per-thread scratch: cell values W, face states FM/FP, face fluxes F.
-W_RHO, W_UN, W_UT1, W_UT2, W_P, W_C, W_K, W_PHI, W_VOL, W_IVL, W_IVR = range(11)
-W_MAT = 11          # + W_STRIDE k: alpha_k, rho_k, e_k, p_k, K_k = rho_k c_K,k^2, Y_T,k (1 - D_k)
-W_STRIDE = 6
-Q_UN, Q_UT1, Q_UT2, Q_P = range(4)
-Q_MAT = 4           # + 3 k: alpha_k, rho_k, e_k
-F_MN, F_MT1, F_MT2, F_E, F_S = range(5)
-F_MAT = 5           # + 3 k: volume, mass, internal energy
-
-
-def scratch_rows(nmat: int, nq: int = 0) -> int:
-    """Number of scratch rows per thread for ``nmat`` materials with ``nq`` transported scalars each."""
-    return (W_MAT + W_STRIDE * nmat) + 2 * (Q_MAT + 3 * nmat) + (F_MAT + 3 * nmat) + 2 * nmat * nq
-
-
-def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int, nq: int = 0) -> np.ndarray:
-    """Per-thread scratch ``(nthreads, rows, pencil_cells + 1)`` for :func:`sweep`."""
-    return np.zeros((nthreads, scratch_rows(nmat, nq), pencil_cells + 1))
-
-
-@njit(cache=True, inline="always")
-def _cell_index(axis, i, j1, j2):
-    if axis == 0:
-        return i, j1, j2
-    if axis == 1:
-        return j1, i, j2
-    return j1, j2, i
 
 
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux):
+          floors, amounts, failure, face_flux, plain_pencils):
     """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -183,6 +148,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     failing cell of each block.  Through each block face along ``axis`` whose neighbour is at
     another refinement level (``neighbor_level`` != 0) the amounts dt A F are stored in
     ``face_flux[b, side, :, j1, j2]`` for refluxing (:mod:`impactpipe.hydro.amr.transfer`).
+    With ``plain_pencils`` a pencil that one material fills alone takes the plain path
+    (:mod:`impactpipe.hydro.sweep_plain`); without, every pencil takes the general path.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
@@ -243,64 +210,83 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         sc[W_IVL, i] = 1.0 / dx
                         sc[W_IVR, i] = 1.0 / dx
                         sc[W_VOL, i] = dx * d1 * d2
-                # 1. gather cell values
-                for i in range(ncell):
-                    ix, iy, iz = _cell_index(axis, i, j1, j2)
-                    rho = 0.0
-                    p = 0.0
-                    kmod = 0.0
-                    phi = 0.0
-                    for k in range(nmat):
-                        a = alpha[b, k, ix, iy, iz]
-                        ar = arho[b, k, ix, iy, iz]
-                        phi += a
-                        rho += ar
-                        row = W_MAT + W_STRIDE * k
-                        ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
-                        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
-                            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
-                            shear_modulus[k], ytk)
-                        if present and i >= g and i < g + n:
-                            if flag != 0:
-                                floors[b, FLOOR_EOS_CLAMP] += 1
-                            if limited:
-                                floors[b, FLOOR_TENSILE_LIMIT] += 1
-                        sc[row + 4, i] = rk * c2b
-                        sc[row + 5, i] = ytk
-                        if present:
-                            p += a * pk
-                            kmod += ar * c2k
-                        sc[row, i] = a
-                        sc[row + 1, i] = rk
-                        sc[row + 2, i] = ek
-                        sc[row + 3, i] = pk
-                        if nq > 0:
-                            inv_ar = 1.0 / ar if ar > 0.0 else 0.0
-                            for j in range(nq):
-                                sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
-                    sc[W_PHI, i] = phi
-                    sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
-                    if rho > 0.0 and phi >= PHI_VOID:
-                        sc[W_RHO, i] = rho
-                        sc[W_P, i] = p
-                        sc[W_K, i] = kmod
-                        inv = 1.0 / rho
-                        sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
-                        sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
-                        sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
-                    else:
-                        sc[W_RHO, i] = 0.0
-                        sc[W_P, i] = 0.0
-                        sc[W_K, i] = 0.0
-                        sc[W_UN, i] = 0.0
-                        sc[W_UT1, i] = 0.0
-                        sc[W_UT2, i] = 0.0
-                # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
-                for i in range(1, ncell - 1):
-                    _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
-                # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
-                for f in range(g, g + n + 1):
-                    _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
+                # 1-3. cell values, face states and fluxes: the plain path for a pencil that one material
+                # fills alone (hydro.sweep_plain), the general path otherwise
+                m = -1
+                if plain_pencils:
+                    m = plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell)
+                rho0_m = reference_density(eos_kind[m], eos_params[m], eos_table) if m >= 0 else 0.0
+                if m == EMPTY_PENCIL:
+                    for f in (g, g + n):
+                        for r in range(f_row, fq_row + nmat * nq):
+                            sc[r, f] = 0.0
+                elif m >= 0:
+                    gather_plain(sc, m, b, axis, j1, j2, t1, t2, ncell, g, n, alpha, arho, arhoe, arhoq, mom,
+                                 eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, nq, wq_row,
+                                 floors)
+                    for i in range(1, ncell - 1):
+                        reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
+                    for f in range(g, g + n + 1):
+                        face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
+                else:
+                    # 1. gather cell values
+                    for i in range(ncell):
+                        ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
+                        rho = 0.0
+                        p = 0.0
+                        kmod = 0.0
+                        phi = 0.0
+                        for k in range(nmat):
+                            a = alpha[b, k, ix, iy, iz]
+                            ar = arho[b, k, ix, iy, iz]
+                            phi += a
+                            rho += ar
+                            row = W_MAT + W_STRIDE * k
+                            ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
+                            present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
+                                a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
+                                shear_modulus[k], ytk)
+                            if present and i >= g and i < g + n:
+                                if flag != 0:
+                                    floors[b, FLOOR_EOS_CLAMP] += 1
+                                if limited:
+                                    floors[b, FLOOR_TENSILE_LIMIT] += 1
+                            sc[row + 4, i] = rk * c2b
+                            sc[row + 5, i] = ytk
+                            if present:
+                                p += a * pk
+                                kmod += ar * c2k
+                            sc[row, i] = a
+                            sc[row + 1, i] = rk
+                            sc[row + 2, i] = ek
+                            sc[row + 3, i] = pk
+                            if nq > 0:
+                                inv_ar = 1.0 / ar if ar > 0.0 else 0.0
+                                for j in range(nq):
+                                    sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
+                        sc[W_PHI, i] = phi
+                        sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
+                        if rho > 0.0 and phi >= PHI_VOID:
+                            sc[W_RHO, i] = rho
+                            sc[W_P, i] = p
+                            sc[W_K, i] = kmod
+                            inv = 1.0 / rho
+                            sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
+                            sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
+                            sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
+                        else:
+                            sc[W_RHO, i] = 0.0
+                            sc[W_P, i] = 0.0
+                            sc[W_K, i] = 0.0
+                            sc[W_UN, i] = 0.0
+                            sc[W_UT1, i] = 0.0
+                            sc[W_UT2, i] = 0.0
+                    # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
+                    for i in range(1, ncell - 1):
+                        _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
+                    # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
+                    for f in range(g, g + n + 1):
+                        _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
                 # boundary counters: fluxes through domain faces (positive = leaving)
                 for side in range(2):
                     if neighbor[b, axis, side] < 0:
@@ -329,8 +315,14 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         for c in range(nmat * nq):
                             face_flux[b, side, 3 * nmat + 4 + c, j1, j2] = area * sc[fq_row + c, f]
                 # 4-5. update interior cells
+                if m == EMPTY_PENCIL:
+                    continue
                 for i in range(g, g + n):
-                    ix, iy, iz = _cell_index(axis, i, j1, j2)
+                    ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
+                    if m >= 0 and update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alpha,
+                                               arho, arhoe, mom, energy, axis, t1, t2, floors, amounts,
+                                               rho0_m, arhoq, nq, fq_row):
+                        continue
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
                                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row)

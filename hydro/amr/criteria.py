@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from impactpipe.hydro.mesh import GHOST
-from impactpipe.hydro.sweep import PHI_SECOND_ORDER
+from impactpipe.hydro.sweep_layout import PHI_SECOND_ORDER
 from impactpipe.hydro.timestep import damaged_tensile_strength, material_state
 
 #: A volume fraction changing by more than this across a cell marks an interface or free

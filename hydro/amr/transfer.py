@@ -50,7 +50,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.reconstruct import minmod_slope
-from impactpipe.hydro.sweep import AMOUNT_MASS_FLOOR, AMOUNT_MASS_VOID, FLOOR_PARTIAL_DENSITY, PHI_SECOND_ORDER
+from impactpipe.hydro.sweep_layout import AMOUNT_MASS_FLOOR, AMOUNT_MASS_VOID, FLOOR_PARTIAL_DENSITY, PHI_SECOND_ORDER
 
 # Plan columns: destination block and padded cell, source block and padded cell.
 P_DST, P_DX, P_DY, P_DZ, P_SRC, P_SX, P_SY, P_SZ = range(8)

@@ -36,7 +36,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
-from impactpipe.hydro.sweep import BND_ENERGY, BND_MOMENTUM
+from impactpipe.hydro.sweep_layout import BND_ENERGY, BND_MOMENTUM
 
 
 @njit(cache=True, inline="always")

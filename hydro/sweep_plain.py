@@ -1,0 +1,354 @@
+"""The sweep's path for plain pencils: every cell full of one material, the others absent.
+
+Most pencils of a scene are plain: a single-material box everywhere, the inside of each
+body of an impact.  There the multi-material machinery of :mod:`impactpipe.hydro.sweep` does
+no work (every volume fraction face value is 1, the volume closure and the energy
+reconciliation are identities, no cell is small, mixed or void), so these functions do the
+same arithmetic for material m alone:
+
+- :func:`plain_material`: m if every cell of the pencil (ghosts included) has
+  alpha_m > 1 - FULL_TOLERANCE and alpha_m rho_m > 0, and every other material has
+  alpha_k = alpha_k rho_k = alpha_k rho_k e_k = 0; EMPTY_PENCIL if no cell holds anything
+  (the general path would compute zero fluxes and leave every cell as it is); else -1;
+- :func:`gather_plain`, :func:`reconstruct_plain`, :func:`face_flux_plain`: the cell values,
+  the MUSCL-Hancock face states and the HLLC fluxes of steps 1-3 of the sweep with
+  one material, written to the same scratch rows (absent materials get zeros);
+- :func:`update_plain`: the flux-form update of step 4 with the equal-strain closure
+  alpha_m += alpha_m dV of a full cell (none at the tensile limit, which opens void) and
+  rho e = E - |m|^2 / (2 rho).  A cell whose new state needs a rule of the general update
+  (density at or below PHI_SMALL rho0, where the small-cell limits and the discard density
+  apply, a volume fraction below PHI_VOID, a NaN) is left untouched and handed back to
+  :func:`impactpipe.hydro.sweep._update_cell`.
+
+The answers agree with the general path to round-off (tests/test_hydro_sweep_plain.py);
+the plain path costs about half as much per cell (docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
+from impactpipe.hydro.riemann import UPWIND_LEFT, hllc_face
+from impactpipe.hydro.sweep_layout import (
+    AMOUNT_ENERGY_FLOOR,
+    AMOUNT_ENERGY_RECONCILED,
+    F_E,
+    F_MAT,
+    F_MN,
+    F_MT1,
+    F_MT2,
+    F_S,
+    FLOOR_EOS_CLAMP,
+    FLOOR_FIRST_ORDER,
+    FLOOR_INTERNAL_ENERGY,
+    FLOOR_TENSILE_LIMIT,
+    FULL_TOLERANCE,
+    PHI_SMALL,
+    Q_MAT,
+    Q_P,
+    Q_UN,
+    Q_UT1,
+    Q_UT2,
+    TENSION_TOLERANCE,
+    W_C,
+    W_IVL,
+    W_IVR,
+    W_K,
+    W_MAT,
+    W_P,
+    W_PHI,
+    W_RHO,
+    W_STRIDE,
+    W_UN,
+    W_UT1,
+    W_UT2,
+    W_VOL,
+    pencil_cell_index,
+)
+from impactpipe.hydro.timestep import PHI_VOID, damaged_tensile_strength, material_state
+
+
+#: :func:`plain_material` of a pencil with no material, momentum or energy in any cell.
+EMPTY_PENCIL = -2
+
+
+@njit(cache=True, inline="always")
+def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell):
+    """The material m that fills every cell of the pencil alone, EMPTY_PENCIL, or -1.
+
+    See the module docstring.  An empty pencil (every cell void, with zero momentum, energy
+    and transported scalars) has no fluxes and no update: the sweep leaves it as it is.
+    """
+    nmat = alpha.shape[1]
+    ix, iy, iz = pencil_cell_index(axis, 0, j1, j2)
+    m = 0
+    for k in range(1, nmat):
+        if alpha[b, k, ix, iy, iz] > alpha[b, m, ix, iy, iz]:
+            m = k
+    if alpha[b, m, ix, iy, iz] == 0.0:
+        for i in range(ncell):
+            ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
+            if energy[b, 0, ix, iy, iz] != 0.0:
+                return -1
+            for c in range(mom.shape[1]):
+                if mom[b, c, ix, iy, iz] != 0.0:
+                    return -1
+            for k in range(nmat):
+                if alpha[b, k, ix, iy, iz] != 0.0 or arho[b, k, ix, iy, iz] != 0.0 or arhoe[b, k, ix, iy, iz] != 0.0:
+                    return -1
+            for c in range(arhoq.shape[1]):
+                if arhoq[b, c, ix, iy, iz] != 0.0:
+                    return -1
+        return EMPTY_PENCIL
+    for i in range(ncell):
+        ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
+        if not (alpha[b, m, ix, iy, iz] > 1.0 - FULL_TOLERANCE and arho[b, m, ix, iy, iz] > 0.0):
+            return -1
+        for k in range(nmat):
+            if k != m and (alpha[b, k, ix, iy, iz] != 0.0 or arho[b, k, ix, iy, iz] != 0.0
+                           or arhoe[b, k, ix, iy, iz] != 0.0):
+                return -1
+    return m
+
+
+@njit(cache=True, inline="always")
+def gather_plain(sc, m, b, axis, j1, j2, t1, t2, ncell, g, n, alpha, arho, arhoe, arhoq, mom, eos_kind,
+                 eos_params, eos_table, shear_modulus, tensile_strength, nq, wq_row, floors):
+    """Step 1 of the sweep for a plain pencil of material m: cell values into the W rows.
+
+    The mixture is material m: rho = alpha_m rho_m, p = alpha_m p_m, K = alpha_m rho_m c_m^2,
+    c = sqrt(K / rho) = c_m (the longitudinal speed, in the general path's arithmetic); the specific transported scalars q_m,j =
+    (alpha_m rho_m q_m,j) / (alpha_m rho_m).  Absent materials get zero rows.
+    """
+    nmat = alpha.shape[1]
+    row = W_MAT + W_STRIDE * m
+    for i in range(ncell):
+        ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
+        a = alpha[b, m, ix, iy, iz]
+        ar = arho[b, m, ix, iy, iz]
+        ytk = damaged_tensile_strength(tensile_strength[m], arhoq, nq, b, m, ix, iy, iz, ar)
+        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
+            a, ar, arhoe[b, m, ix, iy, iz], eos_kind[m], eos_params[m], eos_table, shear_modulus[m], ytk)
+        if i >= g and i < g + n:
+            if flag != 0:
+                floors[b, FLOOR_EOS_CLAMP] += 1
+            if limited:
+                floors[b, FLOOR_TENSILE_LIMIT] += 1
+        for k in range(nmat):
+            if k != m:
+                krow = W_MAT + W_STRIDE * k
+                for c in range(W_STRIDE - 1):
+                    sc[krow + c, i] = 0.0
+                sc[krow + W_STRIDE - 1, i] = tensile_strength[k]
+        sc[row, i] = a
+        sc[row + 1, i] = rk
+        sc[row + 2, i] = ek
+        sc[row + 3, i] = pk
+        sc[row + 4, i] = rk * c2b
+        sc[row + 5, i] = ytk
+        inv = 1.0 / ar
+        for j in range(nq):
+            sc[wq_row + nq * m + j, i] = arhoq[b, nq * m + j, ix, iy, iz] * inv
+        sc[W_PHI, i] = a
+        sc[W_C, i] = np.sqrt(ar * c2k / ar)
+        sc[W_RHO, i] = ar
+        sc[W_P, i] = a * pk
+        sc[W_K, i] = ar * c2k
+        sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
+        sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
+        sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
+
+
+@njit(cache=True, inline="always")
+def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
+    """Step 2 for cell i of a plain pencil: MUSCL-Hancock face states of (u, p, alpha_m, rho_m, e_m).
+
+    The same predictor and admissibility rules as the general path
+    (:func:`impactpipe.hydro.sweep._reconstruct_cell`): a face pressure from p > 0 below
+    -TENSION_TOLERANCE K, or below the tensile limit -alpha_m Y_T,m (1 - D_m) and below p, or
+    a non-positive face density gives the cell values (first order, counted).
+    """
+    row = W_MAT + W_STRIDE * m
+    qrow = Q_MAT + 3 * m
+    un = sc[W_UN, i]
+    dun = mc_slope(sc[W_UN, i - 1], un, sc[W_UN, i + 1])
+    dp = mc_slope(sc[W_P, i - 1], sc[W_P, i], sc[W_P, i + 1])
+    for c in range(3):
+        q = sc[W_UN + c, i]
+        dq = mc_slope(sc[W_UN + c, i - 1], q, sc[W_UN + c, i + 1])
+        if c == 0:
+            qh = q - half * (un * dq + dp / sc[W_RHO, i])
+        else:
+            qh = q - half * un * dq
+        sc[qm_row + Q_UN + c, i] = qh - 0.5 * dq
+        sc[qp_row + Q_UN + c, i] = qh + 0.5 * dq
+    p = sc[W_P, i]
+    ph = p - half * (un * dp + sc[W_K, i] * dun)
+    sc[qm_row + Q_P, i] = ph - 0.5 * dp
+    sc[qp_row + Q_P, i] = ph + 0.5 * dp
+    p_face = ph - 0.5 * abs(dp)
+    a = sc[row, i]
+    first_order = ((p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i])
+                   or (p_face < -a * sc[row + 5, i] and p_face < p))
+    da = mc_slope(sc[row, i - 1], a, sc[row, i + 1])
+    ah = a - half * un * da
+    sc[qm_row + qrow, i] = min(max(ah - 0.5 * da, 0.0), 1.0)
+    sc[qp_row + qrow, i] = min(max(ah + 0.5 * da, 0.0), 1.0)
+    rk = sc[row + 1, i]
+    ek = sc[row + 2, i]
+    drk = mc_slope(sc[row + 1, i - 1], rk, sc[row + 1, i + 1])
+    dek = mc_slope(sc[row + 2, i - 1], ek, sc[row + 2, i + 1])
+    rh = rk - half * (un * drk + rk * dun)
+    eh = ek - half * (un * dek + sc[row + 3, i] / rk * dun)
+    if rh - 0.5 * abs(drk) <= 0.0:
+        first_order = True
+    em = eh - 0.5 * dek
+    ep = eh + 0.5 * dek
+    if ek >= 0.0:
+        em = max(em, 0.0)
+        ep = max(ep, 0.0)
+    sc[qm_row + qrow + 1, i] = rh - 0.5 * drk
+    sc[qp_row + qrow + 1, i] = rh + 0.5 * drk
+    sc[qm_row + qrow + 2, i] = em
+    sc[qp_row + qrow + 2, i] = ep
+    if first_order:
+        if interior:
+            floors[b, FLOOR_FIRST_ORDER] += 1
+        for c in range(3):
+            sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
+            sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
+            sc[qm_row + qrow + c, i] = sc[row + c, i]
+            sc[qp_row + qrow + c, i] = sc[row + c, i]
+        sc[qm_row + Q_P, i] = p
+        sc[qp_row + Q_P, i] = p
+
+
+@njit(cache=True, inline="always")
+def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row):
+    """Step 3 for face f (between cells f-1 and f) of a plain pencil: HLLC fluxes into column f.
+
+    No void on either side; material m's volume flux is alpha_face s with the ultrabee face
+    value and its mass flux alpha_face rho_m,K chi s, capped as in the general path
+    (:func:`impactpipe.hydro.sweep._face_flux`); absent materials carry zero fluxes.
+    """
+    row = W_MAT + W_STRIDE * m
+    qrow = Q_MAT + 3 * m
+    frow = f_row + F_MAT + 3 * m
+    il = f - 1
+    ir = f
+    rho_l = sc[qp_row + qrow, il] * sc[qp_row + qrow + 1, il]
+    rho_r = sc[qm_row + qrow, ir] * sc[qm_row + qrow + 1, ir]
+    side, s, p_star, chi, de = hllc_face(
+        rho_l, sc[qp_row + Q_UN, il], sc[qp_row + Q_P, il], sc[W_C, il], False,
+        rho_r, sc[qm_row + Q_UN, ir], sc[qm_row + Q_P, ir], sc[W_C, ir], False)
+    if side == UPWIND_LEFT:
+        donor = il
+        up = il - 1
+        down = ir
+        krow = qp_row
+        iv_donor = sc[W_IVR, il]
+    else:
+        donor = ir
+        up = ir + 1
+        down = il
+        krow = qm_row
+        iv_donor = sc[W_IVL, ir]
+    a_donor = sc[row, donor]
+    af = ultrabee_face(sc[row, up], a_donor, sc[row, down], abs(s) * dtdx)
+    if af > 1.0:
+        af = 1.0
+    flow = abs(s) * dt * iv_donor
+    if af * flow > a_donor:
+        af = a_donor / flow
+    mass = af * sc[krow + qrow + 1, donor] * chi * s
+    mcap = a_donor * sc[row + 1, donor] / (dt * iv_donor)
+    if abs(mass) > mcap:
+        mass = mcap if mass > 0.0 else -mcap
+    for k in range(nmat):
+        if k != m:
+            for c in range(3):
+                sc[f_row + F_MAT + 3 * k + c, f] = 0.0
+            for j in range(nq):
+                sc[fq_row + nq * k + j, f] = 0.0
+    eint = mass * sc[krow + qrow + 2, donor]
+    sc[frow, f] = af * s
+    sc[frow + 1, f] = mass
+    sc[frow + 2, f] = eint
+    for j in range(nq):
+        sc[fq_row + nq * m + j, f] = mass * sc[wq_row + nq * m + j, donor]
+    un = sc[krow + Q_UN, donor]
+    ut1 = sc[krow + Q_UT1, donor]
+    ut2 = sc[krow + Q_UT2, donor]
+    sc[f_row + F_MN, f] = mass * s + p_star
+    sc[f_row + F_MT1, f] = mass * ut1
+    sc[f_row + F_MT2, f] = mass * ut2
+    sc[f_row + F_E, f] = eint + mass * (0.5 * (un * un + ut1 * ut1 + ut2 * ut2) + de) + p_star * s
+    sc[f_row + F_S, f] = s
+
+
+@njit(cache=True, inline="always")
+def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alpha, arho, arhoe, mom, energy,
+                 axis, t1, t2, floors, amounts, rho0, arhoq, nq, fq_row):
+    """Step 4 for interior cell i of a plain pencil; False (cell untouched) if it needs the general update.
+
+    U_new = U - dt (A_+ F_+ - A_- F_-) / V for alpha_m rho_m, momentum, E and the transported
+    scalars; alpha_m after the volume flux, then closed as a full cell: alpha_m += alpha_m dV
+    (dV = dt div s) unless p_m is at the tensile limit -Y_T,m (1 - D_m), capped at 1 after
+    its p dV work;
+    alpha_m rho_m e_m = E - |m|^2 / (2 rho) (J/m^3; the general path's reconciliation for one
+    material, the difference from the transported internal energy counted as reconciled), a
+    negative value floored at 0 with E raised to match (counted).  ``rho0`` is material m's
+    reference density (kg/m^3; 0 for a gas).
+    """
+    row = W_MAT + W_STRIDE * m
+    frow = f_row + F_MAT + 3 * m
+    wl = dt * sc[W_IVL, i]
+    wr = dt * sc[W_IVR, i]
+    fl = i
+    fr = i + 1
+    ar = arho[b, m, ix, iy, iz] - (wr * sc[frow + 1, fr] - wl * sc[frow + 1, fl])
+    mn = mom[b, axis, ix, iy, iz] - (wr * sc[f_row + F_MN, fr] - wl * sc[f_row + F_MN, fl])
+    if radial:
+        mn += 0.5 * (sc[qm_row + Q_P, i] + sc[qp_row + Q_P, i]) * (wr - wl)
+    m1 = mom[b, t1, ix, iy, iz] - (wr * sc[f_row + F_MT1, fr] - wl * sc[f_row + F_MT1, fl])
+    m2 = mom[b, t2, ix, iy, iz] - (wr * sc[f_row + F_MT2, fr] - wl * sc[f_row + F_MT2, fl])
+    e_tot = energy[b, 0, ix, iy, iz] - (wr * sc[f_row + F_E, fr] - wl * sc[f_row + F_E, fl])
+    dv = wr * sc[f_row + F_S, fr] - wl * sc[f_row + F_S, fl]
+    a_flux = alpha[b, m, ix, iy, iz] - (wr * sc[frow, fr] - wl * sc[frow, fl])
+    if a_flux > 1.0:
+        a_new = 1.0
+    elif dv > 0.0 and sc[row + 3, i] > -sc[row + 5, i]:
+        a_new = a_flux + sc[row, i] * dv
+    else:
+        a_new = a_flux
+    if not (ar > PHI_SMALL * rho0 and a_new >= PHI_VOID and e_tot == e_tot and mn == mn and m1 == m1
+            and m2 == m2):
+        return False
+    ae = (arhoe[b, m, ix, iy, iz] - (wr * sc[frow + 2, fr] - wl * sc[frow + 2, fl])
+          - sc[row + 3, i] * (a_new - a_flux))
+    e_int = e_tot - 0.5 * (mn * mn + m1 * m1 + m2 * m2) / ar
+    vol = sc[W_VOL, i]
+    amounts[b, AMOUNT_ENERGY_RECONCILED] += abs(e_int - ae) * vol
+    delta = (e_int - ae) / ar
+    if delta < 0.0 and ae > 0.0 and e_int >= 0.0:
+        ae *= e_int / ae
+    else:
+        ae += delta * ar
+    if ae < 0.0:
+        floors[b, FLOOR_INTERNAL_ENERGY] += 1
+        amounts[b, AMOUNT_ENERGY_FLOOR] -= ae * vol
+        e_tot -= ae
+        ae = 0.0
+    alpha[b, m, ix, iy, iz] = min(a_new, 1.0)
+    arho[b, m, ix, iy, iz] = ar
+    arhoe[b, m, ix, iy, iz] = ae
+    for j in range(nq):
+        c = nq * m + j
+        arhoq[b, c, ix, iy, iz] -= wr * sc[fq_row + c, fr] - wl * sc[fq_row + c, fl]
+    mom[b, axis, ix, iy, iz] = mn
+    mom[b, t1, ix, iy, iz] = m1
+    mom[b, t2, ix, iy, iz] = m2
+    energy[b, 0, ix, iy, iz] = e_tot
+    return True
