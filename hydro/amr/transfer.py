@@ -221,7 +221,7 @@ def _put_state_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim,
         _put_child(mom, n_mom, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
         _put_child(energy, n_energy, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
     else:
-        _put_fraction_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, 0.0 * lam)
+        _put_fraction_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, lam)
 
 
 @njit(cache=True)
