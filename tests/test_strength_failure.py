@@ -17,8 +17,9 @@ from impactpipe.pipeline.presets import resolve_strength
 def test_spall_fails_the_target_in_tension():
     """The rarefactions from both free surfaces meet inside the target: the material fails
     there (damage 1, counted), holds no more than Y_T of tension before it fails and none
-    after (measured: 52 failed cells, none below 0 Pa; before failed material lost its
-    tension, 141 failed cells held -1.0e7 Pa), and opens void."""
+    after, and opens void.  Measured by this test's scene: 52 failed cells, none below 0 Pa
+    (asserted: 20-200); before failed material lost its tension, 141 failed cells held
+    -1.0e7 Pa."""
     y_t = 1.0e7
     materials = {"basalt": preset_material("basalt")}
     materials["basalt"]["strength"] = resolve_strength("geo", "strongHT", {})
@@ -35,7 +36,7 @@ def test_spall_fails_the_target_in_tension():
     damage = snap.extra["damage"].reshape(-1)
     phi = snap.volume_fraction.sum(axis=1).reshape(-1)
     failed = damage >= 1.0
-    assert failed.any()
+    assert 20 <= failed.sum() <= 200
     assert snap.pressure.reshape(-1)[failed].min() >= 0.0
     # the failed layer lies inside the target, away from its free surfaces, and has opened void
     assert (x[failed] > 0.05).any()
