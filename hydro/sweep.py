@@ -57,6 +57,12 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    internal energy -> 0 with E raised to match, an emptied cell -> void.  NaN or a
    mixture density below -FAIL_NEGATIVE_FRACTION of the cell's previous density is a
    failure recorded in ``failure`` for the solver to raise.
+
+A pencil that one material fills alone takes the plain path of
+:mod:`impactpipe.hydro.sweep_plain` (the same arithmetic without the multi-material
+machinery); the predictor and flux pieces both paths use are in
+:mod:`impactpipe.hydro.sweep_steps`, the thresholds, counter slots and scratch rows in
+:mod:`impactpipe.hydro.sweep_layout`.
 """
 
 from __future__ import annotations
@@ -66,8 +72,7 @@ from numba import get_thread_id, njit, prange
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
-from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
-from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE, hllc_face
+from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE
 from impactpipe.hydro.sweep_layout import (
     AMOUNT_ENERGY_CAP,
     AMOUNT_ENERGY_FLOOR,
@@ -108,8 +113,6 @@ from impactpipe.hydro.sweep_layout import (
     Q_MAT,
     Q_P,
     Q_UN,
-    Q_UT1,
-    Q_UT2,
     TENSION_TOLERANCE,
     W_C,
     W_IVL,
@@ -133,6 +136,14 @@ from impactpipe.hydro.sweep_plain import (
     plain_material,
     reconstruct_plain,
     update_plain,
+)
+from impactpipe.hydro.sweep_steps import (
+    cell_value_faces,
+    flow_fluxes,
+    material_face_flux,
+    predict_flow,
+    predict_material,
+    upwind_face,
 )
 from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, damaged_tensile_strength, material_state
 
@@ -347,25 +358,7 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
         if not pure:
             first_order = True
     if not first_order:
-        rho = sc[W_RHO, i]
-        un = sc[W_UN, i]
-        dun = mc_slope(sc[W_UN, i - 1], un, sc[W_UN, i + 1])
-        dp = mc_slope(sc[W_P, i - 1], sc[W_P, i], sc[W_P, i + 1])
-        for c in range(3):
-            row = W_UN + c
-            q = sc[row, i]
-            dq = mc_slope(sc[row, i - 1], q, sc[row, i + 1])
-            if c == 0:
-                qh = q - half * (un * dq + dp / rho)
-            else:
-                qh = q - half * un * dq
-            sc[qm_row + Q_UN + c, i] = qh - 0.5 * dq
-            sc[qp_row + Q_UN + c, i] = qh + 0.5 * dq
-        p = sc[W_P, i]
-        ph = p - half * (un * dp + sc[W_K, i] * dun)
-        sc[qm_row + Q_P, i] = ph - 0.5 * dp
-        sc[qp_row + Q_P, i] = ph + 0.5 * dp
-        p_face = ph - 0.5 * abs(dp)
+        un, dun, p, p_face = predict_flow(sc, i, half, qm_row, qp_row)
         if p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i]:
             first_order = True
         p_min = 0.0
@@ -374,56 +367,12 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
         if p_face < p_min and p_face < p:
             first_order = True
         for k in range(nmat):
-            row = W_MAT + W_STRIDE * k
-            qrow = Q_MAT + 3 * k
-            a = sc[row, i]
-            da = mc_slope(sc[row, i - 1], a, sc[row, i + 1])
-            ah = a - half * un * da
-            am = min(max(ah - 0.5 * da, 0.0), 1.0)
-            ap = min(max(ah + 0.5 * da, 0.0), 1.0)
-            sc[qm_row + qrow, i] = am
-            sc[qp_row + qrow, i] = ap
-            rk = sc[row + 1, i]
-            ek = sc[row + 2, i]
-            if rk > 0.0:
-                rkm = sc[row + 1, i - 1] if sc[row + 1, i - 1] > 0.0 else rk
-                rkp = sc[row + 1, i + 1] if sc[row + 1, i + 1] > 0.0 else rk
-                ekm = sc[row + 2, i - 1] if sc[row + 1, i - 1] > 0.0 else ek
-                ekp = sc[row + 2, i + 1] if sc[row + 1, i + 1] > 0.0 else ek
-                drk = mc_slope(rkm, rk, rkp)
-                dek = mc_slope(ekm, ek, ekp)
-                rh = rk - half * (un * drk + rk * dun)
-                eh = ek - half * (un * dek + sc[row + 3, i] / rk * dun)
-                if rh - 0.5 * abs(drk) <= 0.0:
-                    first_order = True
-                em = eh - 0.5 * dek
-                ep = eh + 0.5 * dek
-                if ek >= 0.0:
-                    em = max(em, 0.0)
-                    ep = max(ep, 0.0)
-                sc[qm_row + qrow + 1, i] = rh - 0.5 * drk
-                sc[qp_row + qrow + 1, i] = rh + 0.5 * drk
-                sc[qm_row + qrow + 2, i] = em
-                sc[qp_row + qrow + 2, i] = ep
-            else:
-                sc[qm_row + qrow + 1, i] = 0.0
-                sc[qp_row + qrow + 1, i] = 0.0
-                sc[qm_row + qrow + 2, i] = 0.0
-                sc[qp_row + qrow + 2, i] = 0.0
+            if predict_material(sc, i, W_MAT + W_STRIDE * k, Q_MAT + 3 * k, half, un, dun, qm_row, qp_row):
+                first_order = True
         if first_order and interior:
             floors[b, FLOOR_FIRST_ORDER] += 1
     if first_order:
-        for c in range(3):
-            sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
-            sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
-        sc[qm_row + Q_P, i] = sc[W_P, i]
-        sc[qp_row + Q_P, i] = sc[W_P, i]
-        for k in range(nmat):
-            row = W_MAT + W_STRIDE * k
-            qrow = Q_MAT + 3 * k
-            for c in range(3):
-                sc[qm_row + qrow + c, i] = sc[row + c, i]
-                sc[qp_row + qrow + c, i] = sc[row + c, i]
+        cell_value_faces(sc, i, qm_row, qp_row, (W_MAT, W_STRIDE, nmat), (Q_MAT, 3, nmat))
 
 
 @njit(cache=True, inline="always")
@@ -439,23 +388,9 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
         rho_r += sc[qm_row + qrow, ir] * sc[qm_row + qrow + 1, ir]
     void_l = sc[W_PHI, il] < PHI_VOID or rho_l <= 0.0
     void_r = sc[W_PHI, ir] < PHI_VOID or rho_r <= 0.0
-    side, s, p_star, chi, de = hllc_face(
-        rho_l, sc[qp_row + Q_UN, il], sc[qp_row + Q_P, il], sc[W_C, il], void_l,
-        rho_r, sc[qm_row + Q_UN, ir], sc[qm_row + Q_P, ir], sc[W_C, ir], void_r)
-    if side == UPWIND_LEFT:
-        donor = il
-        up = il - 1
-        down = ir
-        krow = qp_row
-        iv_donor = sc[W_IVR, il]
-        donor_void = void_l
-    else:
-        donor = ir
-        up = ir + 1
-        down = il
-        krow = qm_row
-        iv_donor = sc[W_IVL, ir]
-        donor_void = void_r
+    side, s, p_star, chi, de, donor, up, down, krow, iv_donor = upwind_face(sc, f, rho_l, void_l, rho_r, void_r,
+                                                                             qm_row, qp_row)
+    donor_void = void_l if side == UPWIND_LEFT else void_r
     nu = abs(s) * dtdx
     flow = abs(s) * dt * iv_donor
     mass = 0.0
@@ -472,43 +407,19 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
             for j in range(nq):
                 sc[fq_row + nq * k + j, f] = 0.0
             continue
-        af = ultrabee_face(sc[row, up], a_donor, sc[row, down], nu)
-        if af > 1.0:
-            af = 1.0
         # a donor cell holding void whose flow diverges loses material through both faces:
         # each face may take at most half of its content, so together they never overdraw
         # it (the test uses the donor's own face states, the same in both blocks of a face)
         share = 1.0
         if sc[W_PHI, donor] <= 1.0 - FULL_TOLERANCE and sc[qm_row + Q_UN, donor] < 0.0 < sc[qp_row + Q_UN, donor]:
             share = 0.5
-        if af * flow > share * a_donor:
-            af = share * a_donor / flow
-        if a_donor < 1.0 - FULL_TOLERANCE:
-            # mixed or partly void donor: the material leaves at its cell-average density and
-            # energy, so transported material is neither diluted nor compressed by the flux
-            mk = af * sc[row + 1, donor] * s
-            ek = sc[row + 2, donor]
-        else:
-            mk = af * sc[krow + qrow + 1, donor] * chi * s
-            ek = sc[krow + qrow + 2, donor]
-        mcap = share * a_donor * sc[row + 1, donor] / (dt * iv_donor)
-        if abs(mk) > mcap:
-            mk = mcap if mk > 0.0 else -mcap
-        sc[frow, f] = af * s
-        sc[frow + 1, f] = mk
-        sc[frow + 2, f] = mk * ek
+        mk, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, share, s, chi, dt,
+                                    iv_donor)
         for j in range(nq):
             sc[fq_row + nq * k + j, f] = mk * sc[wq_row + nq * k + j, donor]
         mass += mk
         eint += mk * ek
-    un = sc[krow + Q_UN, donor]
-    ut1 = sc[krow + Q_UT1, donor]
-    ut2 = sc[krow + Q_UT2, donor]
-    sc[f_row + F_MN, f] = mass * s + p_star
-    sc[f_row + F_MT1, f] = mass * ut1
-    sc[f_row + F_MT2, f] = mass * ut2
-    sc[f_row + F_E, f] = eint + mass * (0.5 * (un * un + ut1 * ut1 + ut2 * ut2) + de) + p_star * s
-    sc[f_row + F_S, f] = s
+    flow_fluxes(sc, f, f_row, krow, donor, mass, eint, s, p_star, de)
 
 
 @njit(cache=True, inline="always")

@@ -29,8 +29,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
-from impactpipe.hydro.riemann import UPWIND_LEFT, hllc_face
 from impactpipe.hydro.sweep_layout import (
     AMOUNT_ENERGY_FLOOR,
     AMOUNT_ENERGY_RECONCILED,
@@ -48,9 +46,6 @@ from impactpipe.hydro.sweep_layout import (
     PHI_SMALL,
     Q_MAT,
     Q_P,
-    Q_UN,
-    Q_UT1,
-    Q_UT2,
     TENSION_TOLERANCE,
     W_C,
     W_IVL,
@@ -66,6 +61,14 @@ from impactpipe.hydro.sweep_layout import (
     W_UT2,
     W_VOL,
     pencil_cell_index,
+)
+from impactpipe.hydro.sweep_steps import (
+    cell_value_faces,
+    flow_fluxes,
+    material_face_flux,
+    predict_flow,
+    predict_material,
+    upwind_face,
 )
 from impactpipe.hydro.timestep import PHI_VOID, damaged_tensile_strength, material_state
 
@@ -119,8 +122,9 @@ def gather_plain(sc, m, b, axis, j1, j2, t1, t2, ncell, g, n, alpha, arho, arhoe
     """Step 1 of the sweep for a plain pencil of material m: cell values into the W rows.
 
     The mixture is material m: rho = alpha_m rho_m, p = alpha_m p_m, K = alpha_m rho_m c_m^2,
-    c = sqrt(K / rho) = c_m (the longitudinal speed, in the general path's arithmetic); the specific transported scalars q_m,j =
-    (alpha_m rho_m q_m,j) / (alpha_m rho_m).  Absent materials get zero rows.
+    c = sqrt(K / rho) = c_m (the longitudinal speed, in the general path's arithmetic); the
+    specific transported scalars q_m,j = (alpha_m rho_m q_m,j) / (alpha_m rho_m).  Absent
+    materials get zero rows.
     """
     nmat = alpha.shape[1]
     row = W_MAT + W_STRIDE * m
@@ -172,57 +176,15 @@ def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
     """
     row = W_MAT + W_STRIDE * m
     qrow = Q_MAT + 3 * m
-    un = sc[W_UN, i]
-    dun = mc_slope(sc[W_UN, i - 1], un, sc[W_UN, i + 1])
-    dp = mc_slope(sc[W_P, i - 1], sc[W_P, i], sc[W_P, i + 1])
-    for c in range(3):
-        q = sc[W_UN + c, i]
-        dq = mc_slope(sc[W_UN + c, i - 1], q, sc[W_UN + c, i + 1])
-        if c == 0:
-            qh = q - half * (un * dq + dp / sc[W_RHO, i])
-        else:
-            qh = q - half * un * dq
-        sc[qm_row + Q_UN + c, i] = qh - 0.5 * dq
-        sc[qp_row + Q_UN + c, i] = qh + 0.5 * dq
-    p = sc[W_P, i]
-    ph = p - half * (un * dp + sc[W_K, i] * dun)
-    sc[qm_row + Q_P, i] = ph - 0.5 * dp
-    sc[qp_row + Q_P, i] = ph + 0.5 * dp
-    p_face = ph - 0.5 * abs(dp)
-    a = sc[row, i]
+    un, dun, p, p_face = predict_flow(sc, i, half, qm_row, qp_row)
     first_order = ((p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i])
-                   or (p_face < -a * sc[row + 5, i] and p_face < p))
-    da = mc_slope(sc[row, i - 1], a, sc[row, i + 1])
-    ah = a - half * un * da
-    sc[qm_row + qrow, i] = min(max(ah - 0.5 * da, 0.0), 1.0)
-    sc[qp_row + qrow, i] = min(max(ah + 0.5 * da, 0.0), 1.0)
-    rk = sc[row + 1, i]
-    ek = sc[row + 2, i]
-    drk = mc_slope(sc[row + 1, i - 1], rk, sc[row + 1, i + 1])
-    dek = mc_slope(sc[row + 2, i - 1], ek, sc[row + 2, i + 1])
-    rh = rk - half * (un * drk + rk * dun)
-    eh = ek - half * (un * dek + sc[row + 3, i] / rk * dun)
-    if rh - 0.5 * abs(drk) <= 0.0:
+                   or (p_face < -sc[row, i] * sc[row + 5, i] and p_face < p))
+    if predict_material(sc, i, row, qrow, half, un, dun, qm_row, qp_row):
         first_order = True
-    em = eh - 0.5 * dek
-    ep = eh + 0.5 * dek
-    if ek >= 0.0:
-        em = max(em, 0.0)
-        ep = max(ep, 0.0)
-    sc[qm_row + qrow + 1, i] = rh - 0.5 * drk
-    sc[qp_row + qrow + 1, i] = rh + 0.5 * drk
-    sc[qm_row + qrow + 2, i] = em
-    sc[qp_row + qrow + 2, i] = ep
     if first_order:
         if interior:
             floors[b, FLOOR_FIRST_ORDER] += 1
-        for c in range(3):
-            sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
-            sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
-            sc[qm_row + qrow + c, i] = sc[row + c, i]
-            sc[qp_row + qrow + c, i] = sc[row + c, i]
-        sc[qm_row + Q_P, i] = p
-        sc[qp_row + Q_P, i] = p
+        cell_value_faces(sc, i, qm_row, qp_row, (row, W_STRIDE, 1), (qrow, 3, 1))
 
 
 @njit(cache=True, inline="always")
@@ -240,52 +202,19 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
     ir = f
     rho_l = sc[qp_row + qrow, il] * sc[qp_row + qrow + 1, il]
     rho_r = sc[qm_row + qrow, ir] * sc[qm_row + qrow + 1, ir]
-    side, s, p_star, chi, de = hllc_face(
-        rho_l, sc[qp_row + Q_UN, il], sc[qp_row + Q_P, il], sc[W_C, il], False,
-        rho_r, sc[qm_row + Q_UN, ir], sc[qm_row + Q_P, ir], sc[W_C, ir], False)
-    if side == UPWIND_LEFT:
-        donor = il
-        up = il - 1
-        down = ir
-        krow = qp_row
-        iv_donor = sc[W_IVR, il]
-    else:
-        donor = ir
-        up = ir + 1
-        down = il
-        krow = qm_row
-        iv_donor = sc[W_IVL, ir]
-    a_donor = sc[row, donor]
-    af = ultrabee_face(sc[row, up], a_donor, sc[row, down], abs(s) * dtdx)
-    if af > 1.0:
-        af = 1.0
-    flow = abs(s) * dt * iv_donor
-    if af * flow > a_donor:
-        af = a_donor / flow
-    mass = af * sc[krow + qrow + 1, donor] * chi * s
-    mcap = a_donor * sc[row + 1, donor] / (dt * iv_donor)
-    if abs(mass) > mcap:
-        mass = mcap if mass > 0.0 else -mcap
+    side, s, p_star, chi, de, donor, up, down, krow, iv_donor = upwind_face(sc, f, rho_l, False, rho_r, False,
+                                                                             qm_row, qp_row)
+    mass, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, abs(s) * dtdx,
+                                  abs(s) * dt * iv_donor, 1.0, s, chi, dt, iv_donor)
     for k in range(nmat):
         if k != m:
             for c in range(3):
                 sc[f_row + F_MAT + 3 * k + c, f] = 0.0
             for j in range(nq):
                 sc[fq_row + nq * k + j, f] = 0.0
-    eint = mass * sc[krow + qrow + 2, donor]
-    sc[frow, f] = af * s
-    sc[frow + 1, f] = mass
-    sc[frow + 2, f] = eint
     for j in range(nq):
         sc[fq_row + nq * m + j, f] = mass * sc[wq_row + nq * m + j, donor]
-    un = sc[krow + Q_UN, donor]
-    ut1 = sc[krow + Q_UT1, donor]
-    ut2 = sc[krow + Q_UT2, donor]
-    sc[f_row + F_MN, f] = mass * s + p_star
-    sc[f_row + F_MT1, f] = mass * ut1
-    sc[f_row + F_MT2, f] = mass * ut2
-    sc[f_row + F_E, f] = eint + mass * (0.5 * (un * un + ut1 * ut1 + ut2 * ut2) + de) + p_star * s
-    sc[f_row + F_S, f] = s
+    flow_fluxes(sc, f, f_row, krow, donor, mass, mass * ek, s, p_star, de)
 
 
 @njit(cache=True, inline="always")
@@ -296,11 +225,10 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alp
     U_new = U - dt (A_+ F_+ - A_- F_-) / V for alpha_m rho_m, momentum, E and the transported
     scalars; alpha_m after the volume flux, then closed as a full cell: alpha_m += alpha_m dV
     (dV = dt div s) unless p_m is at the tensile limit -Y_T,m (1 - D_m), capped at 1 after
-    its p dV work;
-    alpha_m rho_m e_m = E - |m|^2 / (2 rho) (J/m^3; the general path's reconciliation for one
-    material, the difference from the transported internal energy counted as reconciled), a
-    negative value floored at 0 with E raised to match (counted).  ``rho0`` is material m's
-    reference density (kg/m^3; 0 for a gas).
+    its p dV work; alpha_m rho_m e_m -> E - |m|^2 / (2 rho) (J/m^3) by the general path's
+    reconciliation for one material, in its arithmetic (the difference from the transported
+    internal energy counted as reconciled), a negative value floored at 0 with E raised to
+    match (counted).  ``rho0`` is material m's reference density (kg/m^3; 0 for a gas).
     """
     row = W_MAT + W_STRIDE * m
     frow = f_row + F_MAT + 3 * m
