@@ -19,72 +19,90 @@ plans of :mod:`impactpipe.hydro.amr.plans`.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh import REFLECTING
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component):
     """Fill the same-level and domain-face ghost slabs of ``field[NB, C, NX, NY, NZ]`` along ``axis``.
 
     ``flip_component`` is the component index whose sign flips at a reflecting boundary
     (the normal momentum, ``axis``) or -1 for scalar fields.  Coarse/fine faces are left
-    alone.  Serial: the copies are a small fraction of a sweep's work and a parallel region
-    per field costs more in thread synchronisation than it saves.
+    alone.  Blocks in parallel: a block writes only its own ghosts and reads only interior
+    cells.
     """
+    for b in prange(field.shape[0]):
+        _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component)
+
+
+@njit(cache=True, parallel=True)
+def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost):
+    """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the blocks."""
+    for b in prange(alpha.shape[0]):
+        _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arho, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arhoe, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(mom, b, neighbor, neighbor_level, axis, ghost, axis)
+        _fill_block_ghosts(energy, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
+
+
+@njit(cache=True, inline="always")
+def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component):
+    """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring)."""
     nb, nc, nx, ny, nz = field.shape
     npad = (nx, ny, nz)[axis]
     n = npad - 2 * ghost
-    for b in range(nb):
-        for side in range(2):
-            nbr = neighbor[b, axis, side]
-            if nbr >= 0 and neighbor_level[b, axis, side] != 0:
-                continue
-            for j in range(ghost):
-                if side == 0:
-                    dst = ghost - 1 - j
-                    if nbr >= 0:
-                        src = ghost + n - 1 - j
-                    elif nbr == REFLECTING:
-                        src = ghost + j
-                    else:
-                        src = ghost
+    for side in range(2):
+        nbr = neighbor[b, axis, side]
+        if nbr >= 0 and neighbor_level[b, axis, side] != 0:
+            continue
+        for j in range(ghost):
+            if side == 0:
+                dst = ghost - 1 - j
+                if nbr >= 0:
+                    src = ghost + n - 1 - j
+                elif nbr == REFLECTING:
+                    src = ghost + j
                 else:
-                    dst = ghost + n + j
-                    if nbr >= 0:
-                        src = ghost + j
-                    elif nbr == REFLECTING:
-                        src = ghost + n - 1 - j
-                    else:
-                        src = ghost + n - 1
-                blk = nbr if nbr >= 0 else np.int64(b)
-                flip = nbr == REFLECTING
-                for c in range(nc):
-                    sign = -1.0 if (flip and c == flip_component) else 1.0
-                    if axis == 0:
+                    src = ghost
+            else:
+                dst = ghost + n + j
+                if nbr >= 0:
+                    src = ghost + j
+                elif nbr == REFLECTING:
+                    src = ghost + n - 1 - j
+                else:
+                    src = ghost + n - 1
+            blk = nbr if nbr >= 0 else np.int64(b)
+            flip = nbr == REFLECTING
+            for c in range(nc):
+                sign = -1.0 if (flip and c == flip_component) else 1.0
+                if axis == 0:
+                    for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
+                        for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
+                            field[b, c, dst, iy, iz] = sign * field[blk, c, src, iy, iz]
+                elif axis == 1:
+                    for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
+                        for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
+                            field[b, c, ix, dst, iz] = sign * field[blk, c, ix, src, iz]
+                else:
+                    for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
                         for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
-                            for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
-                                field[b, c, dst, iy, iz] = sign * field[blk, c, src, iy, iz]
-                    elif axis == 1:
-                        for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
-                            for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
-                                field[b, c, ix, dst, iz] = sign * field[blk, c, ix, src, iz]
-                    else:
-                        for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
-                            for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
-                                field[b, c, ix, iy, dst] = sign * field[blk, c, ix, iy, src]
+                            field[b, c, ix, iy, dst] = sign * field[blk, c, ix, iy, src]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _lo(npad, ghost):
     """First interior index of an axis with ``npad`` padded cells (0 for an unused axis)."""
     return ghost if npad > 1 else 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _hi(npad, ghost):
     """One past the last interior index of an axis with ``npad`` padded cells."""
     return npad - ghost if npad > 1 else 1
@@ -116,8 +134,7 @@ def fill_state_ghosts(state, mesh, axis: int) -> None:
     if g == 0:
         return
     fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-    for arr in fields:
-        fill_ghosts(arr, mesh.neighbor, mesh.neighbor_level, axis, g, axis if arr is state.momentum else -1)
+    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g)
     if not mesh.adaptive:
         return
     plans = axis_plans(mesh, axis)
