@@ -51,7 +51,7 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
         _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component):
     """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring)."""
     nb, nc, nx, ny, nz = field.shape
