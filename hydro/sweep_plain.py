@@ -20,8 +20,10 @@ same arithmetic for material m alone:
   apply, a volume fraction below PHI_VOID, a NaN) is left untouched and handed back to
   :func:`impactpipe.hydro.sweep._update_cell`.
 
-The answers agree with the general path to round-off (tests/test_hydro_sweep_plain.py);
-the plain path costs about half as much per cell (docs/performance.md).
+The answers agree with the general path bit for bit (tests/test_hydro_sweep_plain.py): the
+shared pieces are in :mod:`impactpipe.hydro.sweep_steps`, and the rest repeats the general
+path's order of operations.  A step costs 1.3-1.8x less with the plain path
+(docs/performance.md, benchmarks/sweep_paths.py).
 """
 
 from __future__ import annotations
