@@ -108,6 +108,7 @@ def test_setup_starts_in_hydrostatic_equilibrium_with_the_column_in_place():
     deposit = column_collapse.deposit(snap)
     assert deposit["runout"] == pytest.approx(500.0, abs=1e-9)
     assert deposit["height"] == pytest.approx(HEIGHT, rel=1e-12)
+    assert deposit["centroid"] == pytest.approx(250.0, rel=1e-12)
     z = sim.mesh.cell_centers()[:, 1]
     inside = snap.volume_fraction[:, 0] == 1.0
     np.testing.assert_allclose(snap.pressure[inside], 2700.0 * G * (HEIGHT - z[inside]), rtol=1e-9)

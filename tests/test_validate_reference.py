@@ -30,7 +30,8 @@ def stage_calls(out):
 
 def test_report_on_stand_ins_recovers_the_synthetic_qstar(tmp_path):
     out = tmp_path / "v"
-    options = vr.options_from_args(vr.parse_args(["--out", str(out), "--handoff-times", "none", "--quick"]))
+    options = vr.options_from_args(vr.parse_args(["--out", str(out), "--handoff-times", "none", "--quick",
+                                                       "--models", "merge,conditional_merge,bounce"]))
     assert options["cells"] == vr.QUICK_CELLS
     with cf.ThreadPoolExecutor(2) as pool:
         report = vr.run_validation(options, executor=pool, stage_functions=sweep_stand_ins.STAGES)
@@ -65,6 +66,11 @@ def test_report_on_stand_ins_recovers_the_synthetic_qstar(tmp_path):
     assert json.loads((out / "validation.json").read_text())["settings"]["quick"] is True
 
 
+def test_case_8_runs_perfect_merging_only_unless_asked():
+    assert vr.options_from_args(vr.parse_args([]))["models"] == ["merge"]
+    assert vr.options_from_args(vr.parse_args(["--models", "bounce"]))["models"] == ["merge", "bounce"]
+
+
 def test_bad_arguments_name_the_option_and_the_allowed_values(tmp_path, capsys):
     out = tmp_path / "v"
     assert vr.main(["--cases", "8a,8d", "--out", str(out)]) == 2
@@ -94,7 +100,7 @@ def test_quick_mode_with_the_real_stages(tmp_path):
     """The smoke mode end to end: every case, all three collision models, the 8c hand-off scan."""
     out = tmp_path / "v"
     status = vr.main(["--quick", "--cells-per-projectile-radius", "4", "--handoff-times", "6,10,12,15",
-                      "--out", str(out), "--workers", "2"])
+                      "--models", "merge,conditional_merge,bounce", "--out", str(out), "--workers", "2"])
     assert status == 0
     report = json.loads((out / "validation.json").read_text())
     assert len(report["runs"]) == 11 and all(r["status"] == "complete" for r in report["runs"])

@@ -172,8 +172,10 @@ def deposit(snapshot) -> dict:
     right edge of the last column of the continuous deposit (h >= FRONT_THICKNESS_CELLS cell
     sizes) plus dx h_next / (FRONT_THICKNESS_CELLS dx) for the thinner column beyond it
     (at most one cell); detached spray further out is left out.  ``height`` H_f is the largest
-    h(x) (at the wall in a deposit).  Also ``x`` (cell centres, m) and ``thickness`` h (m),
-    arrays over the cell columns.
+    h(x) (at the wall in a deposit).  ``centroid``: the distance of the material's centre
+    from the wall, sum_x x h(x) / sum_x h(x) (m), a measure of how far the bulk has moved that,
+    unlike the front, does not jump by a cell when the thinnest column crosses the threshold.
+    Also ``x`` (cell centres, m) and ``thickness`` h (m), arrays over the cell columns.
     """
     lo = snapshot.block_lo
     nx = snapshot.volume_fraction.shape[2]
@@ -192,4 +194,6 @@ def deposit(snapshot) -> dict:
     runout = first + edge * dx
     if edge < ncols:
         runout += dx * min(thickness[edge] / threshold, 1.0)
-    return {"runout": runout, "height": float(thickness.max()), "x": x, "thickness": thickness}
+    centroid = float((x * thickness).sum() / thickness.sum()) if thickness.sum() > 0.0 else float("nan")
+    return {"runout": runout, "height": float(thickness.max()), "centroid": centroid, "x": x,
+            "thickness": thickness}
