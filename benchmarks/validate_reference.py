@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import contextlib
 import json
 import math
 import os
@@ -50,7 +51,8 @@ from impactpipe.pipeline import runstore
 from impactpipe.pipeline.config import ConfigError, load_config
 from impactpipe.pipeline.handoff_scan import handoff_scan
 from impactpipe.pipeline.stages import read_records, resolved_dict, resolved_yaml
-from impactpipe.pipeline.sweep import Execution, SweepError, load_sweep, make_executor, run_sweep
+from impactpipe.pipeline.sweep import (Execution, SweepError, load_sweep, make_executor, pool_stopped_on_interrupt,
+                                      run_sweep)
 
 REFERENCE_DIR = Path(__file__).resolve().parent.parent / "configs" / "reference"
 CASES = ("8a", "8b", "8c", "9a", "9b")
@@ -216,18 +218,23 @@ def run_validation(options: dict[str, Any], executor: cf.Executor | None = None,
         scan_config = out / "case8c-scan.yaml"
         runstore.write_text_atomic(scan_config, resolved_yaml(config))
     close = None
+    guard = contextlib.nullcontext()
     if executor is None:
-        executor, close = make_executor(Execution(**options["execution"]))
+        execution = Execution(**options["execution"])
+        executor, close = make_executor(execution)
+        if execution.backend == "local":
+            guard = pool_stopped_on_interrupt(executor)
     try:
-        points: dict[str, dict[str, Any]] = {}
-        for plan, sweep in zip(plans, sweeps):
-            result = run_sweep(sweep, executor=executor, show_progress=False)
-            for name, point in result["points"].items():
-                points[name] = {**point, "case": plan["cases"][float(point["params"]["scene.impact.velocity"])]}
-        scan = None
-        if scan_config is not None:
-            scan = handoff_scan(scan_config, options["handoff_times"], out / "case8c-handoff-scan",
-                                executor=executor, show_progress=False)
+        with guard:
+            points: dict[str, dict[str, Any]] = {}
+            for plan, sweep in zip(plans, sweeps):
+                result = run_sweep(sweep, executor=executor, show_progress=False)
+                for name, point in result["points"].items():
+                    points[name] = {**point, "case": plan["cases"][float(point["params"]["scene.impact.velocity"])]}
+            scan = None
+            if scan_config is not None:
+                scan = handoff_scan(scan_config, options["handoff_times"], out / "case8c-handoff-scan",
+                                    executor=executor, show_progress=False)
     finally:
         if close is not None:
             close()

@@ -24,7 +24,9 @@ import math
 import multiprocessing
 import os
 import re
+import signal
 import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -264,6 +266,12 @@ def run_point(job: PointJob) -> PointResult:
                 logging.getLogger(__name__).info("%s: reused %s from %s", job.name, ", ".join(adopted), job.reuse_dir)
         summary = stages.run(job.config, run_dir, show_progress=False, stage_functions=job.stage_functions or None)
     except Exception as exc:
+        if isinstance(exc, stages.StageInterrupted) and multiprocessing.parent_process() is not None:
+            # a signal stopped the stage, which recorded itself as interrupted: the sweep is
+            # being stopped (:func:`_stop_pool_workers`), so this pool worker takes no further point
+            logging.getLogger(__name__).warning("%s: interrupted; this worker stops", job.name)
+            handler.close()
+            os._exit(1)
         (run_dir / "error.log").write_text(traceback.format_exc())
         raise PointFailed(f"{job.name}: {type(exc).__name__}: {exc} (log: {run_dir / 'error.log'})") from None
     finally:
@@ -626,19 +634,76 @@ def make_executor(execution: Execution) -> tuple[cf.Executor, Any]:
 
 
 @contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """While active, SIGTERM raises KeyboardInterrupt in the main thread, as Ctrl-C does, so a
+    sweep stopped by ``kill`` (or a batch system's polite stop) cleans up instead of dying
+    at once and leaving its pool workers running."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f"stopped by {signal.Signals(signum).name}")
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+#: Seconds the pool workers get after SIGTERM before they are killed.
+WORKER_STOP_GRACE = 5.0
+
+
+def _stop_pool_workers(executor: cf.Executor) -> None:
+    """Cancel the points not started, then SIGTERM this process's pool workers: a stage in
+    flight stops, records itself as interrupted (:mod:`impactpipe.pipeline.stages`) and its
+    worker exits (:func:`run_point`), so the point resumes on the next run; a worker still
+    alive after WORKER_STOP_GRACE seconds is killed (that point reruns too)."""
+    executor.shutdown(wait=False, cancel_futures=True)
+    workers = multiprocessing.active_children()
+    for worker in workers:
+        worker.terminate()
+    deadline = time.monotonic() + WORKER_STOP_GRACE
+    for worker in workers:
+        worker.join(max(0.0, deadline - time.monotonic()))
+    for worker in workers:
+        if worker.is_alive():
+            worker.kill()
+            worker.join()
+
+
+@contextlib.contextmanager
+def pool_stopped_on_interrupt(executor: cf.Executor):
+    """Around work on a local process pool: Ctrl-C, or SIGTERM to this process alone, stops the
+    pool's workers too (:func:`_stop_pool_workers`) before the interrupt propagates."""
+    try:
+        with _sigterm_as_interrupt():
+            yield
+    except KeyboardInterrupt:
+        _stop_pool_workers(executor)
+        raise
+
+
+@contextlib.contextmanager
 def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool, label: str):
     """A :class:`SweepRunner` on ``executor`` (or one made from the sweep's execution settings)
     with a progress bar; on exit the bar closes, the result tables are written (also after an
-    error or an interrupt) and an executor made here shuts down."""
+    error or an interrupt) and an executor made here shuts down.  Interrupted (Ctrl-C, or
+    SIGTERM to this process alone), a local process pool made here stops its workers first,
+    so no point keeps running after the sweep has gone."""
     close = None
     if executor is None:
         executor, close = make_executor(sweep.spec.execution)
+    own_pool = close is not None and sweep.spec.execution.backend == "local"
     from tqdm import tqdm
 
     bar = tqdm(total=0, desc=f"{label} {sweep.spec.name}", unit="run", disable=None if show_progress else True)
     runner = SweepRunner(sweep, executor, bar)
     try:
-        yield runner
+        with pool_stopped_on_interrupt(executor) if own_pool else contextlib.nullcontext():
+            yield runner
     finally:
         bar.close()
         write_results(sweep, runner.points)

@@ -5,6 +5,7 @@ Each stage writes its output file and then appends "<run name> <stage>" to
 """
 
 import math
+import os
 import time
 
 from impactpipe.pipeline.runstore import atomic_path
@@ -51,9 +52,20 @@ def slow_analysis(ctx):
     return analysis(ctx)
 
 
+def hanging_hydro(ctx):
+    """A hydro stage that writes its process id to ``<runs dir>/<run name>.pid`` and then
+    takes a minute, so a test can stop a sweep while it runs."""
+    (ctx.run_dir.parent / f"{ctx.run_dir.name}.pid").write_text(str(os.getpid()))
+    for _ in range(1200):
+        time.sleep(0.05)
+    return hydro(ctx)
+
+
 STAGES = {s: f"sweep_stand_ins:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
 #: Stages whose analysis takes 0.3 s, so a sweep can be killed while points are still running.
 SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
+#: Stages whose hydro takes a minute (``hanging_hydro``).
+HANGING_STAGES = {**STAGES, "hydro": "sweep_stand_ins:hanging_hydro"}
 
 
 def critical_velocity(target_radius, projectile_radius):

@@ -6,6 +6,7 @@ every stage they finish, so the tests count work exactly.
 
 import collections
 import concurrent.futures as cf
+import contextlib
 import math
 import os
 import signal
@@ -18,6 +19,7 @@ import pytest
 import yaml
 
 import sweep_stand_ins
+from impactpipe.pipeline import stages
 from impactpipe.pipeline.sweep import SweepError, load_sweep, run_sweep, sweep_status
 
 HERE = Path(__file__).parent
@@ -113,6 +115,40 @@ def test_killed_sweep_resumes_and_runs_each_point_once(tmp_path):
     # one per worker, may run twice; nothing finished is redone.
     rerun = [key for key, count in done.items() if count > 1]
     assert max(done.values()) <= 2 and len(rerun) <= 2, done
+
+
+def test_sweep_stopped_by_sigterm_stops_its_workers_and_resumes(tmp_path):
+    """SIGTERM to the sweep process alone (``kill PID``): its pool workers stop too, the hydro
+    stages in flight record themselves as interrupted, and a rerun finishes every point."""
+    velocities = [1000.0, 1100.0, 1200.0]
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": velocities},
+                       execution={"backend": "local", "workers": 2}, stage_functions=sweep_stand_ins.HANGING_STAGES)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", "from impactpipe.pipeline.cli import main; main()", "sweep", str(path), "-q"],
+                            env=env, start_new_session=True)
+    runs = tmp_path / "sweep" / "runs"
+    deadline = time.time() + 90
+    while time.time() < deadline and len(list(runs.glob("*.pid"))) < 2:
+        time.sleep(0.05)
+    pids = [int(p.read_text()) for p in runs.glob("*.pid")]
+    assert len(pids) == 2, "both workers must be inside a hydro stage"
+    os.kill(proc.pid, signal.SIGTERM)
+    try:
+        assert proc.wait(timeout=30) != 0
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    interrupted = [stages.read_records(d)["hydro"]["status"] for d in runs.iterdir()
+                   if d.is_dir() and (runs / f"{d.name}.pid").exists()]
+    assert interrupted == ["interrupted", "interrupted"]
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": velocities},
+                       execution={"backend": "local", "workers": 2}, stage_functions=sweep_stand_ins.STAGES)
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert [p["status"] for p in result["points"].values()] == ["complete"] * len(velocities)
 
 
 def test_bisection_converges_on_synthetic_model(tmp_path):
