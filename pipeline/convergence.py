@@ -295,6 +295,15 @@ class Rung:
     hydro_from: str = ""
     answers: dict[str, float] = field(default_factory=dict)
     costs: dict[str, float] = field(default_factory=dict)
+    point_params: list[dict[str, Any]] = field(default_factory=list)
+    names: list[str] = field(default_factory=list)
+    samples: list[float] = field(default_factory=list)
+
+    @property
+    def spread(self) -> float:
+        """max - min of M_lr/M_T over the rung's hand-off times (NaN with fewer than two)."""
+        good = [v for v in self.samples if math.isfinite(v)]
+        return max(good) - min(good) if len(good) > 1 else float("nan")
 
 
 def _answer_names(depths: list[float]) -> list[str]:
@@ -311,11 +320,23 @@ def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
     return params
 
 
+def _rung_points(params: dict[str, Any], handoff_times: list[float] | None) -> list[dict[str, Any]]:
+    """The runs of one rung: the rung itself, or with ``handoff_times`` one run per hand-off
+    time, all with the hydro run to the latest time and a snapshot at each (so the rung's runs
+    share one hydro run, as a hand-off scan's do)."""
+    if not handoff_times:
+        return [params]
+    times = sorted(handoff_times)
+    return [{**params, "handoff.time": t, "hydro.end_time": times[-1], "hydro.output_times": times} for t in times]
+
+
 def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
                  execution: dict[str, Any] | None = None,
-                 stage_functions: dict[str, str] | None = None) -> tuple[Sweep, list[Rung]]:
+                 stage_functions: dict[str, str] | None = None,
+                 handoff_times: list[float] | None = None) -> tuple[Sweep, list[Rung]]:
     """Validate every rung's config (before any work) and return the sweep and its rungs.
 
+    With ``handoff_times`` each rung is run once per hand-off time (:func:`_rung_points`).
     Raises LadderError naming the key, the value and what is allowed.
     """
     config_path = Path(config_path).resolve()
@@ -338,6 +359,10 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
     known = set(key_paths())
     messages: list[str] = []
     rungs: list[Rung] = []
+    if handoff_times and "handoff.time" in ladders:
+        raise LadderError(["--handoff-times: not with a handoff.time ladder (that ladder is the hand-off scan)"])
+    if handoff_times and len(set(handoff_times)) != len(handoff_times):
+        raise LadderError([f"--handoff-times: the times must be distinct (got {handoff_times})"])
     for key, values in ladders.items():
         pattern = re.sub(r"^materials\.[^.]+\.", "materials.<name>.", key)
         if key not in known and pattern not in known:
@@ -349,15 +374,21 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
             continue
         for value in values:
             params = _rung_params(key, value, values)
-            try:
-                config = sweep.config_for(params)
-            except ConfigError as exc:
-                messages += [f"--vary {key}={value}: {m}" for m in exc.messages]
+            points = _rung_points(params, handoff_times)
+            bad = False
+            for point in points:
+                try:
+                    config = sweep.config_for(point)
+                except ConfigError as exc:
+                    messages += [f"--vary {key}={value}: {m}" for m in exc.messages]
+                    bad = True
+                    break
+                errors = derived.capability_errors(config, derived.derive(config))
+                messages += [f"--vary {key}={value}: {m}" for m in errors]
+            if bad:
                 continue
-            errors = derived.capability_errors(config, derived.derive(config))
-            messages += [f"--vary {key}={value}: {m}" for m in errors]
             step = float(STEP_SIZE[key][1](value)) if key in STEP_SIZE else float("nan")
-            rungs.append(Rung(ladder=key, value=value, name="", params=params, step=step))
+            rungs.append(Rung(ladder=key, value=value, name="", params=params, step=step, point_params=points))
     if messages:
         raise LadderError(messages)
     return sweep, rungs
@@ -366,7 +397,8 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
 def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
                 depths: list[float] = DEFAULT_DEPTHS, tolerance: float = DEFAULT_TOLERANCE,
                 executor: cf.Executor | None = None, execution: dict[str, Any] | None = None,
-                stage_functions: dict[str, str] | None = None, show_progress: bool = True) -> dict[str, Any]:
+                stage_functions: dict[str, str] | None = None, show_progress: bool = True,
+                handoff_times: list[float] | None = None) -> dict[str, Any]:
     """Run the ladders and write the table, the Richardson table, a JSON record and one figure per ladder.
 
     Args:
@@ -377,29 +409,34 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
         tolerance: the cheapest rung within this of the extrapolated M_lr/M_T is reported.
         executor: a concurrent.futures executor; default from ``execution`` (sweep ``execution`` keys).
         stage_functions: replace stage functions (``{"nbody": "pkg.mod:func"}``; for tests).
+        handoff_times: hand off each rung at each of these times (s) from one hydro run, and take
+            the mean M_lr/M_T and N_lr over them as the rung's answers (their max - min is
+            reported as ``M_lr_over_M_T_spread``): the reaccumulation's scatter between
+            neighbouring hand-off times is then averaged out of the ladder.
 
     Returns:
         {"rungs": [Rung], "richardson": {ladder: {answer: Extrapolation}}, "cheapest": {ladder: rung index or
         None}, "files": [paths written]}.
     """
-    sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions)
+    sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions, handoff_times)
     out = sweep.directory
     out.mkdir(parents=True, exist_ok=True)
     runstore.write_text_atomic(sweep.source, yaml.safe_dump(
         {**sweep.spec.model_dump(mode="json", exclude_none=True), "ladders": ladders,
-         "depths_in_projectile_radii": list(depths)}, sort_keys=False))
+         "depths_in_projectile_radii": list(depths), "handoff_times": handoff_times}, sort_keys=False))
     with open_runner(sweep, executor, show_progress, "convergence") as runner:
         by_digest: dict[str, str] = {}
         for rung in rungs:
-            config = sweep.config_for(rung.params)
-            digest = stage_hashes(config)[STAGES[-1]]
-            if digest not in by_digest:
-                by_digest[digest] = runner.add_point(rung.params, group=rung.ladder)
-            rung.name = by_digest[digest]
+            for params in rung.point_params:
+                digest = stage_hashes(sweep.config_for(params))[STAGES[-1]]
+                if digest not in by_digest:
+                    by_digest[digest] = runner.add_point(params, group=rung.ladder)
+                rung.names.append(by_digest[digest])
+            rung.name = rung.names[0]
         results = runner.run_points(sorted(set(by_digest.values())))
     base = sweep.config_for({})
     for rung in rungs:
-        _fill(rung, results[rung.name], runner.points[rung.name], sweep, depths)
+        _fill(rung, [results[n] for n in rung.names], [runner.points[n] for n in rung.names], sweep, depths)
     answers = _answer_names(depths)
     extrapolations: dict[str, dict[str, Extrapolation]] = {}
     cheapest: dict[str, int | None] = {}
@@ -455,22 +492,36 @@ def _cheapest_text(key: str, ladder: list, index: int | None, reference: tuple[s
             f"M_lr/M_T {value:.4g}: {key} = {ladder[index].value}")
 
 
-def _fill(rung: Rung, result: Any, point: dict[str, Any], sweep: Sweep, depths: list[float]) -> None:
-    """Status, answers and costs of one rung from its finished (or failed) run."""
-    rung.status = result.status
-    rung.error = result.error or ""
-    run_dir = Path(point["run_dir"])
-    if result.status != "complete":
+#: Costs of the hydro stage, which a rung's runs share; the other costs add up over its runs.
+HYDRO_COSTS = ("wall_hydro", "hydro_steps", "cell_updates")
+
+
+def _fill(rung: Rung, results: list[Any], points: list[dict[str, Any]], sweep: Sweep, depths: list[float]) -> None:
+    """Status, answers and costs of one rung from its finished (or failed) runs.
+
+    One run per hand-off time (``--handoff-times``) or one run: M_lr/M_T and N_lr are the
+    means over the runs (``samples`` keeps each M_lr/M_T), the peak pressures come from the
+    shared hydro run, the hydro costs are that run's and the downstream costs their sum.
+    """
+    failed = [r for r in results if r.status != "complete"]
+    rung.status = failed[0].status if failed else "complete"
+    rung.error = "; ".join(r.error for r in failed if r.error)
+    if failed:
         return
-    summary = result.summary
+    summaries = [r.summary for r in results]
+    rung.samples = [float(s.get("M_lr_over_M_T", np.nan)) for s in summaries]
+    rung.answers["M_lr_over_M_T"] = float(np.mean(rung.samples))
+    rung.answers["N_lr"] = float(np.mean([float(s.get("N_lr", np.nan)) for s in summaries]))
     config = sweep.config_for(rung.params)
     r_p, r_t = config.scene.projectile.radius, config.scene.target.radius
-    rung.answers["M_lr_over_M_T"] = float(summary.get("M_lr_over_M_T", np.nan))
-    rung.answers["N_lr"] = float(summary.get("N_lr", np.nan))
+    run_dir = Path(points[0]["run_dir"])
     pressures = peak_pressure_at_depths(run_dir / "hydro.h5", r_t, [d * r_p for d in depths])
     for d, p in zip(depths, pressures):
         rung.answers[f"peak_pressure_at_{d:g}Rp"] = float(p)
-    rung.costs = costs_of(summary)
+    costs = [costs_of(s) for s in summaries]
+    rung.costs = {c: (costs[0].get(c, np.nan) if c in HYDRO_COSTS else float(sum(x.get(c, np.nan) for x in costs)))
+                  for c in COSTS if c != "wall_total"}
+    rung.costs["wall_total"] = float(sum(v for c, v in rung.costs.items() if c.startswith("wall_")))
     reused = read_records(run_dir).get("hydro", {}).get("reused_from")
     rung.hydro_from = Path(reused).name if reused else ""
 
@@ -504,7 +555,8 @@ def rung_rows(rungs: list[Rung], extrapolations: dict[str, dict[str, Extrapolati
         for position, i in enumerate(order):
             rung = ladder[i]
             row: dict[str, Any] = {"ladder": key, "value": rung.value, "step_size": rung.step, "status": rung.status,
-                                   "run": rung.name, "hydro_from": rung.hydro_from, "error": rung.error}
+                                   "run": rung.name, "hydro_from": rung.hydro_from, "error": rung.error,
+                                   "M_lr_over_M_T_spread": rung.spread, "handoffs": len(rung.samples)}
             for name in answers:
                 row[name] = rung.answers.get(name, float("nan"))
                 ext = extrapolations[key].get(name)
@@ -524,12 +576,15 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                    base: Any) -> list[Path]:
     rows = rung_rows(rungs, extrapolations, answers)
     extra = [f"{a}_{s}" for a in answers if a != "N_lr" for s in ("error_estimate", "change_from_previous")]
-    columns = ["ladder", "value", "step_size", "status", *answers, *extra, *COSTS, "run", "hydro_from", "error"]
+    columns = ["ladder", "value", "step_size", "status", *answers, "M_lr_over_M_T_spread", "handoffs", *extra, *COSTS,
+               "run", "hydro_from", "error"]
     comments = [f"convergence ladders of {base.name}; answers in SI (pressures Pa), costs: "
                  + ", ".join(f"{c} ({u})" for c, u in COSTS.items()),
                  "rows of a ladder with a step size run from the finest rung; *_error_estimate = answer - "
                  "Richardson value; *_change_from_previous = answer - answer of the row above",
-                 "a rung that reused another rung's hydro run (hydro_from) reports that run's hydro cost"]
+                 "a rung that reused another rung's hydro run (hydro_from) reports that run's hydro cost",
+                 "M_lr_over_M_T and N_lr are means over the rung's hand-offs (handoffs); M_lr_over_M_T_spread "
+                 "= their max - min"]
     for key, index in cheapest.items():
         ladder = [r for r in rungs if r.ladder == key]
         comments.append(_cheapest_text(key, ladder, index, reference[key], extrapolations[key]["M_lr_over_M_T"],
@@ -547,6 +602,8 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
         ["Richardson estimate f = f* + C h^p from the three finest rungs of each ladder"]))
     runstore.write_json_atomic(out / JSON_FILE, {
         "base": base.name, "ladders": ladders, "tolerance": tolerance,
+        "handoff_times": sorted({float(p["handoff.time"]) for r in rungs for p in r.point_params
+                                 if len(r.point_params) > 1}) or None,
         "rows": rows, "richardson": rich_rows,
         "cheapest_within_tolerance": {k: (None if i is None else [r for r in rungs if r.ladder == k][i].value)
                                       for k, i in cheapest.items()},
@@ -638,11 +695,14 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
     rows = rung_rows(result["rungs"], result["richardson"], answers)
     for key, by_answer in result["richardson"].items():
         lines.append(f"{key}:")
-        head = f"  {'value':>8} {'M_lr/M_T':>9} {'N_lr':>7} " + " ".join(
+        ladder_rows = [r for r in rows if r["ladder"] == key]
+        spread = any(r["handoffs"] > 1 for r in ladder_rows)
+        head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'spread':>7} " if spread else "") + f"{'N_lr':>7} " + " ".join(
             f"{'P(' + format(d, 'g') + 'Rp) Pa':>13}" for d in depths) + f" {'wall s':>8} {'cell-upd':>10} {'status'}"
         lines.append(head)
-        for row in (r for r in rows if r["ladder"] == key):
-            lines.append(f"  {_fmt(row['value']):>8} {_fmt(row['M_lr_over_M_T']):>9} {_fmt(row['N_lr']):>7} "
+        for row in ladder_rows:
+            lines.append(f"  {_fmt(row['value']):>8} {_fmt(row['M_lr_over_M_T']):>9} "
+                         + (f"{_fmt(row['M_lr_over_M_T_spread']):>7.7} " if spread else "") + f"{_fmt(row['N_lr']):>7} "
                          + " ".join(f"{_fmt(row[f'peak_pressure_at_{d:g}Rp']):>13}" for d in depths)
                          + f" {_fmt(row['wall_total']):>8} {_fmt(row['cell_updates']):>10} {row['status']}")
         for name, ext in by_answer.items():

@@ -20,9 +20,11 @@ HERE = Path(__file__).parent
 QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
 
 #: Stand-in answer: M_lr/M_T = CONVERGED + AMPLITUDE h^ORDER with h = 1 / cells_per_projectile_radius,
-#: plus NBODY_SLOPE (1/n - 1/100) with n = nbody.steps_per_dynamical_time (0 at its default 100).
+#: plus NBODY_SLOPE (1/n - 1/100) with n = nbody.steps_per_dynamical_time (0 at its default 100),
+#: plus HANDOFF_SLOPE (t - 1 s) with t = handoff.time when one is set.
 CONVERGED, AMPLITUDE, ORDER = 0.7, 0.3, 2.0
 NBODY_SLOPE = 2.0
+HANDOFF_SLOPE = 0.05
 
 
 def hydro(ctx):
@@ -45,9 +47,10 @@ def nbody(ctx):
 def analysis(ctx):
     h = 1.0 / ctx.config.hydro.cells_per_projectile_radius
     h_nbody = 1.0 / ctx.config.nbody.steps_per_dynamical_time
+    t = ctx.config.handoff.time
     _finish(ctx, "analysis")
-    return {"M_lr_over_M_T": CONVERGED + AMPLITUDE * h ** ORDER + NBODY_SLOPE * (h_nbody - 0.01), "N_lr": 100,
-            "Q": 500.0}
+    return {"M_lr_over_M_T": CONVERGED + AMPLITUDE * h ** ORDER + NBODY_SLOPE * (h_nbody - 0.01)
+            + (HANDOFF_SLOPE * (t - 1.0) if t is not None else 0.0), "N_lr": 100, "Q": 500.0}
 
 
 STAGES = {s: f"test_convergence:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
@@ -231,6 +234,41 @@ def test_handoff_time_ladder_shares_one_hydro_run_to_the_latest_time(tmp_path):
     assert sum(n for (_, stage), n in done.items() if stage == "nbody") == 3
     ext = result["richardson"]["handoff.time"]["M_lr_over_M_T"]
     assert not ext.ok and "no step size" in ext.status
+
+
+def test_ladder_averaged_over_handoff_times(tmp_path):
+    """--handoff-times: each rung hands off at every time from one hydro run; its answer is the mean
+    over them (the hand-off term of the stand-in, HANDOFF_SLOPE (t - 1 s), averages to zero)."""
+    out = tmp_path / "ladder"
+    cells, times = [2.0, 4.0, 8.0], [0.8, 1.0, 1.2]
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_ladders(QUICKSTART, {"hydro.cells_per_projectile_radius": cells}, out, executor=pool,
+                             stage_functions=STAGES, show_progress=False, handoff_times=times)
+    done = calls(out)
+    assert sum(n for (_, stage), n in done.items() if stage == "hydro") == len(cells), "one hydro run per rung"
+    assert sum(n for (_, stage), n in done.items() if stage == "nbody") == len(cells) * len(times)
+    for rung in result["rungs"]:
+        h = 1.0 / rung.value
+        assert rung.samples == pytest.approx([CONVERGED + AMPLITUDE * h ** ORDER + HANDOFF_SLOPE * (t - 1.0)
+                                              for t in times], abs=1e-12)
+        assert rung.answers["M_lr_over_M_T"] == pytest.approx(CONVERGED + AMPLITUDE * h ** ORDER, abs=1e-12)
+        assert rung.spread == pytest.approx(HANDOFF_SLOPE * 0.4, abs=1e-12)
+        assert rung.costs["cell_updates"] == 1000 * rung.value ** 3, "the shared hydro run is counted once"
+        assert rung.costs["nbody_steps"] == len(times) * 50, "the N-body runs add up"
+    ext = result["richardson"]["hydro.cells_per_projectile_radius"]["M_lr_over_M_T"]
+    assert ext.ok and ext.value == pytest.approx(CONVERGED, abs=1e-9)
+    with open(out / "convergence.csv") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    assert {r["handoffs"] for r in rows} == {"3"} and {float(r["M_lr_over_M_T_spread"]) for r in rows} == {0.02}
+    assert json.loads((out / "convergence.json").read_text())["handoff_times"] == times
+    runner = CliRunner()
+    bad = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                               "--vary", "handoff.time=0.5,1.0", "--handoff-times", "1,2"])
+    assert bad.exit_code == 2 and "--handoff-times: not with a handoff.time ladder" in bad.output
+    bad = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                               "--vary", "hydro.cfl=0.2,0.4", "--handoff-times", "1,x"])
+    assert bad.exit_code == 2 and "--handoff-times: expected comma-separated numbers (got '1,x')" in bad.output
+    assert not (tmp_path / "bad").exists()
 
 
 @pytest.mark.validation
