@@ -28,9 +28,9 @@ h1 < h2 < h3 and answers f1, f2, f3, the model f = f* + C h^p gives
 
 solved for the observed order p (p = ln((f3 - f2)/(f2 - f1)) / ln r for a constant
 ratio r), then f* = f1 + (f1 - f2) / (r21^p - 1), and each rung's error estimate is
-f_i - f*.  With fewer than three rungs, answers that do not change monotonically, or
-differences that do not shrink with refinement, no value is extrapolated and the
-table says why.
+f_i - f*.  With fewer than three rungs, answers that do not change monotonically,
+differences that do not shrink with refinement, or an observed order below
+:data:`MIN_ORDER`, no value is extrapolated and the table says why.
 """
 
 from __future__ import annotations
@@ -172,7 +172,12 @@ class Extrapolation:
         return self.status == "extrapolated"
 
 
-def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0) -> Extrapolation:
+#: Observed orders below this are not extrapolated: the estimate would lie more than 2.4 times
+#: the last change beyond the finest rung (1 / (2^0.5 - 1) at a refinement ratio of 2).
+MIN_ORDER = 0.5
+
+
+def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0, min_order: float = MIN_ORDER) -> Extrapolation:
     """Richardson extrapolation of answers ``f`` at step sizes ``h`` from the three finest rungs.
 
     Model f(h) = f* + C h^p.  With h1 < h2 < h3 the three smallest step sizes (finite
@@ -180,8 +185,8 @@ def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0) -> Extrapo
     e32 / e21 = r21^p (r32^p - 1) / (r21^p - 1) (r21 = h2/h1, r32 = h3/h2; for
     r21 = r32 = r, p = ln(e32/e21) / ln r), and f* = f1 + (f1 - f2) / (r21^p - 1).
     Needs e32 / e21 > 1 (the answers change monotonically and the change shrinks with
-    refinement) and 0 < p <= ``max_order``; otherwise the status says which failed and
-    nothing is extrapolated.
+    refinement) and ``min_order`` <= p <= ``max_order``; otherwise the status says which
+    failed and nothing is extrapolated.
     """
     h = np.asarray(h, dtype=float)
     f = np.asarray(f, dtype=float)
@@ -217,6 +222,9 @@ def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0) -> Extrapo
         return Extrapolation(f"observed order above {max_order:g}: not in the asymptotic range",
                              ratios=(r21, r32), errors=nan_errors)
     p = float(optimize.brentq(mismatch, low, max_order, xtol=1e-12))
+    if p < min_order:
+        return Extrapolation(f"observed order {p:.2g} below {min_order:g}: not in the asymptotic range",
+                             order=p, ratios=(r21, r32), errors=nan_errors)
     value = float(f1 + (f1 - f2) / (r21 ** p - 1.0))
     return Extrapolation("extrapolated", order=p, ratios=(r21, r32), value=value, errors=f - value)
 

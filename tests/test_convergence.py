@@ -91,6 +91,10 @@ def test_richardson_refuses_to_invent_a_number():
     assert richardson(h, np.array([0.5, 0.6, 0.55])).status.startswith("non-monotone")
     assert richardson(h, np.array([0.5, 0.6, 0.65])).status.startswith("not converging")
     assert "agree exactly" in richardson(h, np.array([0.5, 0.5, 0.5])).status
+    # changes of 0.067 and then 0.069 per halving (case 8c's ladder averaged over hand-offs): order 0.04,
+    # whose extrapolation would lie 25 changes beyond the finest rung
+    slow = richardson(h, np.array([0.719, 0.786, 0.855]))
+    assert slow.status == "observed order 0.042 below 0.5: not in the asymptotic range" and np.isnan(slow.value)
     for status in ("non-monotone", "not converging"):
         ext = richardson(h, np.array([0.5, 0.6, 0.55 if status == "non-monotone" else 0.65]))
         assert not ext.ok and np.isnan(ext.value) and np.all(np.isnan(ext.errors))
