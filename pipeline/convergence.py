@@ -406,7 +406,8 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
                 depths: list[float] = DEFAULT_DEPTHS, tolerance: float = DEFAULT_TOLERANCE,
                 executor: cf.Executor | None = None, execution: dict[str, Any] | None = None,
                 stage_functions: dict[str, str] | None = None, show_progress: bool = True,
-                handoff_times: list[float] | None = None) -> dict[str, Any]:
+                handoff_times: list[float] | None = None,
+                reuse_runs: list[str | Path] | tuple = ()) -> dict[str, Any]:
     """Run the ladders and write the table, the Richardson table, a JSON record and one figure per ladder.
 
     Args:
@@ -421,18 +422,26 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
             the mean M_lr/M_T and N_lr over them as the rung's answers (their max - min is
             reported as ``M_lr_over_M_T_spread``): the reaccumulation's scatter between
             neighbouring hand-off times is then averaged out of the ladder.
+        reuse_runs: finished run directories (``impactpipe run`` or a sweep's ``runs/<point>``)
+            whose hydro runs the rungs with the same hydro settings adopt instead of running
+            their own (:meth:`impactpipe.pipeline.sweep.SweepRunner.add_donor`).
 
     Returns:
         {"rungs": [Rung], "richardson": {ladder: {answer: Extrapolation}}, "cheapest": {ladder: rung index or
         None}, "files": [paths written]}.
     """
     sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions, handoff_times)
+    unfinished = [str(d) for d in reuse_runs if read_records(Path(d)).get("hydro", {}).get("status") != "complete"]
+    if unfinished:
+        raise LadderError([f"--reuse-hydro {d}: no finished hydro stage there (its stages.json)" for d in unfinished])
     out = sweep.directory
     out.mkdir(parents=True, exist_ok=True)
     runstore.write_text_atomic(sweep.source, yaml.safe_dump(
         {**sweep.spec.model_dump(mode="json", exclude_none=True), "ladders": ladders,
          "depths_in_projectile_radii": list(depths), "handoff_times": handoff_times}, sort_keys=False))
     with open_runner(sweep, executor, show_progress, "convergence") as runner:
+        for run_dir in reuse_runs:
+            runner.add_donor(run_dir)
         by_digest: dict[str, str] = {}
         for rung in rungs:
             for params in rung.point_params:

@@ -314,6 +314,7 @@ class SweepRunner:
         self.points: dict[str, dict[str, Any]] = {}
         self._configs: dict[str, Config] = {}
         self.runs_dir = sweep.directory / "runs"
+        self.donors: dict[str, str] = {}
 
     # -- bookkeeping
 
@@ -331,6 +332,18 @@ class SweepRunner:
                                  "attempts": 0}
             self._configs[name] = config
         return name
+
+    def add_donor(self, run_dir: str | Path) -> bool:
+        """Offer a finished run from outside the sweep: points with its hydro hash adopt its hydro
+        run (and its hand-off where that matches too) instead of running their own, unless a
+        point of theirs has one already.  Returns False if its hydro stage is not complete."""
+        from .stages import read_records
+
+        record = read_records(Path(run_dir)).get("hydro", {})
+        if record.get("status") != "complete" or not record.get("hash"):
+            return False
+        self.donors[record["hash"]] = str(Path(run_dir).resolve())
+        return True
 
     def _is_done(self, name: str) -> bool:
         run_dir = Path(self.points[name]["run_dir"])
@@ -379,14 +392,20 @@ class SweepRunner:
 
     def _shared_sources(self, names: list[str]) -> dict[str, str]:
         """For each point, the point whose finished stages it reuses: the first of the points with
-        the same hydro hash (it adopts the hydro run, and the hand-off too when that matches)."""
+        the same hydro hash (it adopts the hydro run, and the hand-off too when that matches), or
+        the directory of a donor run (:meth:`add_donor`) when no point of the group has one."""
         first: dict[str, str] = {}
         for name in names:
             first.setdefault(self.points[name]["hydro_hash"], name)
         for name in names:
             if self._has_shared(name):
                 first[self.points[name]["hydro_hash"]] = name
-        return {name: first[self.points[name]["hydro_hash"]] for name in names}
+        sources = {}
+        for name in names:
+            hydro = self.points[name]["hydro_hash"]
+            own = first[hydro]
+            sources[name] = self.donors[hydro] if hydro in self.donors and not self._has_shared(own) else own
+        return sources
 
     def _has_shared(self, name: str) -> bool:
         records_path = Path(self.points[name]["run_dir"]) / "stages.json"
@@ -397,7 +416,10 @@ class SweepRunner:
 
     def _submit(self, name: str, reuse: str | None) -> cf.Future:
         point = self.points[name]
-        reuse_dir = self.points[reuse]["run_dir"] if reuse and reuse != name else None
+        if reuse in self.points:
+            reuse_dir = self.points[reuse]["run_dir"] if reuse != name else None
+        else:
+            reuse_dir = reuse  # a donor run's directory, or None
         job = PointJob(name, point["params"], self._configs[name], point["run_dir"], reuse_dir,
                        self.sweep.spec.execution.threads_per_run, self.sweep.spec.stage_functions)
         self._record(name, status="running", attempts=point["attempts"] + 1, error=None)

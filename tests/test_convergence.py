@@ -12,8 +12,9 @@ import pytest
 from click.testing import CliRunner
 from sweep_stand_ins import _finish
 
+from impactpipe.pipeline import stages
 from impactpipe.pipeline.cli import main
-from impactpipe.pipeline.config import load_yaml
+from impactpipe.pipeline.config import load_config, load_yaml
 from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson, run_ladders)
 
 HERE = Path(__file__).parent
@@ -272,6 +273,30 @@ def test_ladder_averaged_over_handoff_times(tmp_path):
     bad = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
                                "--vary", "hydro.cfl=0.2,0.4", "--handoff-times", "1,x"])
     assert bad.exit_code == 2 and "--handoff-times: expected comma-separated numbers (got '1,x')" in bad.output
+    assert not (tmp_path / "bad").exists()
+
+
+def test_ladder_adopts_the_hydro_run_of_a_finished_run(tmp_path):
+    """--reuse-hydro: rungs with the donor's hydro settings adopt its hydro run (no hydro stage
+    runs); rungs with other hydro settings run their own; an unfinished donor is refused."""
+    donor = tmp_path / "donor" / "run"
+    stages.run(load_config(QUICKSTART), donor, show_progress=False, stage_functions=STAGES)
+    out = tmp_path / "ladder"
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_ladders(QUICKSTART, {"nbody.opening_angle": [0.25, 0.5, 1.0], "hydro.cfl": [0.2, 0.4]}, out,
+                             executor=pool, stage_functions=STAGES, show_progress=False, reuse_runs=[donor])
+    done = calls(out)
+    hydro_runs = {run for (run, stage) in done if stage == "hydro"}
+    assert hydro_runs == {r.name for r in result["rungs"] if r.ladder == "hydro.cfl" and r.value == 0.2}, \
+        "only the rung whose hydro settings differ from the donor's runs a hydro stage"
+    assert sum(n for (_, stage), n in done.items() if stage == "nbody") == 3, \
+        "the base rung (common to both ladders) is the donor's config and adopts all its stages"
+    adopted = [r for r in result["rungs"] if r.hydro_from == "run"]
+    assert len(adopted) == 4 and all(r.status == "complete" for r in result["rungs"])
+    (tmp_path / "empty").mkdir()
+    bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                                    "--vary", "hydro.cfl=0.2,0.4", "--reuse-hydro", str(tmp_path / "empty")])
+    assert bad.exit_code == 2 and "no finished hydro stage there" in bad.output
     assert not (tmp_path / "bad").exists()
 
 
