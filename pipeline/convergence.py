@@ -371,6 +371,9 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
         raise LadderError(["--handoff-times: not with a handoff.time ladder (that ladder is the hand-off scan)"])
     if handoff_times and len(set(handoff_times)) != len(handoff_times):
         raise LadderError([f"--handoff-times: the times must be distinct (got {handoff_times})"])
+    clash = [k for k in ("hydro.end_time", "hydro.output_times") if handoff_times and k in ladders]
+    if clash:
+        raise LadderError([f"--handoff-times: not with a {k} ladder (the option sets it)" for k in clash])
     for key, values in ladders.items():
         pattern = re.sub(r"^materials\.[^.]+\.", "materials.<name>.", key)
         if key not in known and pattern not in known:
@@ -398,7 +401,7 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
             step = float(STEP_SIZE[key][1](value)) if key in STEP_SIZE else float("nan")
             rungs.append(Rung(ladder=key, value=value, name="", params=params, step=step, point_params=points))
     if messages:
-        raise LadderError(messages)
+        raise LadderError(list(dict.fromkeys(messages)))
     return sweep, rungs
 
 
@@ -431,9 +434,17 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
         None}, "files": [paths written]}.
     """
     sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions, handoff_times)
-    unfinished = [str(d) for d in reuse_runs if read_records(Path(d)).get("hydro", {}).get("status") != "complete"]
-    if unfinished:
-        raise LadderError([f"--reuse-hydro {d}: no finished hydro stage there (its stages.json)" for d in unfinished])
+    wanted = {stage_hashes(sweep.config_for(p))["hydro"] for r in rungs for p in r.point_params}
+    messages = []
+    for d in reuse_runs:
+        record = read_records(Path(d)).get("hydro", {})
+        if record.get("status") != "complete":
+            messages.append(f"--reuse-hydro {d}: no finished hydro stage there (its stages.json)")
+        elif record.get("hash") not in wanted:
+            messages.append(f"--reuse-hydro {d}: its hydro settings match no rung's (a run of another config, "
+                            "or the ladder varies a hydro key)")
+    if messages:
+        raise LadderError(messages)
     out = sweep.directory
     out.mkdir(parents=True, exist_ok=True)
     runstore.write_text_atomic(sweep.source, yaml.safe_dump(
@@ -476,7 +487,8 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
         f_mlr = np.array([r.answers.get("M_lr_over_M_T", np.nan) for r in ladder])
         reference[key] = _tolerance_reference(key, h, f_mlr, mlr)
         cheapest[key] = cheapest_within(h, f_mlr, reference[key][1], tolerance)
-    files = _write_outputs(out, rungs, ladders, extrapolations, cheapest, reference, answers, tolerance, base)
+    files = _write_outputs(out, rungs, ladders, extrapolations, cheapest, reference, answers, tolerance, base,
+                           sorted(handoff_times) if handoff_times else None)
     return {"rungs": rungs, "richardson": extrapolations, "cheapest": cheapest, "reference": reference,
             "files": files}
 
@@ -590,7 +602,7 @@ def rung_rows(rungs: list[Rung], extrapolations: dict[str, dict[str, Extrapolati
 def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                    extrapolations: dict[str, dict[str, Extrapolation]], cheapest: dict[str, int | None],
                    reference: dict[str, tuple[str, float]], answers: list[str], tolerance: float,
-                   base: Any) -> list[Path]:
+                   base: Any, handoff_times: list[float] | None) -> list[Path]:
     rows = rung_rows(rungs, extrapolations, answers)
     extra = [f"{a}_{s}" for a in answers if a != "N_lr" for s in ("error_estimate", "change_from_previous")]
     columns = ["ladder", "value", "step_size", "status", *answers, "M_lr_over_M_T_spread", "handoffs", *extra, *COSTS,
@@ -619,8 +631,7 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
         ["Richardson estimate f = f* + C h^p from the three finest rungs of each ladder"]))
     runstore.write_json_atomic(out / JSON_FILE, {
         "base": base.name, "ladders": ladders, "tolerance": tolerance,
-        "handoff_times": sorted({float(p["handoff.time"]) for r in rungs for p in r.point_params
-                                 if len(r.point_params) > 1}) or None,
+        "handoff_times": handoff_times,
         "rows": rows, "richardson": rich_rows,
         "cheapest_within_tolerance": {k: (None if i is None else [r for r in rungs if r.ladder == k][i].value)
                                       for k, i in cheapest.items()},

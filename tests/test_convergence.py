@@ -273,6 +273,9 @@ def test_ladder_averaged_over_handoff_times(tmp_path):
     bad = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
                                "--vary", "hydro.cfl=0.2,0.4", "--handoff-times", "1,x"])
     assert bad.exit_code == 2 and "--handoff-times: expected comma-separated numbers (got '1,x')" in bad.output
+    bad = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                               "--vary", "hydro.end_time=1.5,2.0", "--handoff-times", "1,1.2"])
+    assert bad.exit_code == 2 and "--handoff-times: not with a hydro.end_time ladder" in bad.output
     assert not (tmp_path / "bad").exists()
 
 
@@ -297,6 +300,10 @@ def test_ladder_adopts_the_hydro_run_of_a_finished_run(tmp_path):
     bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
                                     "--vary", "hydro.cfl=0.2,0.4", "--reuse-hydro", str(tmp_path / "empty")])
     assert bad.exit_code == 2 and "no finished hydro stage there" in bad.output
+    # a donor whose hydro settings no rung shares would silently run every hydro stage: refused
+    bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                                    "--vary", "hydro.cfl=0.1,0.2", "--reuse-hydro", str(donor)])
+    assert bad.exit_code == 2 and "its hydro settings match no rung's" in bad.output
     assert not (tmp_path / "bad").exists()
 
 
