@@ -22,8 +22,20 @@ are discarded.  ``qstar_err`` is the standard deviation of the valid samples and
 ``qstar_interval`` their 16th-84th percentiles.  With few runs the bootstrap
 underestimates the error; a line through two runs has no scatter to resample, so with
 fewer than three distinct Q the errors and the interval are NaN (not the zero the
-bootstrap would give).  The method's own error, about +-0.1 in M_lr/M_T from the
-hand-off time, is not included.
+bootstrap would give), unless every Q was run more than once.
+
+Replicates: runs at the same Q that differ only in the hand-off (``handoff.seed`` or
+``handoff.time``; a sweep's ``replicates``, docs/sweeps.md) sample the method's own
+scatter of M_lr/M_T (N-body reaccumulation amplifies a 1 % velocity perturbation into a
+standard deviation of about 0.05 for case 8c, docs/accuracy.md).  They enter the fit as
+separate runs, so the bootstrap over runs carries that scatter into ``qstar_err``; a
+fit of one run per Q does not contain it.  ``replicate_std`` is the pooled standard
+deviation of M_lr/M_T within Q,
+
+    s^2 = sum_g sum_i (y_gi - mean_g)^2 / sum_g (n_g - 1),
+
+over the fitted Q values g with n_g >= 2 runs (NaN when no Q was repeated), and
+``replicated_q`` the number of such Q values.
 
 The slope against the normalised energy, d(M_lr/M_T)/d(Q/Q*_D) = b Q*_D, is
 reported with its bootstrap error (about -0.5 in the reference study).
@@ -75,6 +87,8 @@ class QStarFit:
         min_mlr, n_lr_resolved, underresolved_weight: the settings used.
         critical_velocity, critical_velocity_err: v* and its bootstrap error (m/s), NaN if not asked.
         critical_radius, critical_radius_err: R* and its bootstrap error (m), NaN if not asked.
+        replicate_std: pooled standard deviation of M_lr/M_T between runs at the same Q (NaN if none).
+        replicated_q: fitted Q values with two or more runs.
     """
 
     qstar: float
@@ -95,6 +109,8 @@ class QStarFit:
     critical_velocity_err: float = float("nan")
     critical_radius: float = float("nan")
     critical_radius_err: float = float("nan")
+    replicate_std: float = float("nan")
+    replicated_q: int = 0
 
     def predict(self, q):
         """M_lr/M_T on the fitted line at specific energy ``q`` (J/kg)."""
@@ -121,6 +137,9 @@ class QStarFit:
             "critical_velocity_err": (self.critical_velocity_err, "m/s", "bootstrap std"),
             "critical_radius": (self.critical_radius, "m", "projectile radius at Q*_D"),
             "critical_radius_err": (self.critical_radius_err, "m", "bootstrap std"),
+            "replicate_std": (self.replicate_std, "dimensionless",
+                              "pooled standard deviation of M_lr/M_T between runs at the same Q"),
+            "replicated_q": (self.replicated_q, "dimensionless", "fitted Q values with two or more runs"),
         }
 
 
@@ -206,7 +225,9 @@ def fit_qstar(
         logger.warning("only %d of %d bootstrap samples were usable (%d fitted runs)", n_valid, n_bootstrap,
                        xu.size)
 
-    resamplable = np.unique(xu).size >= 3
+    distinct, runs_per_q = np.unique(xu, return_counts=True)
+    resamplable = distinct.size >= 3 or bool(np.all(runs_per_q >= 2))
+    replicate_std, replicated_q = pooled_replicate_std(xu, yu)
 
     def spread(samples):
         return float(np.std(samples, ddof=1)) if resamplable and samples.size > 1 else float("nan")
@@ -238,8 +259,24 @@ def fit_qstar(
         min_mlr=float(min_mlr),
         n_lr_resolved=int(n_lr_resolved),
         underresolved_weight=float(underresolved_weight),
+        replicate_std=replicate_std,
+        replicated_q=replicated_q,
         **extra,
     )
+
+
+def pooled_replicate_std(q, y) -> tuple[float, int]:
+    """(s, g): pooled standard deviation of ``y`` between entries with equal ``q`` and the
+    number g of ``q`` values with two or more entries (equation in the module docstring);
+    s is NaN when g is 0."""
+    q = np.asarray(q, dtype=float)
+    y = np.asarray(y, dtype=float)
+    _, group, counts = np.unique(q, return_inverse=True, return_counts=True)
+    means = np.bincount(group, weights=y) / counts
+    squares = float(np.sum((y - means[group]) ** 2))
+    dof = int(np.sum(counts - 1))
+    replicated = int(np.sum(counts >= 2))
+    return (float(np.sqrt(squares / dof)) if dof > 0 else float("nan")), replicated
 
 
 def plus_minus(value: float, error: float, fmt: str = ".3g") -> str:
@@ -292,6 +329,9 @@ def write_qstar_table(
         f"# runs fitted: M_lr/M_T > {fit.min_mlr:g}; weight {fit.underresolved_weight:g} for N_lr < "
         f"{fit.n_lr_resolved}, else 1; brackets 0.5: {fit.brackets}",
     ]
+    if fit.replicated_q:
+        header.append(f"# replicates: {fit.replicated_q} Q values run more than once; pooled standard deviation "
+                      f"of M_lr/M_T at the same Q = {fit.replicate_std:.3g}")
     if np.isfinite(fit.critical_velocity):
         header.append(f"# critical velocity = {fit.critical_velocity:.6g} m/s +- {fit.critical_velocity_err:.3g}")
     if np.isfinite(fit.critical_radius):

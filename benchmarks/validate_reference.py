@@ -19,6 +19,12 @@ each family (and, for case 8, per collision model).  The hand-off-time plateau o
 is a hand-off scan (``impactpipe.pipeline.handoff_scan``): one hydro run to the latest
 time, handed off at each time.
 
+One run per case carries the method's scatter of M_lr/M_T (a standard deviation of about
+0.05 for case 8c from the hand-off velocity noise alone, docs/accuracy.md).  ``--seeds N``
+runs every case N times with ``handoff.seed`` 1..N (a sweep's ``replicates``: one hydro
+run per speed); the tables then give each case's mean and standard deviation, and every
+seed enters the Q*_D fit, so its bootstrap error contains that scatter.
+
 Writes ``validation.json`` and ``validation.md`` into ``--out`` and prints the tables.
 
     python benchmarks/validate_reference.py                      # the real thing (hours)
@@ -99,6 +105,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              f"{QUICK_CELLS:g} cells per projectile radius unless given")
     parser.add_argument("--handoff-times", default=",".join(f"{t:g}" for t in HANDOFF_TIMES),
                         help="hand-off scan times of case 8c (s); 'none' skips the scan")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="hand-off velocity-noise seeds per run (handoff.seed 1..N, one hydro run per speed); "
+                             "M_lr/M_T is then given as mean +- standard deviation (default 1)")
     parser.add_argument("--out", default="runs/validate_reference", help="output directory")
     parser.add_argument("--backend", choices=("local", "dask"), default="local")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address (implies --backend dask)")
@@ -130,14 +139,14 @@ def options_from_args(args: argparse.Namespace) -> dict[str, Any]:
                              f"(got {args.handoff_times!r})") from None
         if not times or times[0] <= 0:
             raise UsageError(f"--handoff-times: expected times > 0 s (got {args.handoff_times!r})")
-    for name in ("workers", "threads_per_run"):
+    for name in ("seeds", "workers", "threads_per_run"):
         value = getattr(args, name)
         if value is not None and value < 1:
             raise UsageError(f"--{name.replace('_', '-')}: must be >= 1 (got {value})")
     if cells is None and args.quick:
         cells = QUICK_CELLS
     return {"cases": cases, "models": ["merge", *[m for m in models if m != "merge"]], "cells": cells,
-            "quick": args.quick, "handoff_times": times, "out": Path(args.out),
+            "quick": args.quick, "handoff_times": times, "seeds": args.seeds, "out": Path(args.out),
             "execution": {"backend": "dask" if args.scheduler else args.backend, "scheduler": args.scheduler,
                           "workers": args.workers, "threads_per_run": args.threads_per_run}}
 
@@ -190,10 +199,12 @@ def family_sweeps(options: dict[str, Any], stage_functions: dict[str, str] | Non
             axes["nbody.collision_model"] = options["models"]
             if "bounce" in options["models"]:
                 overrides["nbody.restitution.normal"] = BOUNCE_RESTITUTION
-        specs.append({"family": family, "cases": dict(zip(velocities, cases)), "spec": {
-            "name": f"case{family}", "base": str(base_path), "output": str(options["out"] / f"case{family}"),
-            "overrides": overrides, "axes": axes, "execution": options["execution"],
-            "stage_functions": stage_functions or {}}, "name": base.name})
+        spec = {"name": f"case{family}", "base": str(base_path), "output": str(options["out"] / f"case{family}"),
+                "overrides": overrides, "axes": axes, "execution": options["execution"],
+                "stage_functions": stage_functions or {}}
+        if options["seeds"] > 1:
+            spec["replicates"] = {"handoff.seed": list(range(1, options["seeds"] + 1))}
+        specs.append({"family": family, "cases": dict(zip(velocities, cases)), "spec": spec, "name": base.name})
     return specs
 
 
@@ -264,6 +275,7 @@ def build_report(options: dict[str, Any], points: dict[str, dict[str, Any]], sca
         full = _full_summary(point)
         runs.append({
             "case": case, "velocity": v, "model": point["params"].get("nbody.collision_model", "merge"),
+            "seed": int(point["params"].get("handoff.seed", 1)),
             "status": point["status"], "error": point.get("error") or "",
             "M_lr_over_M_T": mlr, "published_M_lr_over_M_T": published["mlr_over_mt"],
             "difference": mlr - published["mlr_over_mt"],
@@ -273,15 +285,16 @@ def build_report(options: dict[str, Any], points: dict[str, dict[str, Any]], sca
             "physics_not_modelled": full.get("physics_not_modelled", []),
             "wall_seconds_own_stages": _run_wall(point),
         })
-    runs.sort(key=lambda r: (r["case"], MODELS.index(r["model"])))
+    runs.sort(key=lambda r: (r["case"], MODELS.index(r["model"]), r["seed"]))
+    cases = case_means(runs)
     fits = []
     for family in sorted({r["case"][0] for r in runs}):
         for model in options["models"] if family == "8" else ["merge"]:
             fits.append(_fit(family, model, [r for r in runs if r["case"][0] == family and r["model"] == model]))
     models = []
-    for case in sorted({r["case"] for r in runs if r["case"][0] == "8"}):
-        merge = next((r for r in runs if r["case"] == case and r["model"] == "merge"), None)
-        for r in runs:
+    for case in sorted({r["case"] for r in cases if r["case"][0] == "8"}):
+        merge = next((r for r in cases if r["case"] == case and r["model"] == "merge"), None)
+        for r in cases:
             if r["case"] == case and r["model"] != "merge" and merge is not None:
                 models.append({"case": case, "model": r["model"], "M_lr_over_M_T": r["M_lr_over_M_T"],
                                "merge_M_lr_over_M_T": merge["M_lr_over_M_T"],
@@ -306,13 +319,43 @@ def build_report(options: dict[str, Any], points: dict[str, dict[str, Any]], sca
     return {
         "settings": {"cases": options["cases"], "models": options["models"], "quick": options["quick"],
                      "cells_per_projectile_radius": options["cells"] if options["cells"] is not None else "configs",
-                     "handoff_times": options["handoff_times"], "restitution_normal_bounce": BOUNCE_RESTITUTION},
-        "runs": runs, "qstar": fits, "collision_models": models, "handoff_plateau": plateau,
+                     "handoff_times": options["handoff_times"], "seeds": options["seeds"],
+                     "restitution_normal_bounce": BOUNCE_RESTITUTION},
+        "runs": runs, "cases": cases, "qstar": fits, "collision_models": models, "handoff_plateau": plateau,
         "cost": {"wall_seconds": wall, "backend": execution.backend, "workers": workers,
                  "threads_per_run": execution.threads_per_run, "cores_used": workers * execution.threads_per_run,
                  "machine_cores": os.cpu_count(),
                  "run_wall_seconds_total": float(sum(r["wall_seconds_own_stages"] for r in runs))},
     }
+
+
+def case_means(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One record per case and collision model: M_lr/M_T, N_lr and N_init averaged over its seeds
+    (finished runs), the sample standard deviation of M_lr/M_T (ddof 1; NaN for one seed), the
+    difference of the mean from the published value, and the status of the worst run."""
+    out = []
+    for key in dict.fromkeys((r["case"], r["model"]) for r in runs):
+        group = [r for r in runs if (r["case"], r["model"]) == key]
+        done = [r for r in group if r["status"] == "complete" and math.isfinite(r["M_lr_over_M_T"])]
+        mlr = np.array([r["M_lr_over_M_T"] for r in done])
+        mean = float(mlr.mean()) if mlr.size else float("nan")
+        failed = [r for r in group if r["status"] != "complete"]
+        first = group[0]
+        out.append({
+            "case": key[0], "model": key[1], "velocity": first["velocity"], "seeds": len(group),
+            "complete": len(done), "M_lr_over_M_T": mean,
+            "M_lr_over_M_T_std": float(mlr.std(ddof=1)) if mlr.size >= 2 else float("nan"),
+            "published_M_lr_over_M_T": first["published_M_lr_over_M_T"],
+            "difference": mean - first["published_M_lr_over_M_T"],
+            "N_lr": float(np.mean([r["N_lr"] for r in done])) if done else float("nan"),
+            "published_N_lr": first["published_N_lr"],
+            "N_init": float(np.mean([r["N_init"] for r in done])) if done else float("nan"),
+            "published_N_init": first["published_N_init"], "published_note": first["published_note"],
+            "status": failed[0]["status"] if failed else "complete",
+            "error": failed[0]["error"] if failed else "",
+            "wall_seconds_own_stages": float(sum(r["wall_seconds_own_stages"] for r in group)),
+        })
+    return out
 
 
 def _full_summary(point: dict[str, Any]) -> dict[str, Any]:
@@ -339,7 +382,7 @@ def _fit(family: str, model: str, runs: list[dict[str, Any]]) -> dict[str, Any]:
     record.update({"qstar": fit.qstar, "qstar_err": fit.qstar_err, "velocity": fit.critical_velocity,
                    "velocity_err": fit.critical_velocity_err, "slope": fit.normalized_slope,
                    "slope_err": fit.normalized_slope_err, "brackets": bool(fit.brackets),
-                   "fitted_runs": int(np.sum(fit.used))})
+                   "fitted_runs": int(np.sum(fit.used)), "replicate_std": fit.replicate_std})
     return record
 
 
@@ -357,16 +400,23 @@ def format_report(report: dict[str, Any]) -> list[str]:
     s = report["settings"]
     lines = ["# Reference cases 8 and 9: this pipeline next to method.md section 6", "",
              f"cases {', '.join(s['cases'])}; collision models (case 8) {', '.join(s['models'])}; "
-             f"cells per projectile radius {s['cells_per_projectile_radius']}; quick {s['quick']}", ""]
+             f"cells per projectile radius {s['cells_per_projectile_radius']}; quick {s['quick']}; "
+             f"hand-off seeds per run {s['seeds']}", ""]
     not_modelled = sorted({m for r in report["runs"] for m in r["physics_not_modelled"]})
     if not_modelled:
         lines += ["Physics not modelled in these runs (summary.json):", *[f"- {m}" for m in not_modelled], ""]
-    lines += ["## M_lr/M_T per run", "",
-              "| case | v (m/s) | model | M_lr/M_T | published | difference | N_lr (published) | "
+    lines += ["## M_lr/M_T per run", ""]
+    if s["seeds"] > 1:
+        lines += [f"Each case ran with hand-off seeds 1-{s['seeds']} from one hydro run: M_lr/M_T is the mean "
+                  "+- the standard deviation over the seeds (n finished), N_lr and N_init are means, the difference "
+                  "is the mean's.", ""]
+    lines += ["| case | v (m/s) | model | M_lr/M_T | published | difference | N_lr (published) | "
               "N_init (published) | status | wall s |",
               "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in report["runs"]:
-        lines.append(f"| {r['case']} | {r['velocity']:.0f} | {r['model']} | {_g(r['M_lr_over_M_T'])} | "
+    for r in report["cases"]:
+        mlr = _g(r["M_lr_over_M_T"]) if r["seeds"] == 1 else \
+            f"{plus_minus(r['M_lr_over_M_T'], r['M_lr_over_M_T_std'])} (n {r['complete']})"
+        lines.append(f"| {r['case']} | {r['velocity']:.0f} | {r['model']} | {mlr} | "
                      f"{r['published_M_lr_over_M_T']:g}{' (' + r['published_note'] + ')' if r['published_note'] else ''}"
                      f" | {_g(r['difference'], 2)} | {_g(r['N_lr'])} ({r['published_N_lr']}) | "
                      f"{_g(r['N_init'])} ({r['published_N_init']}) | {r['status']}"
@@ -389,6 +439,12 @@ def format_report(report: dict[str, Any]) -> list[str]:
                      f"{plus_minus(f['qstar'], f['qstar_err'])}{note} | {pub_q} | "
                      f"{plus_minus(f['velocity'] / 1e3, f['velocity_err'] / 1e3)} | {pub_v} | "
                      f"{plus_minus(f['slope'], f['slope_err'])} | {pub_s} |")
+    scatter = [f"family {f['family']} {f['model']} {f['replicate_std']:.2g}" for f in report["qstar"]
+               if math.isfinite(f.get("replicate_std", float("nan")))]
+    if scatter:
+        lines += ["", "Standard deviation of M_lr/M_T between the seeds of a run, pooled over the family's speeds: "
+                  + "; ".join(scatter) + ". Every seed is a run of the fit, so this scatter is in the bootstrap "
+                  "errors above."]
     if report["collision_models"]:
         lines += ["", "## Case 8: collision model against perfect merging", "",
                   "| case | model | M_lr/M_T | with merge | change |", "|---|---|---|---|---|"]

@@ -7,6 +7,7 @@ written), 130 interrupted (SIGINT/SIGTERM; finished stages and checkpoints are k
 from __future__ import annotations
 
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -105,11 +106,16 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
 @click.option("--backend", type=click.Choice(["local", "dask"]), help="Execution backend (overrides the file).")
 @click.option("--scheduler", help="Dask scheduler address (implies --backend dask).")
 @click.option("--workers", type=int, help="Parallel runs (default: cores / threads_per_run).")
+@click.option("--reuse-hydro", "reuse_hydro", multiple=True, type=click.Path(file_okay=False), metavar="RUN_DIR",
+              help="A finished run whose hydro stage the points with the same hydro settings adopt instead of "
+                   "running it (e.g. to add hand-off seeds to earlier runs); repeatable.")
 @click.option("-v", "--verbose", count=True, help="More log output.")
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
 def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, scheduler: str | None,
-              workers: int | None, verbose: int, quiet: bool) -> None:
+              workers: int | None, reuse_hydro: tuple[str, ...], verbose: int, quiet: bool) -> None:
     """Run every point of the sweep file SWEEP (a grid or a Q*_D search); resumes where it stopped."""
+    from impactpipe.analysis.qstar import plus_minus
+
     from .sweep import SweepError, load_sweep, run_sweep, sweep_status
 
     _setup_logging(verbose, quiet)
@@ -126,14 +132,24 @@ def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, schedul
         execution.backend = backend
     if workers:
         execution.workers = workers
-    result = run_sweep(sweep, show_progress=not quiet)
+    try:
+        result = run_sweep(sweep, show_progress=not quiet, reuse_runs=list(reuse_hydro))
+    except SweepError as exc:
+        for message in exc.messages:
+            click.echo(message, err=True)
+        sys.exit(2)
     status = sweep_status(sweep.directory)
     click.echo(f"sweep {sweep.spec.name}: {status['total']} points, "
                + ", ".join(f"{n} {s}" for s, n in sorted(status["counts"].items())))
     for record in result["qstar"]:
-        click.echo(f"  Q*_D = {record.get('Qstar_D', float('nan')):.4g} J/kg ({record['status']}) for "
+        scatter = (f", M_lr/M_T standard deviation between replicates {record['replicate_std']:.3f}"
+                   if math.isfinite(record.get("replicate_std", float("nan"))) else "")
+        click.echo(f"  Q*_D = {plus_minus(record.get('Qstar_D', float('nan')), record.get('Qstar_D_uncertainty', float('nan')), '.4g')}"
+                   f" J/kg ({record['status']}{scatter}) for "
                    + ", ".join(f"{k}={record[k]}" for k in sweep.spec.axis_values() if k in record))
-    click.echo(f"tables in {sweep.directory}/: results.csv, results.h5" + (", qstar.csv" if result["qstar"] else ""))
+    tables = ["results.csv", "results.h5"] + (["replicates.csv"] if sweep.spec.replicates else []) \
+        + (["qstar.csv"] if result["qstar"] else [])
+    click.echo(f"tables in {sweep.directory}/: {', '.join(tables)}")
     if status["failed"]:
         sys.exit(1)
 
@@ -248,6 +264,9 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
         click.echo(f"critical {by.replace('_', ' ')} = {plus_minus(critical, critical_err, '.4g')} {unit}")
         click.echo("slope of M_lr/M_T against Q/Q*_D = "
                    f"{plus_minus(fit.normalized_slope, fit.normalized_slope_err, '.3f')}")
+        if fit.replicated_q:
+            click.echo(f"replicates: {fit.replicated_q} Q values run more than once; standard deviation of "
+                       f"M_lr/M_T at the same Q = {fit.replicate_std:.3f} (included in the error)")
         if common_velocity is not None:
             v_from = critical if by == "velocity" else float(group[0]["config"].scene.impact.velocity)
             moved = float(scale_qstar_to_velocity(fit.qstar, v_from, common_velocity, mu))

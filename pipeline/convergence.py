@@ -53,7 +53,7 @@ from scipy import optimize
 from . import derived, runstore
 from .config import ConfigError, key_paths
 from .stages import STAGES, read_records, stage_hashes
-from .sweep import Sweep, SweepSpec, open_runner
+from .sweep import Sweep, SweepSpec, donor_problems, handoff_time_params, open_runner, with_replicates
 
 log = logging.getLogger(__name__)
 
@@ -323,8 +323,7 @@ def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
     time with a snapshot at every rung (the hydro run is then shared by the whole ladder)."""
     params = {key: value}
     if key == "handoff.time":
-        times = sorted(float(v) for v in values)
-        params.update({"hydro.end_time": times[-1], "hydro.output_times": times})
+        params.update(handoff_time_params(values))
     return params
 
 
@@ -334,8 +333,7 @@ def _rung_points(params: dict[str, Any], handoff_times: list[float] | None) -> l
     share one hydro run, as a hand-off scan's do)."""
     if not handoff_times:
         return [params]
-    times = sorted(handoff_times)
-    return [{**params, "handoff.time": t, "hydro.end_time": times[-1], "hydro.output_times": times} for t in times]
+    return with_replicates(params, {"handoff.time": sorted(handoff_times)})
 
 
 def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
@@ -435,14 +433,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
     """
     sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions, handoff_times)
     wanted = {stage_hashes(sweep.config_for(p))["hydro"] for r in rungs for p in r.point_params}
-    messages = []
-    for d in reuse_runs:
-        record = read_records(Path(d)).get("hydro", {})
-        if record.get("status") != "complete":
-            messages.append(f"--reuse-hydro {d}: no finished hydro stage there (its stages.json)")
-        elif record.get("hash") not in wanted:
-            messages.append(f"--reuse-hydro {d}: its hydro settings match no rung's (a run of another config, "
-                            "or the ladder varies a hydro key)")
+    messages = donor_problems(reuse_runs, wanted, "rung")
     if messages:
         raise LadderError(messages)
     out = sweep.directory

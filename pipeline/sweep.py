@@ -40,7 +40,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from . import runstore
 from .config import Config, ConfigError, Strict, _LineFinder, key_paths, load_yaml, parse_config, unknown_keys
-from .stages import STAGES, adopt_stages, plan, read_summary, stage_hashes
+from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,13 @@ POINTS_FILE = "points.json"
 RESULTS_CSV = "results.csv"
 RESULTS_H5 = "results.h5"
 QSTAR_CSV = "qstar.csv"
+REPLICATES_CSV = "replicates.csv"
 RESULT_KEYS = ("Q", "Q_R", "gamma", "M_lr_over_M_T", "M_slr_over_M_T", "N_lr", "N_init")
+#: Config keys a point may be replicated over: realisations of the same impact that differ only
+#: in the hand-off (velocity-noise seed, hand-off time) or in REBOUND's collision order.
+REPLICATE_KEYS = ("handoff.seed", "handoff.time", "nbody.seed")
+#: Keys a ``handoff.time`` replicate sets (:func:`handoff_time_params`).
+HANDOFF_TIME_KEYS = ("hydro.end_time", "hydro.output_times")
 
 
 # --------------------------------------------------------------------------- sweep file
@@ -117,6 +123,26 @@ class SweepSpec(Strict):
     execution: Execution = Field(default_factory=Execution)
     stage_functions: dict[str, str] = Field(default_factory=dict,
                                             description="replace stages by 'package.module:function'")
+    replicates: dict[str, list[Any]] = Field(
+        default_factory=dict, description="run every point once per combination of these values "
+                                          f"(keys: {', '.join(REPLICATE_KEYS)}) and average M_lr/M_T over them")
+
+    @model_validator(mode="after")
+    def _replicates_valid(self) -> "SweepSpec":
+        for key, values in self.replicates.items():
+            if key not in REPLICATE_KEYS:
+                raise ValueError(f"replicates: {key} cannot be replicated (allowed: {', '.join(REPLICATE_KEYS)}; "
+                                 "other keys change the impact: make them an axis)")
+            if not values or len({repr(v) for v in values}) != len(values):
+                raise ValueError(f"replicates: {key} needs a list of distinct values (got {values})")
+            if key in self.axes or key in self.overrides:
+                raise ValueError(f"replicates: {key} is also in {'axes' if key in self.axes else 'overrides'}")
+        if "handoff.time" in self.replicates:
+            clash = [k for k in HANDOFF_TIME_KEYS if k in self.axes or k in self.overrides]
+            if clash:
+                raise ValueError(f"replicates: handoff.time runs the hydro stage to the latest time with a snapshot "
+                                 f"at each, so {' and '.join(clash)} cannot be set in axes or overrides")
+        return self
 
     def axis_values(self) -> dict[str, list[Any]]:
         """Each axis as a list of values."""
@@ -182,7 +208,7 @@ def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
     directory = Path(output or spec.output or Path("sweeps") / spec.name)
     sweep = Sweep(spec=spec, base_text=base_text, base_path=base_path, directory=directory, source=path)
     messages = []
-    for params in grid_points(sweep):
+    for params in (p for point in grid_points(sweep) for p in with_replicates(point, spec.replicates)):
         try:
             sweep.config_for(params)
         except ConfigError as exc:
@@ -203,6 +229,25 @@ def grid_points(sweep: Sweep) -> list[dict[str, Any]]:
     if sweep.spec.mode == "qstar" and sweep.spec.qstar.bracket is not None:
         points = [{**p, sweep.spec.qstar.variable: sweep.spec.qstar.bracket[0]} for p in points]
     return points
+
+
+def handoff_time_params(times: list[float]) -> dict[str, Any]:
+    """Hydro settings that let one hydro run serve hand-offs at each of ``times`` (s): the
+    stage runs to the latest time with a snapshot at every one."""
+    times = sorted(float(t) for t in times)
+    return {"hydro.end_time": times[-1], "hydro.output_times": times}
+
+
+def with_replicates(point: dict[str, Any], replicates: dict[str, list[Any]]) -> list[dict[str, Any]]:
+    """The runs of one point: one per combination of the ``replicates`` values (the point
+    itself when there are none).  ``handoff.time`` replicates also get
+    :func:`handoff_time_params`, so they share one hydro run like a hand-off scan."""
+    keys = list(replicates)
+    runs = [{**point, **dict(zip(keys, combo))} for combo in itertools.product(*(replicates[k] for k in keys))]
+    if "handoff.time" in replicates:
+        shared = handoff_time_params(replicates["handoff.time"])
+        runs = [{**run, **shared} for run in runs]
+    return runs
 
 
 def point_name(params: dict[str, Any], config: Config) -> str:
@@ -322,23 +367,26 @@ class SweepRunner:
         self.points.setdefault(name, {}).update(fields_)
         runstore.write_json_atomic(self.sweep.directory / POINTS_FILE, self.points)
 
-    def add_point(self, params: dict[str, Any], group: str = "") -> str:
-        """Register a point; returns its name."""
+    def add_point(self, params: dict[str, Any], group: str = "", replicate_of: dict[str, Any] | None = None) -> str:
+        """Register a point; returns its name.  ``replicate_of``: the parameters of the point
+        this run replicates (``params`` without the replicate keys)."""
         config = self.sweep.config_for(params)
         name = point_name(params, config)
         if name not in self.points:
             self.points[name] = {"params": params, "group": group, "run_dir": str(self.runs_dir / name),
                                  "hydro_hash": stage_hashes(config)["hydro"], "status": "pending",
-                                 "attempts": 0}
+                                 "attempts": 0, "replicate_of": params if replicate_of is None else replicate_of}
             self._configs[name] = config
         return name
+
+    def add_replicates(self, point: dict[str, Any], group: str = "") -> list[str]:
+        """Register the runs of one point (:func:`with_replicates`); returns their names."""
+        return [self.add_point(run, group, point) for run in with_replicates(point, self.sweep.spec.replicates)]
 
     def add_donor(self, run_dir: str | Path) -> bool:
         """Offer a finished run from outside the sweep: points with its hydro hash adopt its hydro
         run (and its hand-off where that matches too) instead of running their own, unless a
         point of theirs has one already.  Returns False if its hydro stage is not complete."""
-        from .stages import read_records
-
         record = read_records(Path(run_dir)).get("hydro", {})
         if record.get("status") != "complete" or not record.get("hash"):
             return False
@@ -446,7 +494,7 @@ class SweepRunner:
     # -- modes
 
     def run_grid(self) -> None:
-        names = [self.add_point(p) for p in grid_points(self.sweep)]
+        names = [name for p in grid_points(self.sweep) for name in self.add_replicates(p)]
         self.run_points(names)
 
     def run_qstar(self) -> list[dict[str, Any]]:
@@ -477,16 +525,27 @@ class SweepRunner:
         return [self._group_record(s) for s in state]
 
     def _evaluate(self, state: list[dict[str, Any]], pending: dict[int, list[float]]) -> None:
+        """Run the pending values of each group; a value's M_lr/M_T is the mean over its
+        finished replicates (NaN when none finished)."""
         variable = self.sweep.spec.qstar.variable
         names = {}
         for i, values in pending.items():
             for value in values:
                 if value not in state[i]["f"]:
-                    names[self.add_point({**state[i]["group"], variable: value}, state[i]["label"])] = (i, value)
+                    point = {**state[i]["group"], variable: value}
+                    for name in self.add_replicates(point, state[i]["label"]):
+                        names[name] = (i, value)
         results = self.run_points(list(names))
+        answers: dict[tuple[int, float], list[float]] = {}
         for name, (i, value) in names.items():
             summary = results[name].summary if results[name].status == "complete" else {}
-            state[i]["f"][value] = summary.get("M_lr_over_M_T", float("nan"))
+            answers.setdefault((i, value), []).append(summary.get("M_lr_over_M_T", float("nan")))
+        for (i, value), mlr in answers.items():
+            finished = [m for m in mlr if np.isfinite(m)]
+            if 0 < len(finished) < len(mlr):
+                log.warning("%s=%s of %s: %d of %d replicates finished; M_lr/M_T is their mean", variable, value,
+                            state[i]["label"], len(finished), len(mlr))
+            state[i]["f"][value] = float(np.mean(finished)) if finished else float("nan")
 
     def _group_record(self, s: dict[str, Any]) -> dict[str, Any]:
         from impactpipe.analysis.qstar import fit_qstar
@@ -501,7 +560,9 @@ class SweepRunner:
         try:
             fit = fit_qstar(q[ok], mlr[ok], n_lr[ok])
             record.update({"Qstar_D": fit.qstar, "Qstar_D_uncertainty": fit.qstar_err,
-                           "slope_vs_Q_over_Qstar": fit.normalized_slope, "brackets": fit.brackets})
+                           "slope_vs_Q_over_Qstar": fit.normalized_slope, "brackets": fit.brackets,
+                           "replicates_per_value": len(with_replicates({}, self.sweep.spec.replicates)),
+                           "replicate_std": fit.replicate_std})
         except (ValueError, np.linalg.LinAlgError) as exc:
             record.update({"Qstar_D": float("nan"), "fit_error": str(exc)})
         return record
@@ -600,16 +661,59 @@ def write_results(sweep: Sweep, points: dict[str, dict[str, Any]]) -> None:
         row.update({f"wall_{s}": summary.get("wall_seconds", {}).get(s, "") for s in STAGES})
         rows.append(row)
     _write_csv(sweep.directory / RESULTS_CSV, columns, rows)
+    replicate_columns, replicate_rows = replicate_means(sweep, points) if sweep.spec.replicates else ([], [])
+    if replicate_rows:
+        _write_csv(sweep.directory / REPLICATES_CSV, replicate_columns, replicate_rows)
     with runstore.atomic_path(sweep.directory / RESULTS_H5) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["sweep"] = str(sweep.source)
-            for col in columns:
-                values = [r[col] for r in rows]
-                numeric = all(isinstance(v, (int, float)) or v == "" for v in values) and col not in ("name", "group")
-                data = np.array([np.nan if v == "" else v for v in values], dtype=float) if numeric \
-                    else np.array([str(v) for v in values], dtype=h5py.string_dtype())
-                units = {"Q": "J/kg", "Q_R": "J/kg"}.get(col, "s" if col.startswith("wall_") else "dimensionless")
-                runstore.write_dataset(f, col, data, units)
+            _write_columns(f, columns, rows)
+            if replicate_rows:
+                group = f.create_group("replicates")
+                group.attrs["description"] = "one row per point: M_lr/M_T and the other results averaged over replicates"
+                _write_columns(group, replicate_columns, replicate_rows)
+
+
+def _write_columns(group: h5py.Group, columns: list[str], rows: list[dict[str, Any]]) -> None:
+    """One dataset per column, numeric where every value is a number (blanks become NaN)."""
+    for col in columns:
+        values = [r[col] for r in rows]
+        numeric = all(isinstance(v, (int, float)) or v == "" for v in values) and col not in ("name", "group", "point")
+        data = np.array([np.nan if v == "" else v for v in values], dtype=float) if numeric \
+            else np.array([str(v) for v in values], dtype=h5py.string_dtype())
+        units = {"Q": "J/kg", "Q_R": "J/kg"}.get(col, "s" if col.startswith("wall_") else "dimensionless")
+        runstore.write_dataset(group, col, data, units)
+
+
+def replicate_means(sweep: Sweep, points: dict[str, dict[str, Any]]) -> tuple[list[str], list[dict[str, Any]]]:
+    """(columns, rows) of the replicates table: one row per point with its replicates counted
+    (``runs``, ``complete``) and each result of :data:`RESULT_KEYS` averaged over the finished
+    ones; M_lr/M_T also gets its sample standard deviation (``M_lr_over_M_T_std``, ddof 1,
+    blank below two runs) and the standard error of the mean (``M_lr_over_M_T_sem`` = std /
+    sqrt(complete))."""
+    by_point: dict[str, list[dict[str, Any]]] = {}
+    for p in points.values():
+        by_point.setdefault(json.dumps(p.get("replicate_of", p["params"]), sort_keys=True), []).append(p)
+    param_keys = sorted({k for key in by_point for k in json.loads(key)})
+    columns = ["point", *param_keys, "runs", "complete", *RESULT_KEYS, "M_lr_over_M_T_std", "M_lr_over_M_T_sem"]
+    rows = []
+    for key, runs in by_point.items():
+        params = json.loads(key)
+        done = [r["summary"] for r in runs if r["status"] == "complete" and "summary" in r]
+        row: dict[str, Any] = {"point": _label(params), "runs": len(runs), "complete": len(done),
+                               "M_lr_over_M_T_std": "", "M_lr_over_M_T_sem": ""}
+        row.update({k: params.get(k, "") for k in param_keys})
+        for k in RESULT_KEYS:
+            values = [d[k] for d in done if isinstance(d.get(k), (int, float))]
+            row[k] = float(np.mean(values)) if values else ""
+        mlr = [d["M_lr_over_M_T"] for d in done if isinstance(d.get("M_lr_over_M_T"), (int, float))]
+        if len(mlr) >= 2:
+            row["M_lr_over_M_T_std"] = float(np.std(mlr, ddof=1))
+            row["M_lr_over_M_T_sem"] = row["M_lr_over_M_T_std"] / math.sqrt(len(mlr))
+        rows.append(row)
+    rows.sort(key=lambda r: tuple((0, r[k], "") if isinstance(r[k], (int, float)) else (1, 0, str(r[k]))
+                                  for k in param_keys))
+    return columns, rows
 
 
 def write_qstar_table(sweep: Sweep, records: list[dict[str, Any]]) -> None:
@@ -733,12 +837,42 @@ def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool,
             close()
 
 
-def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: bool = True) -> dict[str, Any]:
-    """Run a sweep to the end; returns {"points": ..., "qstar": [...]}; writes the tables."""
+def donor_problems(run_dirs: list[str | Path] | tuple, wanted: set[str] | None, what: str) -> list[str]:
+    """One message per ``--reuse-hydro`` run that cannot serve: no finished hydro stage, or
+    (when ``wanted`` hydro hashes are given) hydro settings that match none of them."""
+    messages = []
+    for d in run_dirs:
+        record = read_records(Path(d)).get("hydro", {})
+        if record.get("status") != "complete":
+            messages.append(f"--reuse-hydro {d}: no finished hydro stage there (its stages.json)")
+        elif wanted is not None and record.get("hash") not in wanted:
+            messages.append(f"--reuse-hydro {d}: its hydro settings match no {what}'s (a run of another config, "
+                            f"or the {what}s vary a hydro key)")
+    return messages
+
+
+def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: bool = True,
+              reuse_runs: list[str | Path] | tuple = ()) -> dict[str, Any]:
+    """Run a sweep to the end; returns {"points": ..., "qstar": [...]}; writes the tables.
+
+    ``reuse_runs``: finished run directories whose hydro runs the points with the same hydro
+    settings adopt instead of running their own (:meth:`SweepRunner.add_donor`).  They are
+    checked before any work (raises SweepError): each needs a finished hydro stage and, in
+    grid mode, the hydro settings of some point (a Q*_D search finds its points as it goes).
+    """
+    wanted = None
+    if sweep.spec.mode == "grid":
+        wanted = {stage_hashes(sweep.config_for(run))["hydro"] for point in grid_points(sweep)
+                  for run in with_replicates(point, sweep.spec.replicates)}
+    messages = donor_problems(reuse_runs, wanted, "point")
+    if messages:
+        raise SweepError(messages)
     sweep.directory.mkdir(parents=True, exist_ok=True)
     runstore.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
     qstar = []
     with open_runner(sweep, executor, show_progress, "sweep") as runner:
+        for run_dir in reuse_runs:
+            runner.add_donor(run_dir)
         if sweep.spec.mode == "grid":
             runner.run_grid()
         else:

@@ -12,6 +12,8 @@ from impactpipe.pipeline.runstore import atomic_path
 
 #: Q*_D of the synthetic law (J/kg): M_lr/M_T = 1 - 0.5 Q / QSTAR.
 QSTAR = 1790.0
+#: Scale of the seed-dependent offset of ``noisy_analysis``.
+REPLICATE_NOISE = 0.03
 #: A hydro stand-in fails for this impact speed (m/s), to test failure isolation.
 FAILING_VELOCITY = 666.0
 
@@ -47,6 +49,15 @@ def analysis(ctx):
     return {"Q": q, "M_lr_over_M_T": max(0.0, 1.0 - 0.5 * q / QSTAR), "N_lr": 5000}
 
 
+def noisy_analysis(ctx):
+    """``analysis`` with a seed-dependent offset of M_lr/M_T: REPLICATE_NOISE * ((4 seed) mod 5 - 2),
+    which takes the values 2, 1, 0, -1, -2 times REPLICATE_NOISE for handoff.seed 1..5
+    (mean 0, sample standard deviation REPLICATE_NOISE sqrt(2.5))."""
+    result = analysis(ctx)
+    result["M_lr_over_M_T"] += REPLICATE_NOISE * ((4 * ctx.config.handoff.seed) % 5 - 2)
+    return result
+
+
 def slow_analysis(ctx):
     time.sleep(0.3)
     return analysis(ctx)
@@ -62,6 +73,8 @@ def hanging_hydro(ctx):
 
 
 STAGES = {s: f"sweep_stand_ins:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
+#: Stages whose M_lr/M_T depends on handoff.seed (``noisy_analysis``).
+NOISY_STAGES = {**STAGES, "analysis": "sweep_stand_ins:noisy_analysis"}
 #: Stages whose analysis takes 0.3 s, so a sweep can be killed while points are still running.
 SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
 #: Stages whose hydro takes a minute (``hanging_hydro``).

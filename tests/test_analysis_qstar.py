@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from impactpipe.analysis import fit_qstar, write_qstar_table
-from impactpipe.analysis.qstar import plus_minus
+from impactpipe.analysis.qstar import plus_minus, pooled_replicate_std
 
 QSTAR = 1790.0  # J/kg, case 8 of method.md section 6
 GAMMA = 0.083**3  # (R_P/R_T)^3, equal densities
@@ -126,3 +126,45 @@ def test_table_round_trip(tmp_path):
     np.testing.assert_allclose([float(r["weight"]) for r in rows], fit.weights)
     np.testing.assert_allclose([float(r["velocity_m_per_s"]) for r in rows], v)
     assert [int(r["used"]) for r in rows] == [1] * 6
+
+
+def test_pooled_replicate_std_by_hand():
+    # Q 1: values 0.6, 0.8 (squares 0.01 + 0.01); Q 2: 0.3, 0.4, 0.5 (0.01 + 0 + 0.01); Q 3 single
+    q = [1.0, 2.0, 1.0, 2.0, 3.0, 2.0]
+    y = [0.6, 0.3, 0.8, 0.4, 0.9, 0.5]
+    s, groups = pooled_replicate_std(q, y)
+    assert groups == 2
+    assert s == pytest.approx(np.sqrt(0.04 / 3), rel=1e-12)
+    s, groups = pooled_replicate_std([1.0, 2.0], [0.6, 0.3])
+    assert groups == 0 and np.isnan(s)
+
+
+def replicated_runs(seed, values_of_q, replicates, noise):
+    """``replicates`` runs at each Q of an exact line plus Gaussian scatter ``noise``."""
+    rng = np.random.default_rng(seed)
+    q = np.repeat(np.asarray(values_of_q, dtype=float) * QSTAR, replicates)
+    y = 1.0 - 0.5 * q / QSTAR + rng.normal(0.0, noise, q.size)
+    return q, y, np.full(q.size, 1500)
+
+
+def test_replicates_put_the_scatter_into_the_error_bar():
+    """One run per Q hides the method's scatter; replicates measure it and the bootstrap carries it."""
+    noise = 0.05
+    q, y, n_lr = replicated_runs(1, [0.6, 1.0, 1.4], 40, noise)
+    fit = fit_qstar(q, y, n_lr, n_bootstrap=1000)
+    assert fit.replicated_q == 3
+    assert fit.replicate_std == pytest.approx(noise, rel=0.15)
+    # at Q*_D the line's error is that of the mean of all n runs, s / sqrt(n), and
+    # Q*_D's is that over the slope |b| = 0.5 / Q*_D: 2 s Q*_D / sqrt(n) (about 0.8 % here)
+    expected = 2.0 * fit.replicate_std * QSTAR / np.sqrt(q.size)
+    assert fit.qstar_err == pytest.approx(expected, rel=0.25)
+    hits = 0
+    for seed in range(20):
+        q, y, n_lr = replicated_runs(200 + seed, [0.7, 1.3], 4, noise)
+        fit = fit_qstar(q, y, n_lr, n_bootstrap=400, seed=seed)
+        assert np.isfinite(fit.qstar_err)  # two distinct Q, each replicated: an error bar
+        hits += abs(fit.qstar - QSTAR) < 2.0 * fit.qstar_err
+    assert hits >= 16
+    one_each = fit_qstar([0.7 * QSTAR, 1.0 * QSTAR, 1.3 * QSTAR], [0.65, 0.5, 0.35], [1500] * 3, n_bootstrap=200)
+    assert one_each.replicated_q == 0 and np.isnan(one_each.replicate_std)
+    assert one_each.qstar_err == pytest.approx(0.0, abs=1e-6)  # exact line: the bootstrap sees no scatter

@@ -211,3 +211,110 @@ def test_real_stages_share_one_hydro_run_between_collision_models(tmp_path):
     hydro_files = [Path(p["run_dir"], "hydro.h5").stat().st_ino for p in points]
     assert hydro_files[0] == hydro_files[1], "the shared hydro.h5 is one file (hard link)"
     assert all(0.0 < p["summary"]["M_lr_over_M_T"] <= (1 + 0.1 ** 3) * (1 + 1e-3) for p in points)
+
+
+SEEDS = [1, 2, 3, 4, 5]
+
+
+def mlr_law(velocity, projectile_radius=830.0, target_radius=1.0e4):
+    q = 0.5 * (projectile_radius / target_radius) ** 3 * velocity ** 2
+    return 1.0 - 0.5 * q / sweep_stand_ins.QSTAR
+
+
+def test_replicates_share_one_hydro_run_and_are_averaged(tmp_path):
+    """Five hand-off seeds per point: one hydro run per point, the mean removes the seed offsets."""
+    import csv
+
+    import h5py
+
+    velocities = [1500.0, 2500.0]
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": velocities}, replicates={"handoff.seed": SEEDS},
+                       stage_functions=sweep_stand_ins.NOISY_STAGES)
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert len(result["points"]) == 10
+    done = calls(tmp_path)
+    per_stage = collections.Counter(stage for (run, stage), n in done.items() for _ in range(n))
+    assert per_stage == {"hydro": 2, "handoff": 10, "nbody": 10, "analysis": 10}
+    rows = list(csv.DictReader(open(tmp_path / "sweep" / "replicates.csv")))
+    assert [float(r["scene.impact.velocity"]) for r in rows] == velocities
+    std = sweep_stand_ins.REPLICATE_NOISE * math.sqrt(2.5)
+    for row, v in zip(rows, velocities):
+        assert (row["runs"], row["complete"]) == ("5", "5")
+        assert float(row["M_lr_over_M_T"]) == pytest.approx(mlr_law(v), abs=1e-12)
+        assert float(row["M_lr_over_M_T_std"]) == pytest.approx(std, rel=1e-9)
+        assert float(row["M_lr_over_M_T_sem"]) == pytest.approx(std / math.sqrt(5), rel=1e-9)
+    with h5py.File(tmp_path / "sweep" / "results.h5") as f:
+        assert f["replicates/M_lr_over_M_T"].attrs["units"] == "dimensionless"
+        assert f["replicates/M_lr_over_M_T"][:] == pytest.approx([mlr_law(v) for v in velocities], abs=1e-12)
+
+
+def test_qstar_search_bisects_the_mean_over_replicates(tmp_path):
+    """Each bisection value is judged by its replicates' mean (here the exact law), and the fit's
+    error bar carries their scatter."""
+    tolerance = 0.02
+    path = write_sweep(tmp_path, mode="qstar", replicates={"handoff.seed": SEEDS},
+                       qstar={"variable": "scene.impact.velocity", "bracket": [1000.0, 8000.0], "tolerance": tolerance},
+                       stage_functions=sweep_stand_ins.NOISY_STAGES)
+    with cf.ThreadPoolExecutor(2) as pool:
+        (record,) = run_sweep(load_sweep(path), executor=pool, show_progress=False)["qstar"]
+    v_crit = sweep_stand_ins.critical_velocity(1.0e4, 830.0)
+    assert record["status"] == "converged" and record["low"] <= v_crit <= record["high"]
+    assert abs(record["bisection_estimate"] - v_crit) / v_crit < tolerance
+    assert record["replicates_per_value"] == 5
+    assert record["replicate_std"] == pytest.approx(sweep_stand_ins.REPLICATE_NOISE * math.sqrt(2.5), rel=1e-9)
+    assert 0.0 < record["Qstar_D_uncertainty"] < 0.1 * sweep_stand_ins.QSTAR
+    assert abs(record["Qstar_D"] - sweep_stand_ins.QSTAR) < 2.0 * record["Qstar_D_uncertainty"]
+
+
+def test_handoff_time_replicates_share_one_hydro_run_to_the_latest_time(tmp_path):
+    path = write_sweep(tmp_path, replicates={"handoff.time": [6.0, 4.0]})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    done = calls(tmp_path)
+    assert sum(n for (run, stage), n in done.items() if stage == "hydro") == 1
+    assert sum(n for (run, stage), n in done.items() if stage == "handoff") == 2
+    params = sorted((p["params"] for p in result["points"].values()), key=lambda p: p["handoff.time"])
+    assert [p["handoff.time"] for p in params] == [4.0, 6.0]
+    assert all(p["hydro.end_time"] == 6.0 and p["hydro.output_times"] == [4.0, 6.0] for p in params)
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"replicates": {"scene.impact.velocity": [1.0e3, 2.0e3]}}, "scene.impact.velocity cannot be replicated"),
+    ({"replicates": {"handoff.seed": [1, 1]}}, "distinct values"),
+    ({"replicates": {"handoff.seed": [1, 2]}, "axes": {"handoff.seed": [3]}}, "handoff.seed is also in axes"),
+    ({"replicates": {"handoff.time": [4.0, 6.0]}, "overrides": {"hydro.end_time": 8.0}},
+     "hydro.end_time cannot be set"),
+    ({"replicates": {"handoff.time": [-4.0, 6.0]}}, "handoff.time: must be > 0"),
+])
+def test_bad_replicates_are_rejected_before_work(tmp_path, fields, message):
+    path = write_sweep(tmp_path, **fields)
+    with pytest.raises(SweepError, match=message):
+        load_sweep(path)
+    assert not (tmp_path / "sweep").exists()
+
+
+def test_reuse_hydro_adds_seeds_to_an_earlier_run_without_rerunning_its_hydro(tmp_path):
+    from click.testing import CliRunner
+
+    from impactpipe.pipeline.cli import main
+
+    first = write_sweep(tmp_path, axes={"scene.impact.velocity": [1500.0]})
+    with cf.ThreadPoolExecutor(2) as pool:
+        (donor,) = [p["run_dir"] for p in run_sweep(load_sweep(first), executor=pool, show_progress=False)["points"].values()]
+    spec = {"name": "seeds", "base": str(BASE), "output": str(tmp_path / "seeds"), "replicates": {"handoff.seed": SEEDS},
+            "axes": {"scene.impact.velocity": [1500.0]}, "stage_functions": sweep_stand_ins.NOISY_STAGES,
+            "execution": {"workers": 1}}
+    path = tmp_path / "seeds.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False, reuse_runs=[donor])
+    assert [p["status"] for p in result["points"].values()] == ["complete"] * 5
+    lines = (tmp_path / "seeds" / "runs" / "calls.log").read_text().split()
+    # seed 1 is the donor's own hand-off: it adopts that too, and its N-body run
+    assert (lines.count("hydro"), lines.count("handoff"), lines.count("nbody")) == (0, 4, 4)
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump({**spec, "axes": {"scene.impact.velocity": [2500.0]}}))
+    bad = CliRunner().invoke(main, ["sweep", str(other), "--reuse-hydro", donor, "--out", str(tmp_path / "o")])
+    assert bad.exit_code == 2 and "its hydro settings match no point's" in bad.output
+    assert not (tmp_path / "o").exists()

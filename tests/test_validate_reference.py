@@ -107,3 +107,30 @@ def test_quick_mode_with_the_real_stages(tmp_path):
     assert all(0.0 <= r["M_lr_over_M_T"] <= 1.01 for r in report["runs"])
     assert report["handoff_plateau"]["times"] == [6.0, 10.0, 12.0, 15.0]
     assert all(math.isfinite(m) for m in report["handoff_plateau"]["M_lr_over_M_T"])
+
+
+def test_seeds_average_each_case_and_enter_the_fit(tmp_path):
+    """--seeds 5: one hydro run per speed, five hand-offs each; the tables give mean +- standard
+    deviation (the stand-in's seed offsets cancel in the mean) and the fit reports their scatter."""
+    out = tmp_path / "v"
+    options = vr.options_from_args(vr.parse_args(["--out", str(out), "--handoff-times", "none", "--quick",
+                                                   "--cases", "8a,8b,8c", "--seeds", "5"]))
+    with cf.ThreadPoolExecutor(2) as pool:
+        report = vr.run_validation(options, executor=pool, stage_functions=sweep_stand_ins.NOISY_STAGES)
+    assert len(report["runs"]) == 15
+    calls = stage_calls(out)
+    assert calls["hydro"] == 3 and calls["handoff"] == 15
+    by = {r["case"]: r for r in report["cases"]}
+    q = 0.5 * SIZE_RATIO ** 3 * 1900.0 ** 2
+    std = sweep_stand_ins.REPLICATE_NOISE * math.sqrt(2.5)
+    assert by["8c"]["M_lr_over_M_T"] == pytest.approx(1 - 0.5 * q / sweep_stand_ins.QSTAR, abs=1e-12)
+    assert by["8c"]["M_lr_over_M_T_std"] == pytest.approx(std, rel=1e-9)
+    assert (by["8c"]["seeds"], by["8c"]["complete"]) == (5, 5)
+    (fit,) = report["qstar"]
+    assert fit["replicate_std"] == pytest.approx(std, rel=1e-9)
+    assert math.isfinite(fit["qstar_err"]) and fit["qstar_err"] > 0.0
+    assert abs(fit["qstar"] - sweep_stand_ins.QSTAR) < 2.0 * fit["qstar_err"]
+    text = (out / "validation.md").read_text()
+    assert f"| 8c | 1900 | merge | {by['8c']['M_lr_over_M_T']:.3g} +- {std:.2g} (n 5) | 0.76 |" in text
+    assert "between the seeds of a run" in text
+    assert vr.main(["--seeds", "0", "--out", str(tmp_path / "bad")]) == 2
