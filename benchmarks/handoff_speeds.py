@@ -7,21 +7,30 @@ units of ``--radius``, the target radius) the shell's mass fraction and the frac
 faster than 12 m/s, and for the particles within 0.5, 0.75 and 1 target radius their kinetic
 energy in their own centre-of-mass frame over their mutual potential energy, K / |W| (direct
 sum; a body with K > |W| cannot stay together without losing energy in collisions;
-docs/validation.md, case 8):
+docs/validation.md, case 8), and the mass fractions by speed over the local escape speed,
+|v - V| / sqrt(2 |phi_i|), with phi_i the direct-sum potential of all the other particles
+(bins ESCAPE_BINS; mass just below 1 is bound particle by particle but close to escaping,
+docs/accuracy.md, "What in the hand-off moves M_lr/M_T").  When the run's ``nbody.h5``
+sits next to the ``handoff.h5``, also the mass fraction on escape orbits at t = 0
+(``initial_unbound_mass``) and the fraction that had escaped by ESCAPE_TIMES dynamical
+times and at the end:
 
     python benchmarks/handoff_speeds.py RUN_DIR/handoff.h5 [...] --radius 1e4
 """
 
 import argparse
+from pathlib import Path
 
 import h5py
 import numpy as np
 
-from impactpipe.nbody.diagnostics import potential_energy
+from impactpipe.nbody.diagnostics import potential_at_particles, potential_energy
 
 G = 6.674e-11
 SHELLS = ((0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, np.inf))
 VIRIAL_RADII = (0.5, 0.75, 1.0)
+ESCAPE_BINS = (0.0, 0.4, 0.6, 0.8, 1.0, 2.0, np.inf)
+ESCAPE_TIMES = (1.0, 3.0, 10.0)
 
 
 def main() -> None:
@@ -57,6 +66,21 @@ def main() -> None:
             potential = potential_energy(np.ascontiguousarray(x[inside]), np.ascontiguousarray(mi), G)
             print(f"  within {radius:g} R_T: mass fraction {mi.sum() / total:.3f}, "
                   f"K / |W| {kinetic / abs(potential):.2f}")
+        phi = potential_at_particles(np.ascontiguousarray(x), np.ascontiguousarray(m), G)
+        ratio = speed / np.sqrt(2.0 * np.abs(phi))
+        print("  speed / local escape speed: " + ", ".join(
+            f"[{lo:g}, {hi:g}) {m[(ratio >= lo) & (ratio < hi)].sum() / total:.3f}"
+            for lo, hi in zip(ESCAPE_BINS[:-1], ESCAPE_BINS[1:])))
+        nbody = Path(path).with_name("nbody.h5")
+        if nbody.is_file():
+            with h5py.File(nbody, "r") as fh:
+                t = fh["diagnostics/time"][()] / fh.attrs["dynamical_time"]
+                escaped = fh["diagnostics/escaped_mass"][()]
+                unbound = fh.attrs["initial_unbound_mass"]
+            by_time = [f"{escaped[np.searchsorted(t, tt, side='right') - 1] / total:.3f} by {tt:g}"
+                       for tt in ESCAPE_TIMES if tt <= t[-1]]
+            print(f"  N-body: on escape orbits at t = 0 {unbound / total:.3f}; escaped "
+                  + ", ".join(by_time) + f" t_dyn, {escaped[-1] / total:.3f} at the end ({t[-1]:.3g} t_dyn)")
 
 
 if __name__ == "__main__":

@@ -172,7 +172,7 @@ def bound_mask(position, velocity, mass, max_iterations: int = 100) -> np.ndarra
         x = position[idx]
         v = velocity[idx]
         v_c = (m[:, None] * v).sum(axis=0) / m.sum()
-        phi = _potential_at_members(x, m, G)
+        phi = potential_at_particles(x, m, G)
         e = 0.5 * np.sum((v - v_c) ** 2, axis=1) + phi
         drop = e >= 0
         if not drop.any():
@@ -202,13 +202,13 @@ def unbound_mass(position, velocity, mass) -> float:
         return 0.0
     m_tot = float(mass.sum())
     v_c = weighted_mean(mass, velocity)
-    phi = _potential_at_members(np.ascontiguousarray(position), np.ascontiguousarray(mass), G)
+    phi = potential_at_particles(np.ascontiguousarray(position), np.ascontiguousarray(mass), G)
     e = 0.5 * m_tot / (m_tot - mass) * np.sum((velocity - v_c) ** 2, axis=1) + phi
     return float(mass[e >= 0].sum())
 
 
 @njit(cache=True)
-def _potential_at_members(position, mass, g):
+def potential_at_particles(position, mass, g):
     """phi_i = -sum_{j != i} g m_j / |x_i - x_j| (J/kg)."""
     n = mass.shape[0]
     phi = np.zeros(n)
