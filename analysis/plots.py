@@ -162,7 +162,9 @@ def qstar_figure(Q, mlr_over_mt, n_lr, fit: QStarFit, *, target_radius: float | 
 
     Left: M_lr/M_T against Q (J/kg): fitted runs (filled: resolved, open:
     N_lr below the resolution threshold), runs left out (grey crosses), the fitted
-    line, Q*_D with its bootstrap 16-84% band.  When ``comparisons`` and
+    line, Q*_D with its bootstrap 16-84% band, and at each Q with two or more runs
+    (replicates: hand-off seeds or times) their mean with an error bar of one sample
+    standard deviation (ddof 1).  When ``comparisons`` and
     ``target_radius`` are given, a right panel shows Q*_D against target radius
     (log-log) for each comparison law (label -> (radius (m), Q*_D (J/kg)), e.g.
     from :func:`impactpipe.analysis.energies.comparison_laws`) with this fit as a
@@ -180,6 +182,14 @@ def qstar_figure(Q, mlr_over_mt, n_lr, fit: QStarFit, *, target_radius: float | 
     ax.plot(q[under], y[under], "o", mfc="none", color="C0",
             label=f"fitted, $N_{{lr}} < {fit.n_lr_resolved}$ (weight {fit.underresolved_weight:g})")
     ax.plot(q[~fit.used], y[~fit.used], "x", color="0.5", label=f"not fitted ($M_{{lr}}/M_T \\leq {fit.min_mlr:g}$)")
+    values, group, counts = np.unique(q, return_inverse=True, return_counts=True)
+    repeated = counts >= 2
+    if repeated.any():
+        means = np.bincount(group, weights=y) / counts
+        squares = np.bincount(group, weights=(y - means[group]) ** 2)
+        std = np.sqrt(squares[repeated] / (counts[repeated] - 1))
+        ax.errorbar(values[repeated], means[repeated], yerr=std, fmt="D", color="k", markersize=4, capsize=3,
+                    zorder=3, label="mean $\\pm$ std of the runs at one $Q$")
     q_line = np.linspace(0.0, max(q.max(), fit.qstar) * 1.1, 200)
     ax.plot(q_line, fit.predict(q_line), "-", color="C1",
             label=f"fit: slope vs $Q/Q^*_D$ = {fit.normalized_slope:.2f}")

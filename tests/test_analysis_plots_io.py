@@ -90,6 +90,21 @@ def test_qstar_figure(tmp_path):
     assert pdf.read_bytes()[:4] == b"%PDF"
 
 
+def test_qstar_figure_shows_the_mean_and_scatter_of_replicates(tmp_path):
+    q = np.repeat([800.0, 1600.0, 2400.0], [3, 1, 2])
+    y = np.array([0.70, 0.80, 0.75, 0.52, 0.30, 0.20])
+    fit = fit_qstar(q, y, np.full(6, 1000), n_bootstrap=50)
+    (bars,) = qstar_figure(q, y, np.full(6, 1000), fit).axes[0].containers
+    marker = bars.lines[0]
+    np.testing.assert_allclose(marker.get_xdata(), [800.0, 2400.0])
+    np.testing.assert_allclose(marker.get_ydata(), [0.75, 0.25])
+    (segments,) = bars.lines[2]
+    half = [abs(seg[1, 1] - seg[0, 1]) / 2.0 for seg in segments.get_segments()]
+    np.testing.assert_allclose(half, [0.05, np.sqrt(0.005)])
+    assert qstar_figure(q[[0, 3, 4]], y[[0, 3, 4]], np.full(3, 1000),
+                        fit_qstar(q[[0, 3, 4]], y[[0, 3, 4]], np.full(3, 1000), n_bootstrap=20)).axes[0].containers == []
+
+
 def test_analysis_h5_round_trip(tmp_path):
     pos = np.array([[0.0, 0, 0], [100.0, 0, 0], [5e4, 0, 0]])
     res = find_remnants(np.full(3, 1e9), np.full(3, 50.0), pos, np.zeros((3, 3)), target_mass=2e9)
