@@ -7,9 +7,10 @@ units of ``--radius``, the target radius) the shell's mass fraction and the frac
 faster than 12 m/s, and for the particles within 0.5, 0.75 and 1 target radius their kinetic
 energy in their own centre-of-mass frame over their mutual potential energy, K / |W| (direct
 sum; a body with K > |W| cannot stay together without losing energy in collisions;
-docs/validation.md, case 8), and the mass fractions by speed over the local escape speed,
-|v - V| / sqrt(2 |phi_i|), with phi_i the direct-sum potential of all the other particles
-(bins ESCAPE_BINS; mass just below 1 is bound particle by particle but close to escaping,
+docs/validation.md, case 8), and the mass fractions by speed over the escape speed from all
+the other particles (``diagnostics.escape_speed_ratio``, the ratio behind the N-body stage's
+``initial_unbound_mass`` and ``initial_near_escape_mass``; bins ESCAPE_BINS; mass just below
+1 is bound particle by particle but close to escaping,
 docs/accuracy.md, "What in the hand-off moves M_lr/M_T").  When the run's ``nbody.h5``
 sits next to the ``handoff.h5``, also the mass fraction on escape orbits at t = 0
 (``initial_unbound_mass``) and the fraction that had escaped by ESCAPE_TIMES dynamical
@@ -24,7 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from impactpipe.nbody.diagnostics import potential_at_particles, potential_energy
+from impactpipe.nbody.diagnostics import escape_speed_ratio, potential_energy
 
 G = 6.674e-11
 SHELLS = ((0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, np.inf))
@@ -66,9 +67,8 @@ def main() -> None:
             potential = potential_energy(np.ascontiguousarray(x[inside]), np.ascontiguousarray(mi), G)
             print(f"  within {radius:g} R_T: mass fraction {mi.sum() / total:.3f}, "
                   f"K / |W| {kinetic / abs(potential):.2f}")
-        phi = potential_at_particles(np.ascontiguousarray(x), np.ascontiguousarray(m), G)
-        ratio = speed / np.sqrt(2.0 * np.abs(phi))
-        print("  speed / local escape speed: " + ", ".join(
+        ratio = escape_speed_ratio(x, u, m)
+        print("  speed / escape speed: " + ", ".join(
             f"[{lo:g}, {hi:g}) {m[(ratio >= lo) & (ratio < hi)].sum() / total:.3f}"
             for lo, hi in zip(ESCAPE_BINS[:-1], ESCAPE_BINS[1:])))
         nbody = Path(path).with_name("nbody.h5")

@@ -183,6 +183,24 @@ def bound_mask(position, velocity, mass, max_iterations: int = 100) -> np.ndarra
     raise RuntimeError("bound_mask did not converge")
 
 
+def escape_speed_ratio(position, velocity, mass) -> np.ndarray:
+    """(n,) each particle's speed over its escape speed from all the other particles.
+
+    With M the total mass, V the centre-of-mass velocity of all particles and phi_i the exact
+    potential of the others at x_i (J/kg), particle i's two-body specific kinetic energy is
+    k_i = 0.5 M / (M - m_i) |v_i - V|^2 (reduced-mass form) and the ratio is
+    sqrt(k_i / |phi_i|): 1 on the escape threshold (e_i = k_i + phi_i = 0).  Zeros for fewer
+    than two particles.
+    """
+    if mass.shape[0] < 2:
+        return np.zeros(mass.shape[0])
+    m_tot = float(mass.sum())
+    v_c = weighted_mean(mass, velocity)
+    phi = potential_at_particles(np.ascontiguousarray(position), np.ascontiguousarray(mass), G)
+    kinetic = 0.5 * m_tot / (m_tot - mass) * np.sum((velocity - v_c) ** 2, axis=1)
+    return np.sqrt(kinetic / np.abs(phi))
+
+
 def unbound_mass(position, velocity, mass) -> float:
     """Mass (kg) on escape orbits from all the other particles, without collisions.
 
@@ -200,11 +218,7 @@ def unbound_mass(position, velocity, mass) -> float:
     """
     if mass.shape[0] < 2:
         return 0.0
-    m_tot = float(mass.sum())
-    v_c = weighted_mean(mass, velocity)
-    phi = potential_at_particles(np.ascontiguousarray(position), np.ascontiguousarray(mass), G)
-    e = 0.5 * m_tot / (m_tot - mass) * np.sum((velocity - v_c) ** 2, axis=1) + phi
-    return float(mass[e >= 0].sum())
+    return float(mass[escape_speed_ratio(position, velocity, mass) >= 1.0].sum())
 
 
 @njit(cache=True)

@@ -76,6 +76,7 @@ BOX_GUARD_FRACTION = 0.9      # particles beyond this fraction are removed (left
 CHUNK_EDGE_FRACTION = 0.5     # chunk <= this * (distance to box edge) / speed
 MAX_CHUNK_STEPS = 2000        # chunk <= this many steps, so escapers leave and dt grows back soon
 UNBOUND_WARNING_FRACTION = 0.5  # warn when more of the hand-off mass than this is on escape orbits at t = 0
+NEAR_ESCAPE_RATIO = 0.6       # initial_near_escape_mass: speed between this and 1 times the escape speed
 SIDECAR_FORMAT = 3            # 3: contact-time impact velocity, energy-limited pushes of t = 0 overlaps, energy account
 _VECTOR_DIAGNOSTICS = ("momentum", "angular_momentum", "spin_angular_momentum",
                        "escaped_momentum", "escaped_angular_momentum")
@@ -235,9 +236,10 @@ class _Run:
         self.escaped = {k: [] for k in ("slot", "mass", "momentum", "position", "velocity", "spin", "time", "reason")}
         self.merges = {"time": [], "survivor": [], "absorbed": []}
         self.diag: dict[str, list] = {}
-        self.initial_unbound_mass = dg.unbound_mass(np.asarray(particles.position, float),
-                                                    np.asarray(particles.velocity, float),
-                                                    np.asarray(particles.mass, float))
+        m0 = np.asarray(particles.mass, float)
+        ratio = dg.escape_speed_ratio(np.asarray(particles.position, float), np.asarray(particles.velocity, float), m0)
+        self.initial_unbound_mass = float(m0[ratio >= 1.0].sum())
+        self.initial_near_escape_mass = float(m0[(ratio >= NEAR_ESCAPE_RATIO) & (ratio < 1.0)].sum())
         unbound_fraction = self.initial_unbound_mass / float(np.sum(particles.mass))
         if unbound_fraction > UNBOUND_WARNING_FRACTION:
             log.warning("%.3g of the hand-off mass is on escape orbits at t = 0 (two-body energy relative to "
@@ -246,6 +248,9 @@ class _Run:
                         "(docs/nbody.md, unbound hand-offs)", unbound_fraction)
         else:
             log.info("%.3g of the hand-off mass is on escape orbits at t = 0", unbound_fraction)
+        log.info("%.3g of the hand-off mass moves at %g-1 times its escape speed at t = 0 (the mass whose fate "
+                 "the reaccumulation decides; docs/nbody.md)", self.initial_near_escape_mass / float(m0.sum()),
+                 NEAR_ESCAPE_RATIO)
 
     # --- set-up -------------------------------------------------------------------
     def start(self) -> None:
@@ -581,6 +586,7 @@ class _Run:
             initial_overlapping_pairs=int(self.initial_overlaps[0]),
             initial_overlap_energy=float(self.initial_overlaps[2]),
             initial_unbound_mass=self.initial_unbound_mass,
+            initial_near_escape_mass=self.initial_near_escape_mass,
             steps=int(self.sim.steps_done),
             particle_steps=int(self.resolver.ctx[CTX_PARTICLE_STEPS]) if self.particle_steps_known else -1,
         )

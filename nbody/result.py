@@ -127,6 +127,10 @@ class NBodyResult:
         initial_unbound_mass: kg of hand-off mass on escape orbits at t = 0 (two-body energy
             relative to all the other mass >= 0, ``diagnostics.unbound_mass``); NaN in files
             written before it existed.
+        initial_near_escape_mass: kg of hand-off mass moving at 0.6 to 1 times its escape speed
+            from all the other mass at t = 0 (``diagnostics.escape_speed_ratio``): bound particle
+            by particle, but the reaccumulation decides which of it escapes; NaN in files
+            written before it existed.
         steps: leapfrog steps done (REBOUND ``steps_done``), over all resumes.
         particle_steps: sum over the steps of the particles each step integrated, over all
             resumes; -1 when the run resumed from a checkpoint written before this counter
@@ -163,6 +167,7 @@ class NBodyResult:
     initial_overlapping_pairs: int = 0
     initial_overlap_energy: float = 0.0
     initial_unbound_mass: float = 0.0
+    initial_near_escape_mass: float = 0.0
     steps: int = 0
     particle_steps: int = 0
 
@@ -175,10 +180,11 @@ class NBodyResult:
 
 
 _SCALARS = ("status", "time", "dynamical_time", "time_step", "collision_model", "initial_overlapping_pairs",
-            "initial_overlap_energy", "initial_unbound_mass", "steps", "particle_steps")
+            "initial_overlap_energy", "initial_unbound_mass", "initial_near_escape_mass", "steps", "particle_steps")
 # attributes that files written before they existed lack, and the value read for them then
 _LATER_SCALARS = {"initial_overlapping_pairs": -1, "initial_overlap_energy": float("nan"),
-                  "initial_unbound_mass": float("nan"), "steps": -1, "particle_steps": -1}
+                  "initial_unbound_mass": float("nan"), "initial_near_escape_mass": float("nan"), "steps": -1,
+                  "particle_steps": -1}
 
 
 def write_result(path: str | os.PathLike, result: NBodyResult, attrs: dict) -> None:
@@ -211,6 +217,7 @@ def read_result(path: str | os.PathLike) -> NBodyResult:
         scalars[name] = value.decode() if isinstance(value, bytes) else str(value)
     for name in ("initial_overlapping_pairs", "steps", "particle_steps"):
         scalars[name] = int(scalars[name])
-    for name in ("time", "dynamical_time", "time_step", "initial_overlap_energy", "initial_unbound_mass"):
+    for name in ("time", "dynamical_time", "time_step", "initial_overlap_energy", "initial_unbound_mass",
+                 "initial_near_escape_mass"):
         scalars[name] = float(scalars[name])
     return NBodyResult(**arrays, diagnostics=diagnostics, **scalars)

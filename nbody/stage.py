@@ -85,6 +85,7 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
             "initial_overlapping_pairs": result.initial_overlapping_pairs,
             "initial_overlap_energy": result.initial_overlap_energy,
             "initial_unbound_mass": result.initial_unbound_mass,
+            "initial_near_escape_mass": result.initial_near_escape_mass,
         },
         "stage": {"simulated_time": result.time, "dynamical_times": result.time / result.dynamical_time,
                   "particles_final": len(result), "particles_escaped": int(len(result.escaped_id)), **counters},

@@ -10,6 +10,10 @@ ladder runs the hydro once) and run a rung common to two ladders once.
 For each rung the answers are
 
 - M_lr/M_T and N_lr (``summary.json`` of the analysis stage),
+- the hand-off mass fractions on escape orbits (``unbound_at_handoff``) and at 0.6-1 times
+  their escape speed (``near_escape_at_handoff``) at the start of the N-body stage
+  (``nbody_budget``): the velocity field that M_lr/M_T is decided from, without the
+  reaccumulation's scatter (docs/accuracy.md, "What in the hand-off moves M_lr/M_T"),
 - the peak shock pressure (Pa) at fixed depths below the impact point, in projectile
   radii, read from the tracers of the ray next to the symmetry axis in ``hydro.h5``
   (interpolated linearly in log P against log distance; NaN outside the ray),
@@ -314,8 +318,12 @@ class Rung:
         return max(good) - min(good) if len(good) > 1 else float("nan")
 
 
+#: Hand-off answers: mass fractions from the N-body stage's t = 0 diagnostics (summary ``nbody_budget``).
+HANDOFF_ANSWERS = {"unbound_at_handoff": "initial_unbound_mass", "near_escape_at_handoff": "initial_near_escape_mass"}
+
+
 def _answer_names(depths: list[float]) -> list[str]:
-    return ["M_lr_over_M_T", "N_lr", *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
+    return ["M_lr_over_M_T", "N_lr", *HANDOFF_ANSWERS, *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
 
 
 def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
@@ -532,6 +540,8 @@ def _fill(rung: Rung, results: list[Any], points: list[dict[str, Any]], sweep: S
     rung.samples = [float(s.get("M_lr_over_M_T", np.nan)) for s in summaries]
     rung.answers["M_lr_over_M_T"] = float(np.mean(rung.samples))
     rung.answers["N_lr"] = float(np.mean([float(s.get("N_lr", np.nan)) for s in summaries]))
+    for answer, key in HANDOFF_ANSWERS.items():
+        rung.answers[answer] = float(np.mean([_handoff_fraction(s, key) for s in summaries]))
     config = sweep.config_for(rung.params)
     r_p, r_t = config.scene.projectile.radius, config.scene.target.radius
     run_dir = Path(points[0]["run_dir"])
@@ -544,6 +554,13 @@ def _fill(rung: Rung, results: list[Any], points: list[dict[str, Any]], sweep: S
     rung.costs["wall_total"] = float(sum(v for c, v in rung.costs.items() if c.startswith("wall_")))
     reused = read_records(run_dir).get("hydro", {}).get("reused_from")
     rung.hydro_from = Path(reused).name if reused else ""
+
+
+def _handoff_fraction(summary: dict[str, Any], key: str) -> float:
+    """``nbody_budget[key]`` over the hand-off's particle mass (NaN when either is missing)."""
+    mass = summary.get("handoff_budget", {}).get("particle_mass", np.nan)
+    value = summary.get("nbody_budget", {}).get(key, np.nan)
+    return float(value) / float(mass) if mass and math.isfinite(float(mass)) else float("nan")
 
 
 # --------------------------------------------------------------------------- outputs
@@ -638,8 +655,9 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
 
 def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str],
             extrapolations: dict[str, Extrapolation], tolerance: float) -> None:
-    """Answers (rows: M_lr/M_T, peak pressures, N_lr) against the ladder value (first column) and
-    each recorded cost (further columns); rungs are joined in the order of the ladder value."""
+    """Answers (rows: M_lr/M_T with the hand-off fractions, peak pressures, N_lr) against the ladder
+    value (first column) and each recorded cost (further columns); rungs are joined in the order
+    of the ladder value."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -672,7 +690,12 @@ def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str]
             for xi, yi, r, s in zip(x, y, rows, shown):
                 if s and math.isfinite(yi):
                     ax.annotate(_fmt(r["value"]), (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=8)
-        ax.set_ylabel("M_lr / M_T")
+        for name, label in (("unbound_at_handoff", "hand-off: on escape orbits"),
+                            ("near_escape_at_handoff", "hand-off: 0.6-1 x escape speed")):
+            yh = np.array([r[name] for r in rows], dtype=float)
+            if np.isfinite(yh[shown]).any():
+                ax.plot(x[shown], yh[shown], "s:", markersize=4, label=label)
+        ax.set_ylabel("M_lr / M_T, mass fractions")
         ax.legend(fontsize=7)
         ax = axes[1, col]
         for name in pressures:
@@ -716,12 +739,14 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
         lines.append(f"{key}:")
         ladder_rows = [r for r in rows if r["ladder"] == key]
         spread = any(r["handoffs"] > 1 for r in ladder_rows)
-        head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'spread':>7} " if spread else "") + f"{'N_lr':>7} " + " ".join(
+        head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'spread':>7} " if spread else "") + f"{'N_lr':>7} " \
+            + f"{'unbound':>8} {'near-esc':>8} " + " ".join(
             f"{'P(' + format(d, 'g') + 'Rp) Pa':>13}" for d in depths) + f" {'wall s':>8} {'cell-upd':>10} {'status'}"
         lines.append(head)
         for row in ladder_rows:
             lines.append(f"  {_fmt(row['value']):>8} {_fmt(row['M_lr_over_M_T']):>9} "
                          + (f"{_fmt(row['M_lr_over_M_T_spread']):>7.7} " if spread else "") + f"{_fmt(row['N_lr']):>7} "
+                         + f"{_fmt(row['unbound_at_handoff']):>8.8} {_fmt(row['near_escape_at_handoff']):>8.8} "
                          + " ".join(f"{_fmt(row[f'peak_pressure_at_{d:g}Rp']):>13}" for d in depths)
                          + f" {_fmt(row['wall_total']):>8} {_fmt(row['cell_updates']):>10} {row['status']}")
         for name, ext in by_answer.items():

@@ -321,6 +321,13 @@ def test_quickstart_resolution_ladder_real_stages(tmp_path):
     for row in rows:
         assert 0 < float(row["M_lr_over_M_T"]) <= 1.01
         assert float(row["peak_pressure_at_1Rp"]) > float(row["peak_pressure_at_4Rp"]) > 0
+        summary = json.loads((tmp_path / "ladder" / "runs" / row["run"] / "summary.json").read_text())
+        budget = summary["nbody_budget"]
+        mass = summary["handoff_budget"]["particle_mass"]
+        assert float(row["unbound_at_handoff"]) == pytest.approx(budget["initial_unbound_mass"] / mass, rel=1e-5)
+        assert float(row["near_escape_at_handoff"]) == pytest.approx(budget["initial_near_escape_mass"] / mass,
+                                                                     rel=1e-5)
+        assert 0.0 <= float(row["near_escape_at_handoff"]) <= 1.0 - float(row["unbound_at_handoff"])
     assert "Richardson M_lr_over_M_T" in result.output
 
 

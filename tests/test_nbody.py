@@ -479,6 +479,8 @@ def test_unbound_mass_of_a_pair_at_its_mutual_escape_speed(factor, unbound):
     u = factor * math.sqrt(2 * G * m.sum() / 300.0)
     v = np.array([[0.0, 0.0, 0.0], [0.0, u, 0.0]])
     assert dg.unbound_mass(x, v, m) == (m.sum() if unbound else 0.0)
+    # each body's speed relative to the centre of mass over its escape speed from the other
+    np.testing.assert_allclose(dg.escape_speed_ratio(x, v, m), [factor, factor], rtol=1e-12)
 
 
 def test_unbound_pile_disperses_without_mergers_and_is_reported():
@@ -492,9 +494,13 @@ def test_unbound_pile_disperses_without_mergers_and_is_reported():
     unbound = dg.unbound_mass(ps.position, ps.velocity, ps.mass)
     assert 0.6 * ps.mass.sum() < unbound < 0.9 * ps.mass.sum()
     escaped = {}
+    ratio = dg.escape_speed_ratio(ps.position, ps.velocity, ps.mass)
+    near = ps.mass[(ratio >= 0.6) & (ratio < 1.0)].sum()
+    assert 0.0 < near < ps.mass.sum() - unbound
     for model in ("merge", "conditional_merge", "bounce"):
         out = pile_run(ps, model)
         assert out.initial_unbound_mass == unbound
+        assert out.initial_near_escape_mass == near
         escaped[model] = out.escaped_mass.sum() / ps.mass.sum()
     # merging dissipates every approaching contact, so less escapes than with bouncing
     # (measured 0.14 against 0.58-0.60), but far more than the runaway gluing let go (0.012)
@@ -582,6 +588,7 @@ def test_time_cap_status_and_result_roundtrip(tmp_path):
     write_result(path, out, {"resolved_config": "nbody: {}"})
     back = read_result(path)
     assert back.status == "time_cap" and back.collision_model == "bounce" and back.time == out.time
+    assert back.initial_near_escape_mass == out.initial_near_escape_mass  # NaN if it were not written
     for name in ("id", "mass", "position", "spin", "members_offset", "members", "escaped_momentum"):
         np.testing.assert_array_equal(getattr(back, name), getattr(out, name))
     for name, values in out.diagnostics.items():
