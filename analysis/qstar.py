@@ -26,7 +26,7 @@ bootstrap would give), unless every Q was run more than once.
 
 Replicates: runs at the same Q that differ only in the hand-off (``handoff.seed`` or
 ``handoff.time``; a sweep's ``replicates``, docs/sweeps.md) sample the method's own
-scatter of M_lr/M_T (N-body reaccumulation amplifies a 1 % velocity perturbation into a
+scatter of M_lr/M_T (N-body reaccumulation amplifies the hand-off's 1 % velocity noise into a
 standard deviation of about 0.05 for case 8c, docs/accuracy.md).  They enter the fit as
 separate runs, so the bootstrap over runs carries that scatter into ``qstar_err``; a
 fit of one run per Q does not contain it.  ``replicate_std`` is the pooled standard

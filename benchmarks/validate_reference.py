@@ -20,7 +20,7 @@ is a hand-off scan (``impactpipe.pipeline.handoff_scan``): one hydro run to the 
 time, handed off at each time.
 
 One run per case carries the method's scatter of M_lr/M_T (a standard deviation of about
-0.05 for case 8c from the hand-off velocity noise alone, docs/accuracy.md).  ``--seeds N``
+0.05 for case 8c from the hand-off seed alone, docs/accuracy.md).  ``--seeds N``
 runs every case N times with ``handoff.seed`` 1..N (a sweep's ``replicates``: one hydro
 run per speed); the tables then give each case's mean and standard deviation, and every
 seed enters the Q*_D fit, so its bootstrap error contains that scatter.
@@ -106,7 +106,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--handoff-times", default=",".join(f"{t:g}" for t in HANDOFF_TIMES),
                         help="hand-off scan times of case 8c (s); 'none' skips the scan")
     parser.add_argument("--seeds", type=int, default=1,
-                        help="hand-off velocity-noise seeds per run (handoff.seed 1..N, one hydro run per speed); "
+                        help="hand-off seeds (ring phases and velocity noise) per run (handoff.seed 1..N, one hydro run per speed); "
                              "M_lr/M_T is then given as mean +- standard deviation (default 1)")
     parser.add_argument("--out", default="runs/validate_reference", help="output directory")
     parser.add_argument("--backend", choices=("local", "dask"), default="local")

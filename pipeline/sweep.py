@@ -51,7 +51,7 @@ QSTAR_CSV = "qstar.csv"
 REPLICATES_CSV = "replicates.csv"
 RESULT_KEYS = ("Q", "Q_R", "gamma", "M_lr_over_M_T", "M_slr_over_M_T", "N_lr", "N_init")
 #: Config keys a point may be replicated over: realisations of the same impact that differ only
-#: in the hand-off (velocity-noise seed, hand-off time) or in REBOUND's collision order.
+#: in the hand-off (its seed: ring phases and velocity noise; its time) or in REBOUND's collision order.
 REPLICATE_KEYS = ("handoff.seed", "handoff.time", "nbody.seed")
 #: Keys a ``handoff.time`` replicate sets (:func:`handoff_time_params`).
 HANDOFF_TIME_KEYS = ("hydro.end_time", "hydro.output_times")

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -318,3 +319,35 @@ def test_reuse_hydro_adds_seeds_to_an_earlier_run_without_rerunning_its_hydro(tm
     bad = CliRunner().invoke(main, ["sweep", str(other), "--reuse-hydro", donor, "--out", str(tmp_path / "o")])
     assert bad.exit_code == 2 and "its hydro settings match no point's" in bad.output
     assert not (tmp_path / "o").exists()
+
+
+def test_real_stages_replicate_the_handoff_over_seeds(tmp_path):
+    """The tiny real impact with two hand-off seeds: one hydro run, two hand-offs that differ only in
+    what the seed draws (ring azimuths and velocity noise), and a replicates row averaging the runs."""
+    import csv
+
+    from impactpipe.handoff import read_particles
+
+    base = tmp_path / "tiny.yaml"
+    base.write_text((HERE.parent / "configs" / "quickstart.yaml").read_text()
+                    .replace("cells_per_projectile_radius: 4", "cells_per_projectile_radius: 2")
+                    .replace("velocity: 250.0", "velocity: 1.0e2"))
+    spec = {"name": "real", "base": str(base), "output": str(tmp_path / "sweep"),
+            "replicates": {"handoff.seed": [1, 2]}}
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    with cf.ThreadPoolExecutor(1) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    points = sorted(result["points"].values(), key=lambda p: p["params"]["handoff.seed"])
+    assert [p["status"] for p in points] == ["complete", "complete"]
+    assert Path(points[0]["run_dir"], "hydro.h5").stat().st_ino == Path(points[1]["run_dir"], "hydro.h5").stat().st_ino
+    one, two = (read_particles(Path(p["run_dir"], "handoff.h5")) for p in points)
+    np.testing.assert_array_equal(one.mass, two.mass)
+    np.testing.assert_allclose(np.hypot(one.position[:, 0], one.position[:, 1]),
+                               np.hypot(two.position[:, 0], two.position[:, 1]), rtol=1e-12)
+    np.testing.assert_array_equal(one.position[:, 2], two.position[:, 2])
+    assert np.abs(one.velocity - two.velocity).max() > 0.0
+    (row,) = csv.DictReader(open(tmp_path / "sweep" / "replicates.csv"))
+    mlr = [p["summary"]["M_lr_over_M_T"] for p in points]
+    assert (row["runs"], row["complete"]) == ("2", "2")
+    assert float(row["M_lr_over_M_T"]) == pytest.approx(np.mean(mlr), rel=1e-12)
