@@ -15,12 +15,14 @@ BASE = Path(__file__).parent / "configs" / "sweep_base.yaml"
 QSTAR = 1790.0
 
 
-def make_run(directory: Path, velocity: float) -> None:
+def make_run(directory: Path, velocity: float, offset: float = 0.0) -> None:
+    """A finished run on the exact line M_lr/M_T = 1 - Q / (2 QSTAR), moved by ``offset``."""
     config = load_config(BASE, overrides={"scene.impact.velocity": velocity})
     q = 0.5 * (830.0 / 1.0e4) ** 3 * velocity ** 2
     directory.mkdir(parents=True)
     write_text_atomic(directory / "config.resolved.yaml", resolved_yaml(config))
-    (directory / "summary.json").write_text(json.dumps({"Q": q, "M_lr_over_M_T": 1 - 0.5 * q / QSTAR, "N_lr": 1000}))
+    (directory / "summary.json").write_text(json.dumps({"Q": q, "M_lr_over_M_T": 1 - 0.5 * q / QSTAR + offset,
+                                                        "N_lr": 1000}))
 
 
 def test_qstar_command_fits_runs(tmp_path):
@@ -36,6 +38,22 @@ def test_qstar_command_fits_runs(tmp_path):
     line = next(l for l in result.output.splitlines() if l.startswith("critical velocity"))
     assert abs(float(line.split()[3]) - v_crit) / v_crit < 1e-3
     assert (tmp_path / "fit" / "qstar.csv").is_file() and (tmp_path / "fit" / "qstar.png").stat().st_size > 0
+
+
+def test_qstar_reports_the_scatter_of_replicated_runs(tmp_path):
+    """Two runs per speed, +-0.02 about the line: the fit reports their standard deviation
+    (0.02 sqrt(2) = 0.028) and gets an error bar from two speeds."""
+    runs = []
+    for v in (1500.0, 3000.0):
+        for offset in (-0.02, 0.02):
+            make_run(tmp_path / f"v{v:.0f}{offset:+.2f}", v, offset)
+            runs.append(str(tmp_path / f"v{v:.0f}{offset:+.2f}"))
+    result = CliRunner().invoke(main, ["qstar", *runs, "--out", str(tmp_path / "fit")])
+    assert result.exit_code == 0, result.output
+    line = next(l for l in result.output.splitlines() if l.startswith("replicates:"))
+    assert "2 Q values run more than once" in line and "at the same Q = 0.028" in line
+    assert "no error bar" not in next(l for l in result.output.splitlines() if "Q*_D =" in l)
+    assert "# replicates: 2 Q values" in (tmp_path / "fit" / "qstar.csv").read_text()
 
 
 def test_qstar_moves_to_a_common_velocity(tmp_path):
