@@ -106,8 +106,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--handoff-times", default=",".join(f"{t:g}" for t in HANDOFF_TIMES),
                         help="hand-off scan times of case 8c (s); 'none' skips the scan")
     parser.add_argument("--seeds", type=int, default=1,
-                        help="hand-off seeds (ring phases and velocity noise) per run (handoff.seed 1..N, one hydro run per speed); "
-                             "M_lr/M_T is then given as mean +- standard deviation (default 1)")
+                        help="hand-off seeds (ring phases and velocity noise) per run (handoff.seed 1..N, "
+                             "one hydro run per speed); M_lr/M_T is then given as mean +- standard deviation "
+                             "(default 1)")
     parser.add_argument("--out", default="runs/validate_reference", help="output directory")
     parser.add_argument("--backend", choices=("local", "dask"), default="local")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address (implies --backend dask)")

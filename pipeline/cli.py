@@ -144,9 +144,9 @@ def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, schedul
     for record in result["qstar"]:
         scatter = (f", M_lr/M_T standard deviation between replicates {record['replicate_std']:.3f}"
                    if math.isfinite(record.get("replicate_std", float("nan"))) else "")
-        click.echo(f"  Q*_D = {plus_minus(record.get('Qstar_D', float('nan')), record.get('Qstar_D_uncertainty', float('nan')), '.4g')}"
-                   f" J/kg ({record['status']}{scatter}) for "
-                   + ", ".join(f"{k}={record[k]}" for k in sweep.spec.axis_values() if k in record))
+        qstar = plus_minus(record.get("Qstar_D", float("nan")), record.get("Qstar_D_uncertainty", float("nan")), ".4g")
+        group = ", ".join(f"{k}={record[k]}" for k in sweep.spec.axis_values() if k in record)
+        click.echo(f"  Q*_D = {qstar} J/kg ({record['status']}{scatter})" + (f" for {group}" if group else ""))
     tables = ["results.csv", "results.h5"] + (["replicates.csv"] if sweep.spec.replicates else []) \
         + (["qstar.csv"] if result["qstar"] else [])
     click.echo(f"tables in {sweep.directory}/: {', '.join(tables)}")

@@ -661,7 +661,7 @@ def write_results(sweep: Sweep, points: dict[str, dict[str, Any]]) -> None:
         row.update({f"wall_{s}": summary.get("wall_seconds", {}).get(s, "") for s in STAGES})
         rows.append(row)
     _write_csv(sweep.directory / RESULTS_CSV, columns, rows)
-    replicate_columns, replicate_rows = replicate_means(sweep, points) if sweep.spec.replicates else ([], [])
+    replicate_columns, replicate_rows = replicate_means(points) if sweep.spec.replicates else ([], [])
     if replicate_rows:
         _write_csv(sweep.directory / REPLICATES_CSV, replicate_columns, replicate_rows)
     with runstore.atomic_path(sweep.directory / RESULTS_H5) as tmp:
@@ -685,7 +685,7 @@ def _write_columns(group: h5py.Group, columns: list[str], rows: list[dict[str, A
         runstore.write_dataset(group, col, data, units)
 
 
-def replicate_means(sweep: Sweep, points: dict[str, dict[str, Any]]) -> tuple[list[str], list[dict[str, Any]]]:
+def replicate_means(points: dict[str, dict[str, Any]]) -> tuple[list[str], list[dict[str, Any]]]:
     """(columns, rows) of the replicates table: one row per point with its replicates counted
     (``runs``, ``complete``) and each result of :data:`RESULT_KEYS` averaged over the finished
     ones; M_lr/M_T also gets its sample standard deviation (``M_lr_over_M_T_std``, ddof 1,
