@@ -96,6 +96,8 @@ class QStarSearch(Strict):
     max_rounds: int = Field(12, ge=1)
     max_expansions: int = Field(4, ge=0, description="times a bracket that does not bracket may be widened by 2x")
     target: float = Field(0.5, gt=0, lt=1)
+    noise_sigmas: float = Field(2.0, ge=0, description="with replicates, stop when a midpoint's mean M_lr/M_T lies "
+                                                         "within this many standard errors of the target (0: never)")
 
     @model_validator(mode="after")
     def _bracket_ordered(self) -> "QStarSearch":
@@ -507,7 +509,7 @@ class SweepRunner:
         state = []
         for group in groups:
             low, high = spec.bracket or initial_bracket(self.sweep.config_for(group), spec.variable)
-            state.append({"group": group, "label": _label(group), "low": low, "high": high, "f": {},
+            state.append({"group": group, "label": _label(group), "low": low, "high": high, "f": {}, "sem": {},
                           "rounds": 0, "expansions": 0, "status": "searching"})
         pending = {i: [s["low"], s["high"]] for i, s in enumerate(state)}
         for _ in range(spec.max_rounds + spec.max_expansions + 1):
@@ -526,7 +528,8 @@ class SweepRunner:
 
     def _evaluate(self, state: list[dict[str, Any]], pending: dict[int, list[float]]) -> None:
         """Run the pending values of each group; a value's M_lr/M_T is the mean over its
-        finished replicates (NaN when none finished)."""
+        finished replicates (NaN when none finished), and its standard error std / sqrt(n)
+        (ddof 1; 0 with fewer than two) goes to the group's ``sem``."""
         variable = self.sweep.spec.qstar.variable
         names = {}
         for i, values in pending.items():
@@ -546,6 +549,8 @@ class SweepRunner:
                 log.warning("%s=%s of %s: %d of %d replicates finished; M_lr/M_T is their mean", variable, value,
                             state[i]["label"], len(finished), len(mlr))
             state[i]["f"][value] = float(np.mean(finished)) if finished else float("nan")
+            state[i]["sem"][value] = float(np.std(finished, ddof=1) / math.sqrt(len(finished))) \
+                if len(finished) >= 2 else 0.0
 
     def _group_record(self, s: dict[str, Any]) -> dict[str, Any]:
         from impactpipe.analysis.qstar import fit_qstar
@@ -594,7 +599,10 @@ def bisection_step(s: dict[str, Any], spec: QStarSearch) -> list[float] | None:
     """Update a group's bracket from its evaluations; return the next values to run, or None when done.
 
     M_lr/M_T falls as velocity or projectile radius grows, so the bracket holds
-    f(low) > target > f(high).  A bracket that does not bracket is widened by 2x.
+    f(low) > target > f(high).  A bracket that does not bracket is widened by 2x.  With
+    replicates, a midpoint whose mean lies within ``noise_sigmas`` standard errors of the
+    target cannot tell on which side the crossing is: the search stops there
+    (``noise_limited``; more rounds would bisect the scatter, not the crossing).
     """
     f_low, f_high = s["f"].get(s["low"], np.nan), s["f"].get(s["high"], np.nan)
     if not (np.isfinite(f_low) and np.isfinite(f_high)):
@@ -616,6 +624,9 @@ def bisection_step(s: dict[str, Any], spec: QStarSearch) -> list[float] | None:
             s["low"] = max(s["low"], v)
         else:
             s["high"] = min(s["high"], v)
+    if any(abs(s["f"][v] - spec.target) <= spec.noise_sigmas * s.get("sem", {}).get(v, 0.0) for v in mids):
+        s["status"] = "noise_limited"
+        return None
     width = (s["high"] - s["low"]) / (0.5 * (s["high"] + s["low"]))
     if width <= spec.tolerance:
         s["status"] = "converged"

@@ -250,22 +250,35 @@ def test_replicates_share_one_hydro_run_and_are_averaged(tmp_path):
         assert f["replicates/M_lr_over_M_T"][:] == pytest.approx([mlr_law(v) for v in velocities], abs=1e-12)
 
 
-def test_qstar_search_bisects_the_mean_over_replicates(tmp_path):
+@pytest.mark.parametrize("noise_sigmas", [0.0, 2.0])
+def test_qstar_search_bisects_the_mean_over_replicates(tmp_path, noise_sigmas):
     """Each bisection value is judged by its replicates' mean (here the exact law), and the fit's
-    error bar carries their scatter."""
+    error bar carries their scatter.  With ``noise_sigmas`` the search stops at the first midpoint
+    whose mean lies within that many standard errors of 0.5 (the seed offsets give a standard
+    error of 0.03 sqrt(2.5) / sqrt(5) = 0.021): bisecting further would bisect the scatter."""
     tolerance = 0.02
     path = write_sweep(tmp_path, mode="qstar", replicates={"handoff.seed": SEEDS},
-                       qstar={"variable": "scene.impact.velocity", "bracket": [1000.0, 8000.0], "tolerance": tolerance},
+                       qstar={"variable": "scene.impact.velocity", "bracket": [1000.0, 8000.0], "tolerance": tolerance,
+                              "noise_sigmas": noise_sigmas},
                        stage_functions=sweep_stand_ins.NOISY_STAGES)
     with cf.ThreadPoolExecutor(2) as pool:
         (record,) = run_sweep(load_sweep(path), executor=pool, show_progress=False)["qstar"]
     v_crit = sweep_stand_ins.critical_velocity(1.0e4, 830.0)
-    assert record["status"] == "converged" and record["low"] <= v_crit <= record["high"]
-    assert abs(record["bisection_estimate"] - v_crit) / v_crit < tolerance
+    assert record["low"] <= v_crit <= record["high"]
     assert record["replicates_per_value"] == 5
     assert record["replicate_std"] == pytest.approx(sweep_stand_ins.REPLICATE_NOISE * math.sqrt(2.5), rel=1e-9)
     assert 0.0 < record["Qstar_D_uncertainty"] < 0.1 * sweep_stand_ins.QSTAR
     assert abs(record["Qstar_D"] - sweep_stand_ins.QSTAR) < 2.0 * record["Qstar_D_uncertainty"]
+    if noise_sigmas == 0.0:
+        assert record["status"] == "converged"
+        assert abs(record["bisection_estimate"] - v_crit) / v_crit < tolerance
+        return
+    sem = sweep_stand_ins.REPLICATE_NOISE * math.sqrt(2.5) / math.sqrt(5)
+    assert record["status"] == "noise_limited"
+    # the midpoints 4500, 2750, 1875, 2312.5 are resolved; 2531.25 (mean 0.488) is within 2 sem of 0.5
+    assert (record["low"], record["high"]) == (2312.5, 2531.25)
+    assert abs(mlr_law(2531.25) - 0.5) <= 2 * sem < abs(mlr_law(2312.5) - 0.5)
+    assert record["rounds"] == 6  # the bracket's round and five midpoints
 
 
 def test_handoff_time_replicates_share_one_hydro_run_to_the_latest_time(tmp_path):
