@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 import yaml
 
-from . import derived
+from . import derived, runstore
 from .config import STAGES, ConfigError, load_config
 from .stages import StageInterrupted, resolved_dict, run
 
@@ -25,6 +25,7 @@ def _setup_logging(verbose: int, quiet: bool) -> None:
     level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S"))
+    handler.setLevel(level)  # a run's run.log (runstore.run_log) lowers the logger, not the console
     root = logging.getLogger("impactpipe")
     root.handlers[:] = [handler]
     root.setLevel(level)
@@ -78,8 +79,9 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
     config, _ = _load_or_exit(config_path)
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     try:
-        summary = run(config, run_dir, stages=stages or None, from_stage=from_stage, force=force,
-                      show_progress=not quiet)
+        with runstore.run_log(run_dir):
+            summary = run(config, run_dir, stages=stages or None, from_stage=from_stage, force=force,
+                          show_progress=not quiet)
     except StageInterrupted as exc:
         click.echo(f"interrupted ({exc}); finished stages and checkpoints are kept in {run_dir}; "
                    "rerun the same command to resume", err=True)

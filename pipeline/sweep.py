@@ -293,38 +293,37 @@ class PointFailed(RuntimeError):
 
 
 def run_point(job: PointJob) -> PointResult:
-    """Run one point in a worker: adopt shared stages, run the pipeline, log to run.log."""
-    from . import stages
-
+    """Run one point in a worker: adopt shared stages, run the pipeline, log to run.log
+    (:func:`impactpipe.pipeline.runstore.run_log`)."""
     _set_threads(job.threads)
     run_dir = Path(job.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(run_dir / "run.log")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-    package_log = logging.getLogger("impactpipe")
-    package_log.addHandler(handler)
-    if package_log.level == logging.NOTSET or package_log.level > logging.INFO:
-        package_log.setLevel(logging.INFO)
     t0 = time.perf_counter()
+    with runstore.run_log(run_dir):
+        summary = _run_logged(job, run_dir)
+    return PointResult(job.name, "complete", summary, None, time.perf_counter() - t0)
+
+
+def _run_logged(job: PointJob, run_dir: Path) -> dict[str, Any]:
+    """The body of :func:`run_point`, inside its run log: adopt shared stages, run the pipeline;
+    a failure writes ``error.log`` and raises PointFailed."""
+    from . import stages
+
     try:
         if job.reuse_dir:
             adopted = adopt_stages(run_dir, Path(job.reuse_dir), job.config)
             if adopted:
-                logging.getLogger(__name__).info("%s: reused %s from %s", job.name, ", ".join(adopted), job.reuse_dir)
-        summary = stages.run(job.config, run_dir, show_progress=False, stage_functions=job.stage_functions or None)
+                log.info("%s: reused %s from %s", job.name, ", ".join(adopted), job.reuse_dir)
+        return stages.run(job.config, run_dir, show_progress=False, stage_functions=job.stage_functions or None)
     except Exception as exc:
         if isinstance(exc, stages.StageInterrupted) and multiprocessing.parent_process() is not None:
             # a signal stopped the stage, which recorded itself as interrupted: the sweep is
             # being stopped (:func:`_stop_pool_workers`), so this pool worker takes no further point
-            logging.getLogger(__name__).warning("%s: interrupted; this worker stops", job.name)
-            handler.close()
+            # (the run log's records are already flushed)
+            log.warning("%s: interrupted; this worker stops", job.name)
             os._exit(1)
         (run_dir / "error.log").write_text(traceback.format_exc())
         raise PointFailed(f"{job.name}: {type(exc).__name__}: {exc} (log: {run_dir / 'error.log'})") from None
-    finally:
-        package_log.removeHandler(handler)
-        handler.close()
-    return PointResult(job.name, "complete", summary, None, time.perf_counter() - t0)
 
 
 def _set_threads(threads: int) -> None:

@@ -210,3 +210,50 @@ def test_provenance_records_the_commit_of_the_imported_source(monkeypatch):
     monkeypatch.setattr(runstore, "git_commit", lambda: "0123456789abcdef-made-after-import")
     attrs = runstore.provenance("name: x\n", runstore.utc_now(), 1.0)
     assert attrs["git_commit"] == (imported or "unknown")
+
+
+def test_cli_run_keeps_a_run_log_while_the_console_stays_quiet(tmp_path, calls):
+    from click.testing import CliRunner
+
+    from impactpipe.pipeline.cli import main
+
+    path = tmp_path / "orchestration.yaml"
+    path.write_text(CONFIG)
+    result = CliRunner().invoke(main, ["run", str(path), "--out", str(tmp_path / "run"), "-q"])
+    assert result.exit_code == 0, result.output
+    text = (tmp_path / "run" / "run.log").read_text()
+    for stage in stages.STAGES:
+        assert f"INFO impactpipe.pipeline.stages: {stage}: done in" in text
+    assert " INFO " not in result.output
+    again = CliRunner().invoke(main, ["run", str(path), "--out", str(tmp_path / "run"), "-q"])
+    assert again.exit_code == 0
+    appended = (tmp_path / "run" / "run.log").read_text()
+    assert appended.startswith(text) and "hydro: up to date" in appended[len(text):]
+
+
+def test_run_logs_of_runs_in_threads_stay_apart(tmp_path):
+    """Two runs in threads of one process (a Dask worker with threads): each run.log holds its
+    own run's records only, and a nested run_log for the same directory adds no second copy."""
+    import logging
+    import threading
+
+    from impactpipe.pipeline.runstore import run_log
+
+    logger = logging.getLogger("impactpipe.test")
+    barrier = threading.Barrier(2)
+
+    def work(name):
+        with run_log(tmp_path / name), run_log(tmp_path / name):
+            for i in range(20):
+                barrier.wait()
+                logger.info("%s line %d", name, i)
+
+    threads = [threading.Thread(target=work, args=(name,)) for name in ("a", "b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for name, other in (("a", "b"), ("b", "a")):
+        lines = (tmp_path / name / "run.log").read_text().splitlines()
+        assert len(lines) == 20 and all(f"{name} line" in line for line in lines)
+        assert not any(f"{other} line" in line for line in lines)
