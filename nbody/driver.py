@@ -27,6 +27,9 @@ The run (see docs/nbody.md for the full description):
    diagnostics row; an empty hand-off returns that status at once, without diagnostics):
    ``equilibrium`` when the mass orbiting the largest remnant (``diagnostics`` module) is
    below ``max_orbiting_fraction`` M_lr and t >= ``min_dynamical_times`` t_dyn;
+   ``stable_orbits`` when more mass orbits, but the particle count and the orbiting mass have
+   not changed for ``max_quiet_dynamical_times`` t_dyn (and t >= ``min_dynamical_times``
+   t_dyn): a satellite in a stable orbit, which would otherwise keep the run going forever;
    ``time_cap`` at the first output time >= ``max_sim_time``; ``wall_cap`` at the first
    chunk end after ``max_wall_seconds`` of wall time in this call.
 5. With ``archive_path``, a Simulationarchive snapshot is appended at the start, at every
@@ -66,7 +69,7 @@ from impactpipe.pipeline.runstore import atomic_path
 from . import diagnostics as dg
 from .resolver import (CTX_N_BOUNCE, CTX_N_HANDOFF, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, CTX_PARTICLE_STEPS,
                        MODEL_CODES, PARAM_KINETIC, PARAM_PUSH_ENERGY, CollisionResolver, particle_view)
-from .result import ESCAPE_ORBIT, LEFT_BOX, LOST, NO_PARTICLES_LEFT, TERMINAL_STATUSES, NBodyResult
+from .result import ESCAPE_ORBIT, LEFT_BOX, LOST, NO_PARTICLES_LEFT, STABLE_ORBITS, TERMINAL_STATUSES, NBodyResult
 from .simulation import G, build_simulation, collision_time_step, dynamical_time, weighted_mean
 
 log = logging.getLogger(__name__)
@@ -96,6 +99,7 @@ def reaccumulate(
     opening_angle: float = 0.5,
     min_dynamical_times: float = 50.0,
     max_orbiting_fraction: float = 0.1,
+    max_quiet_dynamical_times: float = 100.0,
     max_sim_time: float | None = None,
     max_wall_seconds: float | None = None,
     archive_path: str | os.PathLike | None = None,
@@ -120,6 +124,8 @@ def reaccumulate(
         opening_angle: Barnes-Hut opening angle (rad).
         min_dynamical_times: least simulated time, in t_dyn, before equilibrium can stop.
         max_orbiting_fraction: equilibrium when orbiting mass < this fraction of M_lr.
+        max_quiet_dynamical_times: stop with ``stable_orbits`` when the particle count and the
+            orbiting mass have not changed for this many t_dyn (:func:`_unchanged_since`).
         max_sim_time: s; stop (``time_cap``) at the first output time at or past it.
         max_wall_seconds: s of wall time in this call; stop (``wall_cap``) at the next chunk end.
         archive_path: Simulationarchive file for checkpoints (None: no checkpoints).
@@ -152,6 +158,8 @@ def reaccumulate(
             raise ValueError(f"{name} must be in [0, 1] (got {value})")
     if not 0.0 < max_orbiting_fraction <= 1.0:
         raise ValueError(f"max_orbiting_fraction must be in (0, 1] (got {max_orbiting_fraction})")
+    if not max_quiet_dynamical_times > 0.0:
+        raise ValueError(f"max_quiet_dynamical_times must be > 0 (got {max_quiet_dynamical_times})")
     if not box_factor > 1.0:
         raise ValueError(f"box_factor must be > 1 (got {box_factor})")
     if np.unique(particles.id).size != len(particles):
@@ -199,9 +207,14 @@ def reaccumulate(
             while run.next_output <= t:
                 run.next_output += output_interval
             d = run.diag
-            if d["orbiting_mass"][-1] < max_orbiting_fraction * d["remnant_mass"][-1] and \
-                    t >= min_dynamical_times * t_dyn:
+            settled = t >= min_dynamical_times * t_dyn
+            if settled and d["orbiting_mass"][-1] < max_orbiting_fraction * d["remnant_mass"][-1]:
                 run.status = "equilibrium"
+            elif settled and t - _unchanged_since(d) >= max_quiet_dynamical_times * t_dyn:
+                run.status = STABLE_ORBITS
+                log.warning("nbody: %.3g M_lr still orbits the largest remnant (%d particles left), unchanged "
+                            "for %.3g t_dyn: stopped as stable orbits", d["orbiting_mass"][-1] /
+                            d["remnant_mass"][-1], run.sim.N, (t - _unchanged_since(d)) / t_dyn)
             elif max_sim_time is not None and t >= max_sim_time:
                 run.status = "time_cap"
         if progress is not None:
@@ -216,6 +229,17 @@ def reaccumulate(
     log.info("nbody stopped: %s at t = %.6g s (%.3g t_dyn), N = %d, %d steps, %d particle-steps", run.status,
              run.sim.t, run.sim.t / t_dyn, run.sim.N, run.sim.steps_done, run.resolver.ctx[CTX_PARTICLE_STEPS])
     return run.result()
+
+
+def _unchanged_since(diag: dict[str, list]) -> float:
+    """Time (s) of the earliest diagnostics output from which on the particle count and the
+    orbiting mass equal their latest values (exact comparison: without a merger, escape or
+    change of orbit the orbiting mass is the same sum of the same particle masses)."""
+    n, orbiting, times = diag["n_particles"], diag["orbiting_mass"], diag["time"]
+    i = len(times) - 1
+    while i > 0 and n[i - 1] == n[-1] and orbiting[i - 1] == orbiting[-1]:
+        i -= 1
+    return float(times[i])
 
 
 class _Run:

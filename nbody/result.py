@@ -11,8 +11,10 @@ import numpy as np
 from impactpipe.pipeline.runstore import atomic_path, write_dataset
 
 NO_PARTICLES_LEFT = "no_particles_left"  # every particle was removed, or the hand-off had none
-STATUSES = ("equilibrium", "time_cap", "wall_cap", NO_PARTICLES_LEFT)
-TERMINAL_STATUSES = ("equilibrium", NO_PARTICLES_LEFT)  # a resumed run does not continue past these
+STABLE_ORBITS = "stable_orbits"  # nothing merged, escaped or stopped orbiting for max_quiet_dynamical_times
+STATUSES = ("equilibrium", STABLE_ORBITS, "time_cap", "wall_cap", NO_PARTICLES_LEFT)
+# a resumed run does not continue past these
+TERMINAL_STATUSES = ("equilibrium", STABLE_ORBITS, NO_PARTICLES_LEFT)
 # escaped_reason codes
 ESCAPE_ORBIT = 1   # beyond half the box half-width on an escape orbit, moving away
 LEFT_BOX = 2       # still bound but about to leave the box (beyond 0.9 of its half-width)
@@ -114,9 +116,11 @@ class NBodyResult:
             members (CSR).  Final and escaped members together partition the hand-off ids.
         merge_time, merge_survivor, merge_absorbed: every merger (s, surviving id, absorbed id).
         diagnostics: time series, keys and units in ``DIAGNOSTIC_UNITS``.
-        status: one of ``STATUSES``: 'equilibrium', 'time_cap', 'wall_cap' or
-            'no_particles_left' (every particle was removed: no final particles, M_lr = 0;
-            also for an empty hand-off, with time 0 and no diagnostics).
+        status: one of ``STATUSES``: 'equilibrium', 'stable_orbits' (mass keeps orbiting the
+            largest remnant, but the particle count and the orbiting mass have not changed for
+            ``max_quiet_dynamical_times``: a satellite in a stable orbit), 'time_cap',
+            'wall_cap' or 'no_particles_left' (every particle was removed: no final particles,
+            M_lr = 0; also for an empty hand-off, with time 0 and no diagnostics).
         time: simulated time reached (s).
         dynamical_time: 1 / sqrt(G rho_bulk) (s).  time_step: final leapfrog step (s).
         collision_model: 'merge', 'conditional_merge' or 'bounce'.

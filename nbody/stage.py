@@ -43,6 +43,7 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
         opening_angle=nbody.opening_angle,
         min_dynamical_times=nbody.stop.min_dynamical_times,
         max_orbiting_fraction=nbody.stop.max_orbiting_fraction,
+        max_quiet_dynamical_times=nbody.stop.max_quiet_dynamical_times,
         max_sim_time=nbody.stop.max_time,
         max_wall_seconds=nbody.stop.max_wall_seconds,
         archive_path=ctx.run_dir / ARCHIVE_FILE,

@@ -688,3 +688,27 @@ def test_single_particle_and_empty_handoffs(tmp_path):
     write_result(tmp_path / "nbody.h5", out, {})
     back = read_result(tmp_path / "nbody.h5")
     assert back.status == "no_particles_left" and back.members_offset.tolist() == [0] and back.diagnostics == {}
+
+
+def test_a_satellite_on_a_stable_orbit_stops_the_run():
+    """Two bodies on a circular orbit, the smaller 0.13 of the larger's mass, far from contact:
+    the orbiting mass stays above max_orbiting_fraction for ever, so equilibrium never comes.
+    The run stops as stable_orbits once nothing has changed for max_quiet_dynamical_times
+    (before, such a run went on until a cap; here the test's cap is 40 t_dyn)."""
+    m = np.array([1.0e12, 0.13e12])
+    r = sphere_radius(m)
+    d = 40.0 * r[0]
+    v = math.sqrt(G * m.sum() / d)
+    share = m[::-1] / m.sum()
+    ps = ParticleSet.from_bodies(m, r, [[-share[0] * d, 0.0, 0.0], [share[1] * d, 0.0, 0.0]],
+                                 [[0.0, -share[0] * v, 0.0], [0.0, share[1] * v, 0.0]])
+    t_dyn = 1.0 / math.sqrt(G * RHO)
+    out = reaccumulate(ps, bulk_density=RHO, min_dynamical_times=2.0, max_quiet_dynamical_times=5.0,
+                       max_sim_time=40.0 * t_dyn)
+    assert out.status == "stable_orbits"
+    assert 5.0 <= out.time / t_dyn < 5.6
+    assert len(out) == 2 and out.escaped_id.size == 0
+    orbiting = out.diagnostics["orbiting_mass"][-1] / out.diagnostics["remnant_mass"][-1]
+    assert orbiting == pytest.approx(0.13, rel=1e-9)
+    with pytest.raises(ValueError, match="max_quiet_dynamical_times"):
+        reaccumulate(ps, bulk_density=RHO, max_quiet_dynamical_times=0.0)
