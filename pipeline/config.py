@@ -403,6 +403,9 @@ class Stop(Strict):
         100.0, gt=0, description="stop (status stable_orbits) when mass keeps orbiting the largest remnant but "
                                  "the particle count and the orbiting mass have not changed for this many t_dyn")
     max_time: float | None = Field(None, gt=0, description="simulated-time cap (s)")
+    max_dynamical_times: float = Field(
+        2000.0, gt=0, description="simulated-time cap in t_dyn (status time_cap): a guard against runs that never "
+                                  "settle; equilibrium usually comes within 50-100 t_dyn")
     max_wall_seconds: float | None = Field(None, gt=0, description="wall-clock cap (s)")
 
 

@@ -119,3 +119,15 @@ def test_handoffs_without_a_remnant_run_through_the_analysis(tmp_path, case):
     assert summary["N_lr"] == 0 and "largest_remnant" not in summary
     assert summary["stages"]["nbody"]["particles_final"] == 0
     assert summary["stages"]["nbody"]["particles_escaped"] == len(particles)
+
+
+def test_simulated_time_cap_is_the_smaller_of_the_two_caps():
+    from impactpipe.nbody.stage import simulated_time_cap
+
+    stop = parse_config(CONFIG, source="n.yaml").nbody.stop
+    assert stop.max_dynamical_times == 2000.0 and stop.max_time is None
+    assert simulated_time_cap(stop, 3.0) == 6000.0
+    capped = parse_config(CONFIG, source="n.yaml", overrides={"nbody.stop.max_time": 100.0}).nbody.stop
+    assert simulated_time_cap(capped, 3.0) == 100.0
+    short = parse_config(CONFIG, source="n.yaml", overrides={"nbody.stop.max_dynamical_times": 10.0}).nbody.stop
+    assert simulated_time_cap(short, 3.0) == 30.0
