@@ -394,6 +394,15 @@ class SweepRunner:
         self.donors[record["hash"]] = str(Path(run_dir).resolve())
         return True
 
+    def offer_earlier_runs(self) -> int:
+        """Offer every finished hydro run already in ``runs/`` as a donor (:meth:`add_donor`):
+        a point whose directory name changed (a new config key, another N-body or hand-off
+        setting) still adopts the hydro run of an earlier point with the same hydro settings
+        instead of running it again.  Returns how many were offered."""
+        if not self.runs_dir.is_dir():
+            return 0
+        return sum(self.add_donor(d) for d in sorted(self.runs_dir.iterdir()) if d.is_dir())
+
     def _is_done(self, name: str) -> bool:
         run_dir = Path(self.points[name]["run_dir"])
         if not run_dir.is_dir():
@@ -837,6 +846,7 @@ def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool,
 
     bar = tqdm(total=0, desc=f"{label} {sweep.spec.name}", unit="run", disable=None if show_progress else True)
     runner = SweepRunner(sweep, executor, bar)
+    runner.offer_earlier_runs()
     try:
         with pool_stopped_on_interrupt(executor) if own_pool else contextlib.nullcontext():
             yield runner

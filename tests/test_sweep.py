@@ -364,3 +364,19 @@ def test_real_stages_replicate_the_handoff_over_seeds(tmp_path):
     mlr = [p["summary"]["M_lr_over_M_T"] for p in points]
     assert (row["runs"], row["complete"]) == ("2", "2")
     assert float(row["M_lr_over_M_T"]) == pytest.approx(np.mean(mlr), rel=1e-12)
+
+
+def test_a_rerun_with_other_downstream_settings_adopts_the_earlier_hydro_runs(tmp_path):
+    """Point names hash the whole config, so a changed N-body setting (or a config key added
+    by a new version) gives every point a new directory; the hydro runs already in runs/ are
+    adopted all the same, and only the downstream stages run again."""
+    velocities = [1500.0, 2500.0]
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": velocities})
+    with cf.ThreadPoolExecutor(2) as pool:
+        run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": velocities}, overrides={"nbody.opening_angle": 0.3})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert [p["status"] for p in result["points"].values()] == ["complete"] * 2
+    done = collections.Counter(stage for (run, stage), n in calls(tmp_path).items() for _ in range(n))
+    assert done == {"hydro": 2, "handoff": 2, "nbody": 4, "analysis": 4}
