@@ -13,8 +13,9 @@ from impactpipe.pipeline.runstore import atomic_path, write_dataset
 NO_PARTICLES_LEFT = "no_particles_left"  # every particle was removed, or the hand-off had none
 STABLE_ORBITS = "stable_orbits"  # nothing merged, escaped or stopped orbiting for max_quiet_dynamical_times
 STATUSES = ("equilibrium", STABLE_ORBITS, "time_cap", "wall_cap", NO_PARTICLES_LEFT)
-# a resumed run does not continue past these
-TERMINAL_STATUSES = ("equilibrium", STABLE_ORBITS, NO_PARTICLES_LEFT)
+# a resumed run does not continue past these (it does past stable_orbits, time_cap and
+# wall_cap: with other stop settings it goes on, with the same it stops at the next output)
+TERMINAL_STATUSES = ("equilibrium", NO_PARTICLES_LEFT)
 # escaped_reason codes
 ESCAPE_ORBIT = 1   # beyond half the box half-width on an escape orbit, moving away
 LEFT_BOX = 2       # still bound but about to leave the box (beyond 0.9 of its half-width)

@@ -690,7 +690,7 @@ def test_single_particle_and_empty_handoffs(tmp_path):
     assert back.status == "no_particles_left" and back.members_offset.tolist() == [0] and back.diagnostics == {}
 
 
-def test_a_satellite_on_a_stable_orbit_stops_the_run():
+def test_a_satellite_on_a_stable_orbit_stops_the_run(tmp_path):
     """Two bodies on a circular orbit, the smaller 0.13 of the larger's mass, far from contact:
     the orbiting mass stays above max_orbiting_fraction for ever, so equilibrium never comes.
     The run stops as stable_orbits once nothing has changed for max_quiet_dynamical_times
@@ -704,9 +704,13 @@ def test_a_satellite_on_a_stable_orbit_stops_the_run():
                                  [[0.0, -share[0] * v, 0.0], [0.0, share[1] * v, 0.0]])
     t_dyn = 1.0 / math.sqrt(G * RHO)
     out = reaccumulate(ps, bulk_density=RHO, min_dynamical_times=2.0, max_quiet_dynamical_times=5.0,
-                       max_sim_time=40.0 * t_dyn)
+                       max_sim_time=40.0 * t_dyn, archive_path=tmp_path / "a.bin")
     assert out.status == "stable_orbits"
     assert 5.0 <= out.time / t_dyn < 5.6
+    # not terminal: resumed with a longer quiet time, the run goes on to it
+    longer = reaccumulate(ps, bulk_density=RHO, min_dynamical_times=2.0, max_quiet_dynamical_times=8.0,
+                          max_sim_time=40.0 * t_dyn, archive_path=tmp_path / "a.bin")
+    assert longer.status == "stable_orbits" and 8.0 <= longer.time / t_dyn < 8.6
     assert len(out) == 2 and out.escaped_id.size == 0
     orbiting = out.diagnostics["orbiting_mass"][-1] / out.diagnostics["remnant_mass"][-1]
     assert orbiting == pytest.approx(0.13, rel=1e-9)
