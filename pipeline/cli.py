@@ -200,7 +200,7 @@ def analyze_cmd(run_dir: str, verbose: int, quiet: bool) -> None:
 
 
 @main.command("qstar")
-@click.argument("run_dirs", metavar="RUN_DIR...", nargs=-1, required=True,
+@click.argument("run_dirs", metavar="RUN_DIR_OR_SWEEP_DIR...", nargs=-1, required=True,
                 type=click.Path(file_okay=False, exists=True))
 @click.option("--by", "by", type=click.Choice(["velocity", "projectile_radius"]), default="velocity",
               show_default=True, help="The variable the runs differ in (gives the critical value).")
@@ -211,7 +211,9 @@ def analyze_cmd(run_dir: str, verbose: int, quiet: bool) -> None:
 def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None, mu: float, out_dir: str) -> None:
     """Fit Q*_D over finished runs: weighted line of M_lr/M_T against Q, crossing 0.5.
 
-    Runs are grouped by target radius; each group gets its fit, table and figure (with the
+    A sweep directory (one with points.json) stands for its finished points: the runs of
+    the sweep as last run, not every directory in its runs/ (which may hold the points of
+    an earlier version of the sweep).  Runs are grouped by target radius; each group gets its fit, table and figure (with the
     published laws for comparison); five or more target radii also get the fit of
     Q*_D(R) = q_b R^alpha + rho q_g R^beta.
     """
@@ -222,7 +224,17 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     from impactpipe.analysis.qstar import fit_qstar, plus_minus, write_qstar_table
 
     from .stages import read_summary
+    from .sweep import POINTS_FILE, finished_run_dirs
 
+    expanded = []
+    for path in run_dirs:
+        if (Path(path) / POINTS_FILE).is_file():
+            found = finished_run_dirs(path)
+            click.echo(f"{path}: {len(found)} finished points of the sweep")
+            expanded += found
+        else:
+            expanded.append(path)
+    run_dirs = tuple(expanded)
     runs = []
     for run_dir in run_dirs:
         summary = read_summary(run_dir)

@@ -901,6 +901,12 @@ def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: 
     return {"points": runner.points, "qstar": qstar}
 
 
+def finished_run_dirs(directory: str | Path) -> list[str]:
+    """Run directories of the sweep's finished points (``points.json``), in name order."""
+    points = json.loads((Path(directory) / POINTS_FILE).read_text())
+    return [p["run_dir"] for _, p in sorted(points.items()) if p["status"] == "complete"]
+
+
 def sweep_status(directory: str | Path) -> dict[str, Any]:
     """Counts of points by status and the failed points' errors, from ``points.json``."""
     path = Path(directory) / POINTS_FILE

@@ -380,3 +380,12 @@ def test_a_rerun_with_other_downstream_settings_adopts_the_earlier_hydro_runs(tm
     assert [p["status"] for p in result["points"].values()] == ["complete"] * 2
     done = collections.Counter(stage for (run, stage), n in calls(tmp_path).items() for _ in range(n))
     assert done == {"hydro": 2, "handoff": 2, "nbody": 4, "analysis": 4}
+    # runs/ now holds both versions' points; `impactpipe qstar SWEEP_DIR` fits the current ones only
+    from click.testing import CliRunner
+
+    from impactpipe.pipeline.cli import main
+
+    assert len([d for d in (tmp_path / "sweep" / "runs").iterdir() if d.is_dir()]) == 4
+    fit = CliRunner().invoke(main, ["qstar", str(tmp_path / "sweep"), "--out", str(tmp_path / "fit")])
+    assert fit.exit_code == 0, fit.output
+    assert "2 finished points of the sweep" in fit.output and "from 2 of 2 runs" in fit.output
