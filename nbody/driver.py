@@ -99,7 +99,7 @@ def reaccumulate(
     opening_angle: float = 0.5,
     min_dynamical_times: float = 50.0,
     max_orbiting_fraction: float = 0.1,
-    max_quiet_dynamical_times: float = 100.0,
+    max_quiet_dynamical_times: float = 200.0,
     max_sim_time: float | None = None,
     max_wall_seconds: float | None = None,
     archive_path: str | os.PathLike | None = None,

@@ -400,7 +400,7 @@ class Stop(Strict):
     min_dynamical_times: float = Field(50.0, ge=0)
     max_orbiting_fraction: float = Field(0.1, gt=0, le=1)
     max_quiet_dynamical_times: float = Field(
-        100.0, gt=0, description="stop (status stable_orbits) when mass keeps orbiting the largest remnant but "
+        200.0, gt=0, description="stop (status stable_orbits) when mass keeps orbiting the largest remnant but "
                                  "the particle count and the orbiting mass have not changed for this many t_dyn")
     max_time: float | None = Field(None, gt=0, description="simulated-time cap (s)")
     max_dynamical_times: float = Field(
