@@ -279,8 +279,10 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
         click.echo("slope of M_lr/M_T against Q/Q*_D = "
                    f"{plus_minus(fit.normalized_slope, fit.normalized_slope_err, '.3f')}")
         if fit.replicated_q:
+            where = ("included in the error" if np.isfinite(fit.qstar_err)
+                     else "no error bar: fewer than three distinct Q and not every Q repeated")
             click.echo(f"replicates: {fit.replicated_q} Q values run more than once; standard deviation of "
-                       f"M_lr/M_T at the same Q = {fit.replicate_std:.3f} (included in the error)")
+                       f"M_lr/M_T at the same Q = {fit.replicate_std:.3f} ({where})")
         if common_velocity is not None:
             v_from = critical if by == "velocity" else float(group[0]["config"].scene.impact.velocity)
             moved = float(scale_qstar_to_velocity(fit.qstar, v_from, common_velocity, mu))
