@@ -426,17 +426,27 @@ class SweepRunner:
             self.progress.refresh()
         source_of = self._shared_sources(names)
         waiting = {n for n in todo if source_of.get(n) and source_of[n] in todo and source_of[n] != n}
+        # at most in_flight_limit() jobs are handed to the executor at a time, and points whose
+        # shared run just finished go first: their (cheap) downstream stages do not queue behind
+        # every other hydro run, so a point's replicates finish together
+        fresh = [(name, source_of.get(name)) for name in todo if name not in waiting]
+        released: list[tuple[str, str | None]] = []
         running: dict[cf.Future, str] = {}
-        for name in todo:
-            if name not in waiting:
-                running[self._submit(name, source_of.get(name))] = name
+        limit = self.in_flight_limit()
+
+        def fill() -> None:
+            while len(running) < limit and (released or fresh):
+                name, reuse = released.pop(0) if released else fresh.pop(0)
+                running[self._submit(name, reuse)] = name
+
+        fill()
         while running:
             done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
             for future in done:
                 name = running.pop(future)
                 result = self._collect(name, future)
                 if result is None:
-                    running[self._submit(name, source_of.get(name))] = name
+                    released.insert(0, (name, source_of.get(name)))
                     continue
                 results[name] = result
                 if self.progress is not None:
@@ -445,8 +455,18 @@ class SweepRunner:
                     if source_of[other] == name:
                         waiting.discard(other)
                         reuse = name if result.status == "complete" or self._has_shared(name) else None
-                        running[self._submit(other, reuse)] = other
+                        released.append((other, reuse))
+            fill()
         return results
+
+    def in_flight_limit(self) -> int:
+        """Jobs handed to the executor at a time: the local pool's workers (``execution.workers``,
+        default cores // threads_per_run, as :func:`make_executor` sizes it); unbounded for Dask,
+        whose scheduler queues by itself."""
+        execution = self.sweep.spec.execution
+        if execution.backend == "dask":
+            return 1 << 30
+        return execution.workers or max(1, (os.cpu_count() or 1) // execution.threads_per_run)
 
     def _shared_sources(self, names: list[str]) -> dict[str, str]:
         """For each point, the point whose finished stages it reuses: the first of the points with

@@ -389,3 +389,16 @@ def test_a_rerun_with_other_downstream_settings_adopts_the_earlier_hydro_runs(tm
     fit = CliRunner().invoke(main, ["qstar", str(tmp_path / "sweep"), "--out", str(tmp_path / "fit")])
     assert fit.exit_code == 0, fit.output
     assert "2 finished points of the sweep" in fit.output and "from 2 of 2 runs" in fit.output
+
+
+def test_replicates_run_as_soon_as_their_hydro_run_is_done(tmp_path):
+    """One worker, two speeds with three seeds: the second and third seed of the first speed (a
+    hand-off and N-body away) run before the second speed's hydro, not queued behind it."""
+    path = write_sweep(tmp_path, axes={"scene.impact.velocity": [1500.0, 2500.0]},
+                       replicates={"handoff.seed": [1, 2, 3]}, execution={"workers": 1})
+    with cf.ThreadPoolExecutor(1) as pool:
+        run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    lines = [line.split() for line in (tmp_path / "sweep" / "runs" / "calls.log").read_text().splitlines()]
+    order = [(run.split("_")[0], stage) for run, stage in lines]
+    second_hydro = order.index(("velocity=2500", "hydro"))
+    assert [stage for run, stage in order[:second_hydro]].count("handoff") == 3
