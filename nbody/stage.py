@@ -20,18 +20,10 @@ from impactpipe.pipeline.stages import StageContext
 
 from .driver import ArchiveMismatch, reaccumulate
 from .result import NO_PARTICLES_LEFT, write_result
-from .simulation import dynamical_time
 
 log = logging.getLogger(__name__)
 
 ARCHIVE_FILE = "nbody.bin"
-
-
-def simulated_time_cap(stop, t_dyn: float) -> float:
-    """The N-body stage's simulated-time cap (s): the smaller of ``stop.max_time`` (s, if set)
-    and ``stop.max_dynamical_times`` t_dyn."""
-    cap = stop.max_dynamical_times * t_dyn
-    return cap if stop.max_time is None else min(stop.max_time, cap)
 
 
 def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
@@ -52,7 +44,7 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
         min_dynamical_times=nbody.stop.min_dynamical_times,
         max_orbiting_fraction=nbody.stop.max_orbiting_fraction,
         max_quiet_dynamical_times=nbody.stop.max_quiet_dynamical_times,
-        max_sim_time=simulated_time_cap(nbody.stop, dynamical_time(values["target_reference_density"])),
+        max_sim_time=values["nbody_time_cap"],
         max_wall_seconds=nbody.stop.max_wall_seconds,
         archive_path=ctx.run_dir / ARCHIVE_FILE,
         seed=nbody.seed,

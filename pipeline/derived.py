@@ -100,7 +100,21 @@ def derive(config: Config) -> dict[str, Any]:
         config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
         c_t, out["end_time"])
     out["domain"] = impact_domain(config, geom, m_t + m_p, out["end_time"])
+    from impactpipe.nbody.simulation import dynamical_time
+
+    out["nbody_dynamical_time"] = dynamical_time(rho_t)
+    out["nbody_time_cap"], out["nbody_time_cap_rule"] = nbody_time_cap(config.nbody.stop, out["nbody_dynamical_time"])
     return out
+
+
+def nbody_time_cap(stop, t_dyn: float) -> tuple[float, str]:
+    """(cap, rule): the N-body stage's simulated-time cap (s), the smaller of ``stop.max_time``
+    (s, if set) and ``stop.max_dynamical_times`` t_dyn (t_dyn = 1 / sqrt(G rho_T), s)."""
+    cap = stop.max_dynamical_times * t_dyn
+    rule = f"nbody.stop.max_dynamical_times x t_dyn = {stop.max_dynamical_times:g} x {t_dyn:.4g} s"
+    if stop.max_time is not None and stop.max_time < cap:
+        return stop.max_time, "nbody.stop.max_time (set in the config; smaller than " + rule + ")"
+    return cap, rule
 
 
 def mesh_levels(config: Config, geom: str) -> tuple[int, str]:

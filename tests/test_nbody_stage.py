@@ -121,13 +121,15 @@ def test_handoffs_without_a_remnant_run_through_the_analysis(tmp_path, case):
     assert summary["stages"]["nbody"]["particles_escaped"] == len(particles)
 
 
-def test_simulated_time_cap_is_the_smaller_of_the_two_caps():
-    from impactpipe.nbody.stage import simulated_time_cap
-
-    stop = parse_config(CONFIG, source="n.yaml").nbody.stop
-    assert stop.max_dynamical_times == 2000.0 and stop.max_time is None
-    assert simulated_time_cap(stop, 3.0) == 6000.0
-    capped = parse_config(CONFIG, source="n.yaml", overrides={"nbody.stop.max_time": 100.0}).nbody.stop
-    assert simulated_time_cap(capped, 3.0) == 100.0
-    short = parse_config(CONFIG, source="n.yaml", overrides={"nbody.stop.max_dynamical_times": 10.0}).nbody.stop
-    assert simulated_time_cap(short, 3.0) == 30.0
+def test_nbody_time_cap_is_the_smaller_of_the_two_caps_and_validate_shows_it():
+    config = parse_config(CONFIG, source="n.yaml")
+    values = derived.derive(config)
+    t_dyn = values["nbody_dynamical_time"]
+    assert t_dyn == pytest.approx(1.0 / np.sqrt(6.674e-11 * values["target_reference_density"]), rel=1e-3)
+    assert values["nbody_time_cap"] == pytest.approx(2000.0 * t_dyn, rel=1e-12)
+    assert "max_dynamical_times" in values["nbody_time_cap_rule"]
+    capped = derived.derive(parse_config(CONFIG, source="n.yaml", overrides={"nbody.stop.max_time": 100.0}))
+    assert capped["nbody_time_cap"] == 100.0 and "max_time" in capped["nbody_time_cap_rule"]
+    short = derived.derive(parse_config(CONFIG, source="n.yaml",
+                                        overrides={"nbody.stop.max_dynamical_times": 10.0}))
+    assert short["nbody_time_cap"] == pytest.approx(10.0 * t_dyn, rel=1e-12)
