@@ -353,9 +353,12 @@ def _init_worker(threads: int) -> None:
 class SweepRunner:
     """Runs the points of a sweep on an executor, with shared work, retries and resume."""
 
-    def __init__(self, sweep: Sweep, executor: cf.Executor, progress: Any = None):
+    def __init__(self, sweep: Sweep, executor: cf.Executor, progress: Any = None, own_pool: bool = False):
+        """``own_pool``: ``executor`` is the local pool :func:`make_executor` sized from the
+        sweep's execution settings (it bounds :meth:`in_flight_limit`)."""
         self.sweep = sweep
         self.executor = executor
+        self.own_pool = own_pool
         self.progress = progress
         self.points: dict[str, dict[str, Any]] = {}
         self._configs: dict[str, Config] = {}
@@ -460,13 +463,16 @@ class SweepRunner:
         return results
 
     def in_flight_limit(self) -> int:
-        """Jobs handed to the executor at a time: the local pool's workers (``execution.workers``,
-        default cores // threads_per_run, as :func:`make_executor` sizes it); unbounded for Dask,
-        whose scheduler queues by itself."""
+        """Jobs handed to the executor at a time: ``execution.workers`` when set, else the workers
+        of a local pool made from the sweep's settings (cores // threads_per_run, as
+        :func:`make_executor` sizes it); unbounded for Dask, whose scheduler queues by itself,
+        and for an executor passed in without ``workers`` (its size is not known here)."""
         execution = self.sweep.spec.execution
         if execution.backend == "dask":
             return 1 << 30
-        return execution.workers or max(1, (os.cpu_count() or 1) // execution.threads_per_run)
+        if execution.workers:
+            return execution.workers
+        return max(1, (os.cpu_count() or 1) // execution.threads_per_run) if self.own_pool else 1 << 30
 
     def _shared_sources(self, names: list[str]) -> dict[str, str]:
         """For each point, the point whose finished stages it reuses: the first of the points with
@@ -865,7 +871,7 @@ def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool,
     from tqdm import tqdm
 
     bar = tqdm(total=0, desc=f"{label} {sweep.spec.name}", unit="run", disable=None if show_progress else True)
-    runner = SweepRunner(sweep, executor, bar)
+    runner = SweepRunner(sweep, executor, bar, own_pool=own_pool)
     runner.offer_earlier_runs()
     try:
         with pool_stopped_on_interrupt(executor) if own_pool else contextlib.nullcontext():
