@@ -271,10 +271,16 @@ def _invalidate_after(stage: str, records: dict[str, Any]) -> None:
 
 
 class _signals_raise:
-    """Context manager turning SIGINT and SIGTERM into StageInterrupted for a clean stop."""
+    """Context manager turning SIGINT and SIGTERM into StageInterrupted for a clean stop.
+
+    Only the first signal raises: a second one while the stop is under way (a sweep's pool
+    SIGTERMs its workers again once one of them has exited) is logged and ignored, so it
+    cannot abort the interrupted stage's record write and leave the stage marked running.
+    """
 
     def __enter__(self) -> "_signals_raise":
         self._old = {}
+        self._stopping = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             try:
                 self._old[sig] = signal.signal(sig, self._handler)
@@ -282,9 +288,13 @@ class _signals_raise:
                 pass
         return self
 
-    @staticmethod
-    def _handler(signum: int, frame: Any) -> None:
-        raise StageInterrupted(f"stopped by {signal.Signals(signum).name}")
+    def _handler(self, signum: int, frame: Any) -> None:
+        name = signal.Signals(signum).name
+        if self._stopping:
+            log.warning("%s ignored: already stopping after an earlier signal (SIGKILL stops at once)", name)
+            return
+        self._stopping = True
+        raise StageInterrupted(f"stopped by {name}")
 
     def __exit__(self, *exc: Any) -> None:
         for sig, old in self._old.items():

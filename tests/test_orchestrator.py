@@ -152,6 +152,26 @@ def test_sigterm_stops_stage_cleanly(tmp_path, monkeypatch):
     assert stages.read_records(tmp_path)["hydro"]["status"] == "interrupted"
 
 
+def test_second_signal_while_stopping_does_not_lose_the_interrupted_record(tmp_path, monkeypatch):
+    """A sweep's pool SIGTERMs a worker again once another worker has exited: a signal that
+    arrives while the first one's stop writes the record must not abort that write."""
+    def stage(ctx):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+
+    write = stages.runstore.write_json_atomic
+    def write_with_second_signal(path, data):
+        if data.get("hydro", {}).get("status") == "interrupted":
+            os.kill(os.getpid(), signal.SIGTERM)
+        write(path, data)
+
+    monkeypatch.setattr(stages, "load_stage_function", lambda stage_name, overrides=None: stage)
+    monkeypatch.setattr(stages.runstore, "write_json_atomic", write_with_second_signal)
+    with pytest.raises(stages.StageInterrupted, match="SIGTERM"):
+        stages.run(config(), tmp_path, stages=["hydro"], show_progress=False)
+    assert stages.read_records(tmp_path)["hydro"]["status"] == "interrupted"
+
+
 def test_killed_writer_leaves_no_complete_looking_file(tmp_path):
     target = tmp_path / "out.h5"
     script = textwrap.dedent(f"""
