@@ -15,8 +15,9 @@ Conservation statements (before the velocity noise, to round-off):
     particle_momentum + dropped_momentum = mesh_momentum
     particle_radial_momentum + dropped_radial_momentum = mesh_radial_momentum   (2d-cylindrical)
 
-Kinetic energy is not conserved: a particle moves with its block's mean velocity, so the
-energy of the velocity dispersion inside each block (``unresolved_kinetic_energy`` >= 0) is
+Kinetic energy is not conserved: a particle moves with its block's mean velocity (of the
+merged block, when finer leaves were merged first), so the energy of the velocity
+dispersion inside each block (``unresolved_kinetic_energy`` >= 0) is
 not carried.  The velocity noise then adds ``noise_momentum`` and ``noise_kinetic_energy``.
 """
 
@@ -58,6 +59,8 @@ BUDGET_UNITS = {
     "mass_floor": "kg",
     "noise_speed": "m/s",
     "seed": "dimensionless",
+    "block_edge": "m",
+    "sphere_blocks": "dimensionless",
 }
 
 
@@ -103,6 +106,10 @@ class HandoffBudget:
         mirrored_y0: True when the snapshot was a half-domain 3d run mirrored across y = 0
             (handoff/mirror.py): every mesh, particle and dropped number then counts the full
             body, both halves (mesh_mass = 2 x the half-domain run's mass on its mesh).
+        block_edge: the smallest block edge the spheres were made from (m) when finer leaf
+            blocks were merged first (``handoff.particle_resolution``); None otherwise.
+        sphere_blocks: blocks the spheres were made from (n_blocks unless merged); None in
+            files written before it was recorded.
     """
 
     geometry: str
@@ -138,6 +145,8 @@ class HandoffBudget:
     noise_speed: float
     seed: int
     mirrored_y0: bool = False
+    block_edge: float | None = None
+    sphere_blocks: int | None = None
 
     @property
     def noise_momentum(self) -> np.ndarray:

@@ -48,7 +48,6 @@ Both geometries, then:
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -56,6 +55,7 @@ from scipy.spatial import cKDTree
 
 from impactpipe.handoff.budget import HandoffBudget
 from impactpipe.handoff.mirror import mirror_across_y0
+from impactpipe.handoff.moments import block_moments, merge_fine_blocks
 from impactpipe.handoff.particles import ParticleSet
 from impactpipe.handoff.tracers import block_tracer_records, fill_from_nearest
 from impactpipe.hydro.snapshot import Snapshot, TracerSet
@@ -71,84 +71,6 @@ _RING_COUNT_SLACK = 1e-12
 # Relative depth below which touching spheres (inscribed spheres of adjacent full blocks)
 # do not count as overlapping.
 _OVERLAP_TOLERANCE = 1e-9
-
-
-@dataclass
-class _BlockMoments:
-    """Per-block sums over cells (NB blocks, M materials), in mesh components.
-
-    material_mass: (NB, M) kg.  mass: (NB,) kg.
-    centre: (NB, 3) centre of mass (m): (x, y, z) in 3d, (rbar, zbar, 0) in 2d-cylindrical.
-    momentum: (NB, 3) kg m/s: (px, py, pz) in 3d, (P_r, P_z, 0) in 2d-cylindrical.
-    kinetic_energy: (NB,) sum_cells m_c |v_c|^2 / 2 (J).
-    min_edge: (NB,) smallest block edge on the axes in use (m).
-    """
-
-    material_mass: np.ndarray
-    mass: np.ndarray
-    centre: np.ndarray
-    momentum: np.ndarray
-    kinetic_energy: np.ndarray
-    min_edge: np.ndarray
-
-
-def block_moments(snapshot: Snapshot, chunk: int = 2048) -> _BlockMoments:
-    """Mass, centre of mass, momentum and kinetic energy of every leaf block.
-
-    Blocks are processed ``chunk`` at a time so that the cell-sized temporaries stay small.
-    """
-    parts = [_chunk_moments(_block_range(snapshot, start, start + chunk))
-             for start in range(0, snapshot.block_lo.shape[0], chunk)]
-    if not parts:
-        n_materials = snapshot.partial_density.shape[1]
-        return _BlockMoments(np.zeros((0, n_materials)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
-                             np.zeros(0), np.zeros(0))
-    return _BlockMoments(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_BlockMoments)))
-
-
-def _block_range(snapshot: Snapshot, start: int, stop: int) -> Snapshot:
-    """The blocks start:stop of a snapshot (views of its arrays, no copies)."""
-    block = slice(start, stop)
-    return replace(
-        snapshot,
-        block_lo=snapshot.block_lo[block], block_hi=snapshot.block_hi[block],
-        block_level=snapshot.block_level[block], block_id=snapshot.block_id[block],
-        partial_density=snapshot.partial_density[block], volume_fraction=snapshot.volume_fraction[block],
-        velocity=snapshot.velocity[block], specific_internal_energy=snapshot.specific_internal_energy[block],
-        pressure=snapshot.pressure[block], temperature=snapshot.temperature[block],
-        sound_speed=snapshot.sound_speed[block], extra={name: arr[block] for name, arr in snapshot.extra.items()},
-    )
-
-
-def _chunk_moments(snapshot: Snapshot) -> _BlockMoments:
-    """:func:`block_moments` for all blocks of ``snapshot`` at once."""
-    ndim = snapshot.ndim
-    volume = snapshot.block_cell_volumes()
-    material_cell_mass = snapshot.partial_density * volume[:, None]
-    material_mass = material_cell_mass.sum(axis=(2, 3, 4))
-    cell_mass = material_cell_mass.sum(axis=1)
-    mass = material_mass.sum(axis=1)
-
-    # Velocities of empty cells do not enter (void may carry any value).
-    velocity = np.where(cell_mass[:, None] > 0.0, snapshot.velocity[:, :ndim], 0.0)
-    if not np.all(np.isfinite(velocity)):
-        raise ValueError("snapshot velocity is not finite in cells that hold mass")
-
-    coords = snapshot.block_cell_centers()[:, :ndim]
-    if snapshot.geometry == "2d-cylindrical":
-        edges = snapshot.cell_edges(0)
-        r_lo, r_hi = edges[:, :-1], edges[:, 1:]
-        centroid = (2.0 / 3.0) * (r_hi**3 - r_lo**3) / (r_hi**2 - r_lo**2)
-        coords[:, 0] = centroid[:, :, None, None]
-
-    weighted = (cell_mass[:, None] * coords).sum(axis=(2, 3, 4))
-    centre = np.zeros((mass.shape[0], 3))
-    np.divide(weighted, mass[:, None], out=centre[:, :ndim], where=mass[:, None] > 0.0)
-    momentum = np.zeros((mass.shape[0], 3))
-    momentum[:, :ndim] = (cell_mass[:, None] * velocity).sum(axis=(2, 3, 4))
-    kinetic_energy = 0.5 * (cell_mass * (velocity**2).sum(axis=1)).sum(axis=(1, 2, 3))
-    extent = (snapshot.block_hi - snapshot.block_lo)[:, :ndim]
-    return _BlockMoments(material_mass, mass, centre, momentum, kinetic_energy, extent.min(axis=1))
 
 
 def ring_sphere_count(ring_radius: np.ndarray, sphere_radius: np.ndarray) -> np.ndarray:
@@ -223,6 +145,7 @@ def blocks_to_spheres(
     seed: int = 1,
     mass_left_mesh: float | None = None,
     mirror_y0: bool = False,
+    block_edge: float | None = None,
 ) -> tuple[ParticleSet, HandoffBudget]:
     """Translate the leaf blocks of a hydro snapshot into N-body spheres.
 
@@ -247,6 +170,10 @@ def blocks_to_spheres(
         mass_left_mesh: mass that left the mesh before hand-off (kg), carried in the budget;
             with ``mirror_y0``, that of the full body (twice the half-domain run's).
         mirror_y0: mirror a half-domain 3d snapshot across y = 0 first.
+        block_edge: make the spheres from blocks of at least this edge (m): leaf blocks
+            narrower than it are merged into their ancestor of this edge first
+            (:func:`impactpipe.handoff.moments.merge_fine_blocks`); None takes the leaf
+            blocks as they are.
 
     Returns:
         The particles (ids 1..N in block order) and the hand-off budget.
@@ -256,7 +183,8 @@ def blocks_to_spheres(
     if mirror_y0:
         snapshot, tracers = mirror_across_y0(snapshot, tracers)
     cylindrical = snapshot.geometry == "2d-cylindrical"
-    moments = block_moments(snapshot)
+    leaf_moments = block_moments(snapshot)
+    moments = leaf_moments if block_edge is None else merge_fine_blocks(leaf_moments, snapshot.ndim, block_edge)
     mass_floor = min_mass_fraction * total_mass
     density_floor = min_density_fraction * target_bulk_density
     noise_speed = velocity_noise * escape_speed
@@ -300,8 +228,7 @@ def blocks_to_spheres(
     direction /= np.linalg.norm(direction, axis=1)[:, None]
     velocity_with_noise = velocity + noise_speed * direction
 
-    records = block_tracer_records(tracers, snapshot.block_lo, snapshot.block_hi, snapshot.ndim,
-                                   moments.material_mass)
+    records = block_tracer_records(tracers, moments.lo, moments.hi, snapshot.ndim, moments.material_mass)
     tracer_count = records.count[block]
     peak_pressure_mean = fill_from_nearest(position, records.peak_pressure_mean[block], tracer_count > 0)
     if projectile_material_index is None:
@@ -320,8 +247,8 @@ def blocks_to_spheres(
         peak_pressure_max=records.peak_pressure_max[block],
         origin_position=records.origin_position[block],
         projectile_fraction=projectile_fraction,
-        source_level=np.asarray(snapshot.block_level, dtype=np.int64)[block],
-        source_block=np.asarray(snapshot.block_id, dtype=np.int64)[block],
+        source_level=moments.level[block],
+        source_block=moments.block_id[block],
     )
 
     def frame_momentum(idx: np.ndarray) -> np.ndarray:
@@ -343,7 +270,7 @@ def blocks_to_spheres(
     all_blocks = np.arange(moments.mass.size)
     budget = HandoffBudget(
         geometry=snapshot.geometry,
-        n_blocks=int(moments.mass.size),
+        n_blocks=int(leaf_moments.mass.size),
         n_particles=int(n_particles),
         total_mass=float(total_mass),
         mesh_mass=float(moments.mass.sum()),
@@ -375,6 +302,8 @@ def blocks_to_spheres(
         noise_speed=float(noise_speed),
         seed=int(seed),
         mirrored_y0=bool(mirror_y0),
+        block_edge=None if block_edge is None else float(block_edge),
+        sphere_blocks=int(moments.mass.size),
     )
     # A meshed body's mass differs from the analytic one by its surface discretisation
     # (~1e-4 at 10 cells per radius); more than 1 % above M_tot means a wrong total_mass.
@@ -382,8 +311,11 @@ def blocks_to_spheres(
         log.warning("mesh mass %.6e kg exceeds total_mass %.6e kg by more than 1 %%", budget.mesh_mass, total_mass)
     if records.outside:
         log.warning("%d tracers not flagged exited lie in no leaf block", records.outside)
+    if block_edge is not None:
+        log.info("hand-off: %d leaf blocks merged into %d blocks of edge >= %.4g m", budget.n_blocks,
+                 budget.sphere_blocks, block_edge)
     log.info("hand-off: %d blocks -> %d particles; %d blocks dropped (%.3e kg); %d radii shrunk; "
-             "%d overlapping pairs (deepest %.2f); %d tracers used", budget.n_blocks, n_particles,
+             "%d overlapping pairs (deepest %.2f); %d tracers used", budget.sphere_blocks, n_particles,
              budget.dropped_count, budget.dropped_mass, shrunk, overlapping_pairs, deepest_overlap, tracers_used)
     return particles, budget
 

@@ -47,6 +47,7 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
         seed=config.handoff.seed,
         mass_left_mesh=halves * mass_left,
         mirror_y0=values["domain"]["half_domain"],
+        block_edge=values.get("handoff_block_edge"),
     )
     if len(particles) == 0:
         raise RuntimeError(f"hand-off at t = {snapshot.time:.6g} s produced no particle "

@@ -389,6 +389,11 @@ class Handoff(Strict):
     min_mass_fraction: float = Field(4.0e-7, ge=0, lt=1)
     velocity_noise: float = Field(0.01, ge=0, description="fraction of the target's escape speed")
     seed: int = 1
+    particle_resolution: float | None = Field(
+        None, gt=0, description="cells per projectile radius of the blocks that become spheres (impact scenes): "
+                                "leaf blocks finer than that are merged into their ancestor blocks first, so the "
+                                "N-body particles are those of a coarser mesh; hydro.cells_per_projectile_radius "
+                                "divided by a power of two; default the leaf blocks as they are")
 
 
 class Restitution(Strict):

@@ -100,11 +100,29 @@ def derive(config: Config) -> dict[str, Any]:
         config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
         c_t, out["end_time"])
     out["domain"] = impact_domain(config, geom, m_t + m_p, out["end_time"])
+    if out["domain"] is not None:
+        out["handoff_block_edge"], out["handoff_block_edge_rule"] = handoff_block_edge(
+            config, out["domain"]["block_cells"])
     from impactpipe.nbody.simulation import dynamical_time
 
     out["nbody_dynamical_time"] = dynamical_time(rho_t)
     out["nbody_time_cap"], out["nbody_time_cap_rule"] = nbody_time_cap(config.nbody.stop, out["nbody_dynamical_time"])
     return out
+
+
+def handoff_block_edge(config: Config, block_cells: int) -> tuple[float | None, str]:
+    """(edge, rule): the smallest block edge the hand-off makes spheres from (m), n_b R_P / n_h with
+    n_b cells per block edge and n_h = ``handoff.particle_resolution`` (None: the leaf blocks,
+    whose finest edge is n_b R_P / hydro.cells_per_projectile_radius)."""
+    r_p = config.scene.projectile.radius
+    n_h = config.handoff.particle_resolution
+    finest = block_cells * r_p / config.hydro.cells_per_projectile_radius
+    if n_h is None:
+        return None, f"auto: one sphere per leaf block (finest blocks {block_cells} x R_P / " \
+                     f"hydro.cells_per_projectile_radius = {finest:.4g} m)"
+    edge = block_cells * r_p / n_h
+    return edge, f"handoff.particle_resolution = {n_h:g}: leaf blocks narrower than {block_cells} x R_P / " \
+                 f"{n_h:g} = {edge:.4g} m are merged into their ancestors first (finest blocks {finest:.4g} m)"
 
 
 def nbody_time_cap(stop, t_dyn: float) -> tuple[float, str]:
@@ -290,6 +308,7 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         if not (any(abs(t - t_handoff) <= 1e-9 * max(t, 1e-300) for t in outputs) or abs(end - t_handoff) <= 1e-9 * end):
             errors.append(f"handoff.time: {t_handoff:g} s has no hydro snapshot; it must be one of "
                           f"hydro.output_times or the hydro end time ({end:.6g} s)")
+    errors.extend(_particle_resolution_errors(config, values))
     if config.hydro.max_levels not in ("auto", 1) and config.scene.problem != "impact":
         errors.append(f"hydro.max_levels: {config.hydro.max_levels} levels; only impact scenes refine adaptively "
                       f"in this version (scene.problem is {config.scene.problem}); use 'auto' or 1")
@@ -311,6 +330,26 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
                       f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")
     return errors
+
+
+def _particle_resolution_errors(config: Config, values: dict[str, Any]) -> list[str]:
+    """``handoff.particle_resolution`` that names no block level of the mesh, as ``key: message`` lines."""
+    n_h = config.handoff.particle_resolution
+    if n_h is None:
+        return []
+    if config.scene.problem != "impact":
+        return [f"handoff.particle_resolution: {n_h:g} applies to impact scenes only (it is in cells per "
+                f"projectile radius; scene.problem is {config.scene.problem}); remove it"]
+    cells = config.hydro.cells_per_projectile_radius
+    levels = values.get("levels", 1)
+    allowed = ", ".join(f"{cells / 2 ** k:g}" for k in range(levels))
+    ratio = cells / n_h
+    k = round(math.log2(ratio)) if ratio > 0 else -1
+    if k < 0 or abs(2.0 ** k - ratio) > 1e-9 * ratio or k > levels - 1:
+        return [f"handoff.particle_resolution: {n_h:g} is not the resolution of a block level of this mesh "
+                f"(hydro.cells_per_projectile_radius {cells:g} over a power of two, down to the root level of "
+                f"{levels} levels); use one of {allowed}"]
+    return []
 
 
 def _impact_geometry_errors(scene, geom: str) -> list[str]:

@@ -12,7 +12,8 @@ import rebound
 from impactpipe.handoff import HandoffBudget, ParticleSet, blocks_to_spheres, read_particles, write_particles
 from impactpipe.handoff.budget import BUDGET_UNITS
 from impactpipe.handoff.particles import PARTICLE_UNITS
-from impactpipe.handoff.spheres import block_moments, ring_sphere_count
+from impactpipe.handoff.moments import block_moments, merge_fine_blocks
+from impactpipe.handoff.spheres import ring_sphere_count
 from impactpipe.handoff.store import read_budget
 from impactpipe.hydro.snapshot import Snapshot, TracerSet
 
@@ -426,6 +427,105 @@ def test_block_moments_do_not_depend_on_chunking():
     whole, chunked = block_moments(snap), block_moments(snap, chunk=5)
     for name in ("material_mass", "mass", "centre", "momentum", "kinetic_energy", "min_edge"):
         np.testing.assert_allclose(getattr(chunked, name), getattr(whole, name), rtol=1e-14, atol=0)
+
+
+# ---------------------------------------------------------------------------- merged blocks
+
+
+def split_blocks(snap, select):
+    """The same fields on a mesh where the selected blocks are split into 2^ndim children
+    (and those children's first one split once more): every fine cell takes the value of the
+    coarse cell it lies in, so the fine mesh holds exactly the coarse one's mass and momentum."""
+    ndim = snap.ndim
+    n = snap.partial_density.shape[2]
+    arrays = ("partial_density", "volume_fraction", "velocity", "specific_internal_energy", "pressure",
+              "temperature", "sound_speed")
+
+    def children(lo, hi, level, values, depth):
+        """Blocks of the parent (lo, hi) split ``depth`` more times in its first child."""
+        out = []
+        half = 0.5 * (hi - lo)
+        for offset in np.stack(np.meshgrid(*[[0, 1]] * ndim, indexing="ij"), axis=-1).reshape(-1, ndim):
+            shift = np.zeros(3)
+            shift[:ndim] = offset * half[:ndim]
+            c_lo, c_hi = lo + shift, lo + shift + np.where(np.arange(3) < ndim, half, 0.0)
+            index = [slice(None)] * 3
+            for a in range(ndim):
+                index[a] = (offset[a] * n + np.arange(n)) // 2
+            grid = np.ix_(*[np.atleast_1d(i) if isinstance(i, np.ndarray) else np.arange(1) for i in index])
+            child = {k: v[(slice(None),) + grid] if v.ndim == 4 else v[grid] for k, v in values.items()}
+            if depth > 1 and not offset.any():
+                out.extend(children(c_lo, c_hi, level + 1, child, depth - 1))
+            else:
+                out.append((c_lo, c_hi, level + 1, child))
+        return out
+
+    blocks = []
+    for b in range(snap.block_lo.shape[0]):
+        values = {k: getattr(snap, k)[b] for k in arrays}
+        if select[b]:
+            blocks.extend(children(snap.block_lo[b], snap.block_hi[b], snap.block_level[b], values, 2))
+        else:
+            blocks.append((snap.block_lo[b], snap.block_hi[b], snap.block_level[b], values))
+    return Snapshot(
+        time=snap.time, geometry=snap.geometry, material_names=snap.material_names,
+        block_lo=np.array([b[0] for b in blocks]), block_hi=np.array([b[1] for b in blocks]),
+        block_level=np.array([b[2] for b in blocks], dtype=np.int64),
+        block_id=np.arange(len(blocks), dtype=np.int64),
+        **{k: np.array([b[3][k] for b in blocks]) for k in arrays},
+    )
+
+
+@pytest.mark.parametrize("geometry", ["3d", "2d-cylindrical"])
+def test_merged_fine_blocks_are_the_coarse_mesh_blocks(geometry):
+    """Blocks split one and two levels below a coarse mesh, merged back to the coarse edge,
+    have the coarse blocks' mass, material masses, centre of mass, momentum and cell kinetic
+    energy (the radial centroids of fine annuli add up to the coarse annulus's)."""
+    coarse = random_flow_snapshot(geometry, seed=3)
+    keep = coarse.block_level == 0
+    coarse = Snapshot(**{f.name: (getattr(coarse, f.name)[keep] if isinstance(getattr(coarse, f.name), np.ndarray)
+                                  else getattr(coarse, f.name)) for f in fields(Snapshot)})
+    select = np.random.default_rng(5).random(coarse.block_lo.shape[0]) < 0.5
+    fine = split_blocks(coarse, select)
+    edge = float((coarse.block_hi - coarse.block_lo)[0, 0])
+    assert fine.block_lo.shape[0] > coarse.block_lo.shape[0] and (fine.block_level == 2).any()
+    merged = merge_fine_blocks(block_moments(fine), fine.ndim, edge)
+    want = block_moments(coarse)
+    order_m = np.lexsort(merged.lo.T[::-1])
+    order_w = np.lexsort(want.lo.T[::-1])
+    assert merged.mass.size == want.mass.size
+    for name in ("lo", "hi", "min_edge", "level"):
+        np.testing.assert_allclose(getattr(merged, name)[order_m], getattr(want, name)[order_w], rtol=1e-12)
+    scale = {"material_mass": want.mass.max(), "mass": want.mass.max(), "centre": edge,
+             "momentum": np.abs(want.momentum).max(), "kinetic_energy": want.kinetic_energy.max()}
+    for name, size in scale.items():
+        np.testing.assert_allclose(getattr(merged, name)[order_m], getattr(want, name)[order_w], rtol=0,
+                                   atol=1e-12 * size)
+
+
+def test_hand_off_from_merged_blocks_conserves_and_reports():
+    snap = uniform_sphere("2d-cylindrical")
+    edges = np.unique((snap.block_hi - snap.block_lo)[:, 0])
+    assert edges.size == 2
+    plain, plain_budget = handoff(snap)
+    particles, budget = handoff(snap, block_edge=float(edges[1]))
+    assert budget.sphere_blocks < plain_budget.sphere_blocks == snap.block_lo.shape[0] == budget.n_blocks
+    assert budget.block_edge == edges[1] and plain_budget.block_edge is None
+    assert len(particles) < len(plain)
+    assert particles.radius.max() <= 0.5 * edges[1] and particles.radius.max() > 0.5 * edges[0]
+    assert abs(budget.mass_residual) <= 1e-12 * budget.mesh_mass
+    np.testing.assert_allclose(budget.particle_momentum + budget.dropped_momentum, budget.mesh_momentum,
+                               atol=1e-9 * budget.mesh_mass)
+    assert budget.unresolved_kinetic_energy >= -1e-9 * budget.mesh_kinetic_energy
+    np.testing.assert_array_equal(particles.source_level, 0)
+
+
+def test_merging_to_an_edge_no_ancestor_has_is_refused():
+    moments = block_moments(uniform_sphere("3d"))
+    edge = float(moments.min_edge.min())
+    with pytest.raises(ValueError, match="not a power-of-two multiple"):
+        merge_fine_blocks(moments, 3, 1.5 * edge)
+    assert merge_fine_blocks(moments, 3, edge) is moments
 
 
 # ---------------------------------------------------------------------------- tracers

@@ -56,6 +56,43 @@ def test_mass_budget_closes_through_every_stage(quickstart):
     assert abs(nbody["mass_error"]) < 1e-12
 
 
+def test_handoff_at_a_coarser_particle_resolution_reuses_the_hydro_run(quickstart, tmp_path):
+    """handoff.particle_resolution 2 (half the mesh's 4 cells per R_P): the same hydro run hands
+    off from blocks twice as wide, with fewer, larger particles and the same mass and momentum."""
+    out, _ = quickstart
+    for name in ("hydro.h5", "config.resolved.yaml"):
+        (tmp_path / name).write_bytes((out / name).read_bytes())
+    records = json.loads((out / "stages.json").read_text())
+    (tmp_path / "stages.json").write_text(json.dumps({"hydro": records["hydro"]}))
+    config = tmp_path / "coarse.yaml"
+    config.write_text(QUICKSTART.read_text().replace("seed: 1}", "seed: 1, particle_resolution: 2}"))
+    result = CliRunner().invoke(main, ["run", str(config), "--out", str(tmp_path), "--stage", "handoff", "-q"])
+    assert result.exit_code == 0, result.output
+    assert "reused_from" not in json.loads((tmp_path / "stages.json").read_text())["hydro"]
+    fine = json.loads((out / "summary.json").read_text())
+    coarse = json.loads((tmp_path / "summary.json").read_text())
+    assert coarse["stages"].keys() == {"handoff"}, "the hydro stage is not rerun"
+    budget, fine_budget = coarse["handoff_budget"], fine["handoff_budget"]
+    assert budget["block_edge"] == pytest.approx(4 * 100.0 / 2)
+    assert budget["sphere_blocks"] < budget["n_blocks"] == fine_budget["n_blocks"]
+    assert coarse["N_init"] < fine["N_init"]
+    assert budget["mesh_mass"] == fine_budget["mesh_mass"]
+    assert abs(budget["mass_residual"]) <= 1e-12 * budget["mesh_mass"]
+    assert budget["unresolved_kinetic_energy"] > fine_budget["unresolved_kinetic_energy"]
+    particles = read_particles(tmp_path / "handoff.h5")
+    assert particles.radius.max() == pytest.approx(0.5 * 4 * 100.0 / 2)
+
+
+def test_particle_resolution_that_is_no_block_level_is_refused(tmp_path):
+    config = tmp_path / "bad.yaml"
+    config.write_text(QUICKSTART.read_text().replace("seed: 1}", "seed: 1, particle_resolution: 3}"))
+    result = CliRunner().invoke(main, ["run", str(config), "--out", str(tmp_path / "run")])
+    assert result.exit_code == 2
+    assert "handoff.particle_resolution: 3 is not the resolution of a block level" in result.output
+    assert "use one of 4, 2, 1, 0.5" in result.output
+    assert not (tmp_path / "run").exists()
+
+
 def test_particles_carry_the_projectile_fraction(quickstart):
     """The projectile's mass in the particles (sum m_i f_i) is the projectile's mass on the mesh."""
     out, _ = quickstart
