@@ -425,6 +425,9 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
               help="Hand off every rung at each of these times (s) from one hydro run and take the mean "
                    "M_lr/M_T over them (e.g. 10,12,15 on the hand-off plateau): averages out the "
                    "reaccumulation's scatter.")
+@click.option("--seeds", type=int, default=None, metavar="N",
+              help="Hand off every rung with the seeds 1..N (ring phases and velocity noise) from its one hydro "
+                   "run and take the mean M_lr/M_T, with its standard error (sem column).")
 @click.option("--reuse-hydro", "reuse_hydro", multiple=True, type=click.Path(file_okay=False), metavar="RUN_DIR",
               help="A finished run whose hydro stage the rungs with the same hydro settings adopt instead of "
                    "running it (e.g. the base config's run, for N-body or hand-off ladders); repeatable.")
@@ -436,8 +439,8 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
 @click.option("-v", "--verbose", count=True, help="More log output.")
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
 def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tolerance: float,
-                    handoff_times: str | None, reuse_hydro: tuple[str, ...], out_dir: str | None, backend: str,
-                    scheduler: str | None, workers: int | None, verbose: int, quiet: bool) -> None:
+                    handoff_times: str | None, seeds: int | None, reuse_hydro: tuple[str, ...], out_dir: str | None,
+                    backend: str, scheduler: str | None, workers: int | None, verbose: int, quiet: bool) -> None:
     """Run convergence ladders of CONFIG: answers (M_lr/M_T, N_lr, peak pressures at fixed depths) against
     cost (wall seconds, cell-updates, particle-steps), with a Richardson estimate of the converged value."""
     from .convergence import LadderError, format_table, parse_floats, parse_vary, run_ladders
@@ -458,7 +461,8 @@ def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tole
         times = parse_floats(handoff_times, "--handoff-times") if handoff_times is not None else None
         result = run_ladders(config_path, ladders, out, depths=depth_values, tolerance=tolerance,
                              execution={k: v for k, v in execution.items() if v is not None},
-                             show_progress=not quiet, handoff_times=times, reuse_runs=list(reuse_hydro))
+                             show_progress=not quiet, handoff_times=times, seeds=seeds,
+                             reuse_runs=list(reuse_hydro))
     except LadderError as exc:
         for message in exc.messages:
             click.echo(message, err=True)

@@ -70,6 +70,8 @@ JSON_FILE = "convergence.json"
 STEP_SIZE: dict[str, tuple[str, Any]] = {
     "hydro.cells_per_projectile_radius": ("1 / value (finest cell size in projectile radii)", lambda v: 1.0 / v),
     "hydro.cfl": ("value (Courant number: hydro time step)", lambda v: v),
+    "handoff.particle_resolution": ("1 / value (N-body particle size: hand-off block edge in block_cells "
+                                    "projectile radii)", lambda v: 1.0 / v),
     "nbody.opening_angle": ("value (Barnes-Hut opening angle, rad)", lambda v: v),
     # the N-body time step is min(t_dyn / n, f r_min / v_rel_max) (docs/nbody.md): each key sets
     # one term, which is the step size wherever that term is the smaller one
@@ -313,9 +315,16 @@ class Rung:
 
     @property
     def spread(self) -> float:
-        """max - min of M_lr/M_T over the rung's hand-off times (NaN with fewer than two)."""
+        """max - min of M_lr/M_T over the rung's hand-offs (NaN with fewer than two)."""
         good = [v for v in self.samples if math.isfinite(v)]
         return max(good) - min(good) if len(good) > 1 else float("nan")
+
+    @property
+    def sem(self) -> float:
+        """Standard error of the rung's mean M_lr/M_T, std (ddof 1) / sqrt(n) over its hand-offs
+        (NaN with fewer than two)."""
+        good = [v for v in self.samples if math.isfinite(v)]
+        return float(np.std(good, ddof=1) / math.sqrt(len(good))) if len(good) > 1 else float("nan")
 
 
 #: Hand-off answers: mass fractions from the N-body stage's t = 0 diagnostics (summary ``nbody_budget``).
@@ -335,22 +344,27 @@ def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
     return params
 
 
-def _rung_points(params: dict[str, Any], handoff_times: list[float] | None) -> list[dict[str, Any]]:
-    """The runs of one rung: the rung itself, or with ``handoff_times`` one run per hand-off
-    time, all with the hydro run to the latest time and a snapshot at each (so the rung's runs
-    share one hydro run, as a hand-off scan's do)."""
-    if not handoff_times:
-        return [params]
-    return with_replicates(params, {"handoff.time": sorted(handoff_times)})
+def _rung_points(params: dict[str, Any], handoff_times: list[float] | None,
+                 seeds: int | None = None) -> list[dict[str, Any]]:
+    """The runs of one rung: the rung itself, or one run per combination of the hand-off times
+    (``handoff_times``: the hydro run goes to the latest time with a snapshot at each, as in a
+    hand-off scan) and of the hand-off seeds 1..``seeds``; all of them share one hydro run."""
+    replicates: dict[str, list[Any]] = {}
+    if handoff_times:
+        replicates["handoff.time"] = sorted(handoff_times)
+    if seeds and seeds > 1:
+        replicates["handoff.seed"] = list(range(1, seeds + 1))
+    return with_replicates(params, replicates)
 
 
 def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
                  execution: dict[str, Any] | None = None,
                  stage_functions: dict[str, str] | None = None,
-                 handoff_times: list[float] | None = None) -> tuple[Sweep, list[Rung]]:
+                 handoff_times: list[float] | None = None, seeds: int | None = None) -> tuple[Sweep, list[Rung]]:
     """Validate every rung's config (before any work) and return the sweep and its rungs.
 
-    With ``handoff_times`` each rung is run once per hand-off time (:func:`_rung_points`).
+    With ``handoff_times`` and ``seeds`` each rung is run once per hand-off time and seed
+    (:func:`_rung_points`).
     Raises LadderError naming the key, the value and what is allowed.
     """
     config_path = Path(config_path).resolve()
@@ -377,6 +391,10 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
         raise LadderError(["--handoff-times: not with a handoff.time ladder (that ladder is the hand-off scan)"])
     if handoff_times and len(set(handoff_times)) != len(handoff_times):
         raise LadderError([f"--handoff-times: the times must be distinct (got {handoff_times})"])
+    if seeds is not None and seeds < 1:
+        raise LadderError([f"--seeds: must be >= 1 (got {seeds})"])
+    if seeds and seeds > 1 and "handoff.seed" in ladders:
+        raise LadderError(["--seeds: not with a handoff.seed ladder (the option sets it)"])
     clash = [k for k in ("hydro.end_time", "hydro.output_times") if handoff_times and k in ladders]
     if clash:
         raise LadderError([f"--handoff-times: not with a {k} ladder (the option sets it)" for k in clash])
@@ -391,7 +409,7 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
             continue
         for value in values:
             params = _rung_params(key, value, values)
-            points = _rung_points(params, handoff_times)
+            points = _rung_points(params, handoff_times, seeds)
             bad = False
             for point in points:
                 try:
@@ -415,7 +433,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
                 depths: list[float] = DEFAULT_DEPTHS, tolerance: float = DEFAULT_TOLERANCE,
                 executor: cf.Executor | None = None, execution: dict[str, Any] | None = None,
                 stage_functions: dict[str, str] | None = None, show_progress: bool = True,
-                handoff_times: list[float] | None = None,
+                handoff_times: list[float] | None = None, seeds: int | None = None,
                 reuse_runs: list[str | Path] | tuple = ()) -> dict[str, Any]:
     """Run the ladders and write the table, the Richardson table, a JSON record and one figure per ladder.
 
@@ -431,6 +449,9 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
             the mean M_lr/M_T and N_lr over them as the rung's answers (their max - min is
             reported as ``M_lr_over_M_T_spread``): the reaccumulation's scatter between
             neighbouring hand-off times is then averaged out of the ladder.
+        seeds: hand off each rung with the seeds 1..``seeds`` (ring phases and velocity noise) and
+            average the same way; the standard error of each rung's mean M_lr/M_T is reported
+            (``M_lr_over_M_T_sem``).  With ``handoff_times`` every time gets every seed.
         reuse_runs: finished run directories (``impactpipe run`` or a sweep's ``runs/<point>``)
             whose hydro runs the rungs with the same hydro settings adopt instead of running
             their own (:meth:`impactpipe.pipeline.sweep.SweepRunner.add_donor`).
@@ -439,7 +460,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
         {"rungs": [Rung], "richardson": {ladder: {answer: Extrapolation}}, "cheapest": {ladder: rung index or
         None}, "files": [paths written]}.
     """
-    sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions, handoff_times)
+    sweep, rungs = plan_ladders(config_path, ladders, out_dir, execution, stage_functions, handoff_times, seeds)
     wanted = {stage_hashes(sweep.config_for(p))["hydro"] for r in rungs for p in r.point_params}
     messages = donor_problems(reuse_runs, wanted, "rung")
     if messages:
@@ -448,7 +469,8 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
     out.mkdir(parents=True, exist_ok=True)
     runstore.write_text_atomic(sweep.source, yaml.safe_dump(
         {**sweep.spec.model_dump(mode="json", exclude_none=True), "ladders": ladders,
-         "depths_in_projectile_radii": list(depths), "handoff_times": handoff_times}, sort_keys=False))
+         "depths_in_projectile_radii": list(depths), "handoff_times": handoff_times, "seeds": seeds},
+        sort_keys=False))
     with open_runner(sweep, executor, show_progress, "convergence") as runner:
         for run_dir in reuse_runs:
             runner.add_donor(run_dir)
@@ -593,7 +615,8 @@ def rung_rows(rungs: list[Rung], extrapolations: dict[str, dict[str, Extrapolati
             rung = ladder[i]
             row: dict[str, Any] = {"ladder": key, "value": rung.value, "step_size": rung.step, "status": rung.status,
                                    "run": rung.name, "hydro_from": rung.hydro_from, "error": rung.error,
-                                   "M_lr_over_M_T_spread": rung.spread, "handoffs": len(rung.samples)}
+                                   "M_lr_over_M_T_spread": rung.spread, "M_lr_over_M_T_sem": rung.sem,
+                                   "handoffs": len(rung.samples)}
             for name in answers:
                 row[name] = rung.answers.get(name, float("nan"))
                 ext = extrapolations[key].get(name)
@@ -613,15 +636,16 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                    base: Any, handoff_times: list[float] | None) -> list[Path]:
     rows = rung_rows(rungs, extrapolations, answers)
     extra = [f"{a}_{s}" for a in answers if a != "N_lr" for s in ("error_estimate", "change_from_previous")]
-    columns = ["ladder", "value", "step_size", "status", *answers, "M_lr_over_M_T_spread", "handoffs", *extra, *COSTS,
+    columns = ["ladder", "value", "step_size", "status", *answers, "M_lr_over_M_T_spread", "M_lr_over_M_T_sem",
+               "handoffs", *extra, *COSTS,
                "run", "hydro_from", "error"]
     comments = [f"convergence ladders of {base.name}; answers in SI (pressures Pa), costs: "
                  + ", ".join(f"{c} ({u})" for c, u in COSTS.items()),
                  "rows of a ladder with a step size run from the finest rung; *_error_estimate = answer - "
                  "Richardson value; *_change_from_previous = answer - answer of the row above",
                  "a rung that reused another rung's hydro run (hydro_from) reports that run's hydro cost",
-                 "M_lr_over_M_T and N_lr are means over the rung's hand-offs (handoffs); M_lr_over_M_T_spread "
-                 "= their max - min"]
+                 "M_lr_over_M_T and N_lr are means over the rung's hand-offs (handoffs: hand-off times x seeds); "
+                 "M_lr_over_M_T_spread = their max - min, M_lr_over_M_T_sem = std / sqrt(handoffs)"]
     for key, index in cheapest.items():
         ladder = [r for r in rungs if r.ladder == key]
         comments.append(_cheapest_text(key, ladder, index, reference[key], extrapolations[key]["M_lr_over_M_T"],
@@ -680,7 +704,12 @@ def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str]
         shown = np.isfinite(x) & ((x > 0) | (column == "value"))
         ax = axes[0, col]
         y = np.array([r["M_lr_over_M_T"] for r in rows], dtype=float)
-        ax.plot(x[shown], y[shown], "o-", label="rungs")
+        sem = np.array([r["M_lr_over_M_T_sem"] for r in rows], dtype=float)
+        if np.isfinite(sem[shown]).any():
+            ax.errorbar(x[shown], y[shown], yerr=np.nan_to_num(sem[shown]), fmt="o-", capsize=3,
+                        label="rungs (mean +- standard error)")
+        else:
+            ax.plot(x[shown], y[shown], "o-", label="rungs")
         ext = extrapolations["M_lr_over_M_T"]
         if ext.ok:
             ax.axhline(ext.value, color="k", ls="--", lw=1, label=f"Richardson {ext.value:.4g} (p = {ext.order:.2g})")
@@ -739,13 +768,14 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
         lines.append(f"{key}:")
         ladder_rows = [r for r in rows if r["ladder"] == key]
         spread = any(r["handoffs"] > 1 for r in ladder_rows)
-        head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'spread':>7} " if spread else "") + f"{'N_lr':>7} " \
+        head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'sem':>7} {'spread':>7} " if spread else "") + f"{'N_lr':>7} " \
             + f"{'unbound':>8} {'near-esc':>8} " + " ".join(
             f"{'P(' + format(d, 'g') + 'Rp) Pa':>13}" for d in depths) + f" {'wall s':>8} {'cell-upd':>10} {'status'}"
         lines.append(head)
         for row in ladder_rows:
             lines.append(f"  {_fmt(row['value']):>8} {_fmt(row['M_lr_over_M_T']):>9} "
-                         + (f"{_fmt(row['M_lr_over_M_T_spread']):>7.7} " if spread else "") + f"{_fmt(row['N_lr']):>7} "
+                         + (f"{_fmt(row['M_lr_over_M_T_sem']):>7.7} {_fmt(row['M_lr_over_M_T_spread']):>7.7} "
+                            if spread else "") + f"{_fmt(row['N_lr']):>7} "
                          + f"{_fmt(row['unbound_at_handoff']):>8.8} {_fmt(row['near_escape_at_handoff']):>8.8} "
                          + " ".join(f"{_fmt(row[f'peak_pressure_at_{d:g}Rp']):>13}" for d in depths)
                          + f" {_fmt(row['wall_total']):>8} {_fmt(row['cell_updates']):>10} {row['status']}")

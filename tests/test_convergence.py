@@ -22,10 +22,14 @@ QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
 
 #: Stand-in answer: M_lr/M_T = CONVERGED + AMPLITUDE h^ORDER with h = 1 / cells_per_projectile_radius,
 #: plus NBODY_SLOPE (1/n - 1/100) with n = nbody.steps_per_dynamical_time (0 at its default 100),
-#: plus HANDOFF_SLOPE (t - 1 s) with t = handoff.time when one is set.
+#: plus HANDOFF_SLOPE (t - 1 s) with t = handoff.time when one is set,
+#: plus SEED_SLOPE x (0, -1, +1) at handoff.seed 1, 2, 3 (0 at the default seed; mean 0 over seeds 1-3),
+#: plus PARTICLE_SLOPE / n_p with n_p = handoff.particle_resolution when one is set.
 CONVERGED, AMPLITUDE, ORDER = 0.7, 0.3, 2.0
 NBODY_SLOPE = 2.0
 HANDOFF_SLOPE = 0.05
+SEED_SLOPE = 0.01
+PARTICLE_SLOPE = 0.04
 
 
 def hydro(ctx):
@@ -49,9 +53,11 @@ def analysis(ctx):
     h = 1.0 / ctx.config.hydro.cells_per_projectile_radius
     h_nbody = 1.0 / ctx.config.nbody.steps_per_dynamical_time
     t = ctx.config.handoff.time
+    n_p = ctx.config.handoff.particle_resolution
     _finish(ctx, "analysis")
     return {"M_lr_over_M_T": CONVERGED + AMPLITUDE * h ** ORDER + NBODY_SLOPE * (h_nbody - 0.01)
-            + (HANDOFF_SLOPE * (t - 1.0) if t is not None else 0.0), "N_lr": 100, "Q": 500.0}
+            + (HANDOFF_SLOPE * (t - 1.0) if t is not None else 0.0) + SEED_SLOPE * {1: 0.0, 2: -1.0, 3: 1.0}[ctx.config.handoff.seed]
+            + (PARTICLE_SLOPE / n_p if n_p is not None else 0.0), "N_lr": 100, "Q": 500.0}
 
 
 STAGES = {s: f"test_convergence:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
@@ -276,6 +282,43 @@ def test_ladder_averaged_over_handoff_times(tmp_path):
     bad = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
                                "--vary", "hydro.end_time=1.5,2.0", "--handoff-times", "1,1.2"])
     assert bad.exit_code == 2 and "--handoff-times: not with a hydro.end_time ladder" in bad.output
+    assert not (tmp_path / "bad").exists()
+
+
+def test_ladders_averaged_over_seeds_and_a_particle_resolution_ladder(tmp_path):
+    """--seeds 3: each rung hands off with seeds 1-3 from one hydro run; its answer is their mean
+    (the stand-in's seed term averages to zero) with the standard error of that mean.  A
+    handoff.particle_resolution ladder shares one hydro run and extrapolates in 1 / value."""
+    out = tmp_path / "ladder"
+    cells, particles = [2.0, 4.0, 8.0], [1.0, 2.0, 4.0]
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_ladders(QUICKSTART, {"hydro.cells_per_projectile_radius": cells,
+                                          "handoff.particle_resolution": particles}, out, executor=pool,
+                             stage_functions=STAGES, show_progress=False, seeds=3)
+    done = calls(out)
+    # the particle ladder runs at the base config's 4 cells, which the resolution ladder has too
+    assert sum(n for (_, stage), n in done.items() if stage == "hydro") == len(cells)
+    assert sum(n for (_, stage), n in done.items() if stage == "nbody") == (len(cells) + len(particles)) * 3
+    for rung in (r for r in result["rungs"] if r.ladder == "hydro.cells_per_projectile_radius"):
+        mean = CONVERGED + AMPLITUDE * rung.value ** -ORDER
+        assert rung.samples == pytest.approx([mean, mean - SEED_SLOPE, mean + SEED_SLOPE], abs=1e-12)
+        assert rung.answers["M_lr_over_M_T"] == pytest.approx(mean, abs=1e-12)
+        assert rung.sem == pytest.approx(SEED_SLOPE / np.sqrt(3.0), rel=1e-9)
+    ext = result["richardson"]["handoff.particle_resolution"]["M_lr_over_M_T"]
+    assert ext.ok and ext.order == pytest.approx(1.0, abs=1e-9)
+    assert ext.value == pytest.approx(CONVERGED + AMPLITUDE * 4.0 ** -ORDER, abs=1e-9)
+    with open(out / "convergence.csv") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    assert {r["handoffs"] for r in rows} == {"3"}
+    assert [float(r["M_lr_over_M_T_sem"]) for r in rows] == pytest.approx([SEED_SLOPE / np.sqrt(3.0)] * len(rows),
+                                                                         rel=1e-5)
+    assert json.loads((out / "convergence.json").read_text())["ladders"]["handoff.particle_resolution"] == particles
+    bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                                    "--vary", "handoff.seed=1,2", "--seeds", "3"])
+    assert bad.exit_code == 2 and "--seeds: not with a handoff.seed ladder" in bad.output
+    bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                                    "--vary", "handoff.particle_resolution=3,4"])
+    assert bad.exit_code == 2 and "handoff.particle_resolution: 3 is not the resolution of a block level" in bad.output
     assert not (tmp_path / "bad").exists()
 
 
