@@ -139,7 +139,12 @@ def adopt_stages(run_dir: Path, source_dir: Path, config: Config) -> list[str]:
 
     The outputs are hard-linked (copied where links are impossible) into ``run_dir``
     and their records copied, marked ``reused_from``.  Stops at the first stage that
-    does not match, since every later hash depends on it.  Returns the adopted stages.
+    does not match, since every later hash depends on it.  A new ``run_dir`` gets the
+    source's summary entries of the adopted stages only (each stage lists its entries in
+    ``stages.<stage>.summary_keys``), so the source's later answers (M_lr/M_T...) never
+    stand in for the run's own; a source written before stages listed their entries gives
+    its whole summary, which the run's own stages overwrite as they finish.  Returns the
+    adopted stages.
     """
     hashes = stage_hashes(config)
     source_records = read_records(source_dir)
@@ -167,10 +172,23 @@ def adopt_stages(run_dir: Path, source_dir: Path, config: Config) -> list[str]:
         summary_path = run_dir / SUMMARY_FILE
         source_summary = source_dir / SUMMARY_FILE
         if source_summary.is_file() and not summary_path.is_file():
-            summary = json.loads(source_summary.read_text())
-            summary["stages"] = {k: v for k, v in summary.get("stages", {}).items() if k in adopted}
+            summary = _adopted_summary(json.loads(source_summary.read_text()), adopted)
+            summary["run_dir"] = str(run_dir.resolve())
             runstore.write_json_atomic(summary_path, summary)
     return adopted
+
+
+def _adopted_summary(source: dict[str, Any], adopted: list[str]) -> dict[str, Any]:
+    """The part of a source run's summary that its ``adopted`` stages wrote (see :func:`adopt_stages`)."""
+    entries = source.get("stages", {})
+    listed = [entries.get(stage, {}).get("summary_keys") for stage in entries]
+    summary = dict(source)
+    if all(keys is not None for keys in listed):
+        written = {key for stage in entries for key in entries[stage]["summary_keys"]}
+        kept = {key for stage in adopted for key in entries.get(stage, {}).get("summary_keys", [])}
+        summary = {key: value for key, value in source.items() if key not in written or key in kept}
+    summary["stages"] = {k: v for k, v in entries.items() if k in adopted}
+    return summary
 
 
 def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
@@ -257,7 +275,7 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
                 raise
             wall = time.perf_counter() - t0
             records[stage].update({"status": "complete", "wall_seconds": wall, "finished": runstore.utc_now()})
-            summary["stages"][stage] = {"wall_seconds": wall, **result.pop("stage", {})}
+            summary["stages"][stage] = {"wall_seconds": wall, **result.pop("stage", {}), "summary_keys": sorted(result)}
             summary.update(result)
             runstore.write_json_atomic(run_dir / RECORD_FILE, records)
             runstore.write_json_atomic(summary_path, summary)

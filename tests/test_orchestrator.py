@@ -66,6 +66,27 @@ def test_resume_skips_finished_stages(tmp_path, calls):
     assert "numpy" in summary["versions"]
 
 
+def test_adopted_stages_bring_only_their_own_summary_entries(tmp_path, calls):
+    """A run adopting a donor's hydro and hand-off stages must not show the donor's N-body and
+    analysis answers before (or instead of) its own."""
+    log, behaviour = calls
+    donor, run = tmp_path / "donor", tmp_path / "run"
+    stages.run(config(), donor, show_progress=False)
+    other = config(**{"nbody.opening_angle": 0.25})
+    assert stages.adopt_stages(run, donor, other) == ["hydro", "handoff"]
+    summary = stages.read_summary(run)
+    assert (summary["hydro_value"], summary["handoff_value"]) == (1, 2)
+    assert "nbody_value" not in summary and "analysis_value" not in summary
+    assert set(summary["stages"]) == {"hydro", "handoff"} and summary["run_dir"] == str(run.resolve())
+    behaviour["nbody"] = "fail"
+    with pytest.raises(RuntimeError, match="stage broke"):
+        stages.run(other, run, show_progress=False)
+    assert "analysis_value" not in stages.read_summary(run)
+    behaviour.clear()
+    stages.run(other, run, show_progress=False)
+    assert stages.read_summary(run)["analysis_value"] == 7 and log[-3:] == ["nbody", "nbody", "analysis"]
+
+
 def test_changed_hydro_key_reruns_hydro_and_everything_after(tmp_path, calls):
     log, _ = calls
     stages.run(config(), tmp_path, show_progress=False)
