@@ -19,11 +19,13 @@ from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
 from .driver import ArchiveMismatch, reaccumulate
-from .result import NO_PARTICLES_LEFT, write_result
+from .result import LEFT_BOX, LOST, NO_PARTICLES_LEFT, write_result
 
 log = logging.getLogger(__name__)
 
 ARCHIVE_FILE = "nbody.bin"
+#: Fraction of the hand-off mass removed as left_box above which the stage warns.
+LEFT_BOX_WARNING = 1.0e-3
 
 
 def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
@@ -51,6 +53,7 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
         progress=progress,
         steps_per_dynamical_time=nbody.steps_per_dynamical_time,
         collision_step_fraction=nbody.collision_step_fraction,
+        box_factor=nbody.box_factor,
     )
     try:
         try:
@@ -71,6 +74,10 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
     log.info("nbody: %s after %.4g s simulated (%.3g t_dyn); %d particles left, %d escaped",
              result.status, result.time, result.time / result.dynamical_time, len(result),
              len(result.escaped_id))
+    left_box = float(result.escaped_mass[result.escaped_reason == LEFT_BOX].sum())
+    if left_box > LEFT_BOX_WARNING * initial_mass:
+        log.warning("nbody: %.3g of the mass was bound but left the box (%g x the hand-off extent) and was removed; "
+                    "raise nbody.box_factor if it would have come back", left_box / initial_mass, nbody.box_factor)
     if result.status == NO_PARTICLES_LEFT:
         log.warning("nbody: no particle left at the end (all escaped or removed): no remnant")
     elif result.status != "equilibrium":
@@ -81,6 +88,8 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
             "mass_initial": initial_mass,
             "mass_final": final_mass,
             "mass_escaped": escaped_mass,
+            "mass_left_box": left_box,
+            "mass_lost": float(result.escaped_mass[result.escaped_reason == LOST].sum()),
             "mass_error": (final_mass + escaped_mass - initial_mass) / initial_mass if initial_mass > 0 else 0.0,
             "momentum_escaped": np.asarray(result.escaped_momentum).sum(axis=0).tolist(),
             "initial_overlapping_pairs": result.initial_overlapping_pairs,

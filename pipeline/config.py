@@ -425,6 +425,10 @@ class NBody(Strict):
         0.5, gt=0, le=1, description="time-step rule, collision term: dt <= collision_step_fraction r_min / "
                                      "v_rel_max (m over m/s); <= 1 so a head-on pair cannot skip its overlap")
     stop: Stop = Field(default_factory=Stop)
+    box_factor: float = Field(
+        10.0, gt=1, description="half-width of REBOUND's root box over the hand-off cloud's extent: bound particles "
+                                "beyond 0.9 of it are removed (nbody_budget.mass_left_box); raise it when that mass "
+                                "is not negligible")
     seed: int = 1
 
 

@@ -121,6 +121,26 @@ def test_handoffs_without_a_remnant_run_through_the_analysis(tmp_path, case):
     assert summary["stages"]["nbody"]["particles_escaped"] == len(particles)
 
 
+def test_box_factor_decides_whether_a_bound_satellite_is_removed_as_left_box(tmp_path, caplog):
+    """A satellite launched radially at 0.9 of its escape speed from 5 central radii rises to 5.3
+    times that distance: nbody.box_factor 1.2 removes it as left_box (reported and warned
+    about), 20 keeps it bound."""
+    G = 6.674e-11
+    m = np.array([1e12, 1e10])
+    r = sphere_radius(m)
+    d = 5.0 * r[0]
+    v = 0.9 * np.sqrt(2.0 * G * m[0] / d)
+    particles = ParticleSet.from_bodies(m, r, [[0.0, 0.0, 0.0], [d, 0.0, 0.0]], [[0.0, 0.0, 0.0], [v, 0.0, 0.0]])
+    small = run(tmp_path / "small", particles, **{"nbody.box_factor": 1.2})
+    assert small["nbody_budget"]["mass_left_box"] == pytest.approx(m[1], rel=1e-12)
+    assert small["nbody_budget"]["mass_escaped"] == pytest.approx(m[1], rel=1e-12)
+    assert small["nbody_budget"]["mass_lost"] == 0.0
+    assert "raise nbody.box_factor" in caplog.text
+    large = run(tmp_path / "large", particles, **{"nbody.box_factor": 20.0})
+    assert large["nbody_budget"]["mass_left_box"] == 0.0 and large["nbody_budget"]["mass_escaped"] == 0.0
+    assert stages.stage_hashes(config(**{"nbody.box_factor": 20.0}))["handoff"] == stages.stage_hashes(config())["handoff"]
+
+
 def test_nbody_time_cap_is_the_smaller_of_the_two_caps_and_validate_shows_it():
     config = parse_config(CONFIG, source="n.yaml")
     values = derived.derive(config)
