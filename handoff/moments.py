@@ -73,6 +73,39 @@ def block_moments(snapshot: Snapshot, chunk: int = 2048) -> BlockMoments:
     return BlockMoments(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(BlockMoments)))
 
 
+def target_kinetic_energy(snapshot: Snapshot, radius: float, chunk: int = 2048) -> float:
+    """Kinetic energy (J) of the material within ``radius`` (m) of the mesh's centre of mass X,
+    in its centre-of-mass frame (velocity V):
+
+        K_T = sum over cells with |x_c - X| < radius of m_c |v_c - V|^2 / 2,
+
+    x_c the cell centres (in 2d-cylindrical X and V lie on the axis: (0, Z), (0, V_z)).  The
+    slow motion of the target after the shock has passed, which the reaccumulation turns into
+    escaping or returning mass (docs/accuracy.md).  A half-domain 3d snapshot must be mirrored
+    first (:func:`impactpipe.handoff.mirror.mirror_across_y0`).
+    """
+    ndim = snapshot.ndim
+    cylindrical = snapshot.geometry == "2d-cylindrical"
+    moments = block_moments(snapshot, chunk)
+    mass = moments.mass.sum()
+    if mass <= 0.0:
+        return 0.0
+    centre = (moments.mass[:, None] * moments.centre).sum(axis=0) / mass
+    velocity = moments.momentum.sum(axis=0) / mass
+    if cylindrical:
+        centre[0] = velocity[0] = 0.0
+    total = 0.0
+    for start in range(0, snapshot.block_lo.shape[0], chunk):
+        part = _block_range(snapshot, start, start + chunk)
+        cell_mass = part.partial_density.sum(axis=1) * part.block_cell_volumes()
+        offset = part.block_cell_centers()[:, :ndim] - centre[:ndim, None, None, None]
+        inside = (offset**2).sum(axis=1) < radius**2
+        relative = part.velocity[:, :ndim] - velocity[:ndim, None, None, None]
+        speed2 = np.where(cell_mass > 0.0, (relative**2).sum(axis=1), 0.0)
+        total += 0.5 * float((cell_mass * speed2)[inside].sum())
+    return total
+
+
 def merge_fine_blocks(moments: BlockMoments, ndim: int, edge: float) -> BlockMoments:
     """Merge the blocks narrower than ``edge`` (m) into their ancestors of that edge (module docstring).
 

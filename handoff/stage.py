@@ -13,6 +13,8 @@ from impactpipe.hydro.problems.impact import PROJECTILE_MATERIAL
 from impactpipe.pipeline import derived, runstore
 from impactpipe.pipeline.stages import StageContext
 
+from .mirror import mirror_across_y0
+from .moments import target_kinetic_energy
 from .spheres import blocks_to_spheres
 from .store import write_particles
 
@@ -49,6 +51,10 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
         mirror_y0=values["domain"]["half_domain"],
         block_edge=values.get("handoff_block_edge"),
     )
+    target_energy = None
+    if config.scene.problem == "impact":
+        whole = mirror_across_y0(snapshot)[0] if values["domain"]["half_domain"] else snapshot
+        target_energy = target_kinetic_energy(whole, config.scene.target.radius)
     if len(particles) == 0:
         raise RuntimeError(f"hand-off at t = {snapshot.time:.6g} s produced no particle "
                            f"(mesh mass {budget.mesh_mass:.4g} kg, all blocks below the mass floor)")
@@ -57,7 +63,8 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     write_particles(ctx.path("handoff"), particles, budget, attrs)
     log.info("handoff: %d particles from %d blocks at t = %.4g s; %.3g kg dropped", len(particles),
              budget.n_blocks, snapshot.time, budget.dropped_mass)
-    return {"N_init": len(particles), "handoff_time": float(snapshot.time), "handoff_budget": budget.to_summary()}
+    return {"N_init": len(particles), "handoff_time": float(snapshot.time), "handoff_budget": budget.to_summary(),
+            "target_kinetic_energy": target_energy}
 
 
 def snapshot_index(hydro_path, time: float | None) -> int:

@@ -14,6 +14,10 @@ For each rung the answers are
   their escape speed (``near_escape_at_handoff``) at the start of the N-body stage
   (``nbody_budget``): the velocity field that M_lr/M_T is decided from, without the
   reaccumulation's scatter (docs/accuracy.md, "What in the hand-off moves M_lr/M_T"),
+- the kinetic energy (J) of the material within one target radius of the centre of mass at
+  the hand-off, in its centre-of-mass frame (``target_kinetic_energy`` of the hand-off stage,
+  :func:`impactpipe.handoff.moments.target_kinetic_energy`): the hydro answer the
+  reaccumulation amplifies, which converges where M_lr/M_T may not yet,
 - the peak shock pressure (Pa) at fixed depths below the impact point, in projectile
   radii, read from the tracers of the ray next to the symmetry axis in ``hydro.h5``
   (interpolated linearly in log P against log distance; NaN outside the ray),
@@ -332,7 +336,8 @@ HANDOFF_ANSWERS = {"unbound_at_handoff": "initial_unbound_mass", "near_escape_at
 
 
 def _answer_names(depths: list[float]) -> list[str]:
-    return ["M_lr_over_M_T", "N_lr", *HANDOFF_ANSWERS, *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
+    return ["M_lr_over_M_T", "N_lr", *HANDOFF_ANSWERS, "target_kinetic_energy",
+            *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
 
 
 def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
@@ -564,6 +569,7 @@ def _fill(rung: Rung, results: list[Any], points: list[dict[str, Any]], sweep: S
     rung.answers["N_lr"] = float(np.mean([float(s.get("N_lr", np.nan)) for s in summaries]))
     for answer, key in HANDOFF_ANSWERS.items():
         rung.answers[answer] = float(np.mean([_handoff_fraction(s, key) for s in summaries]))
+    rung.answers["target_kinetic_energy"] = float(np.mean([_number(s.get("target_kinetic_energy")) for s in summaries]))
     config = sweep.config_for(rung.params)
     r_p, r_t = config.scene.projectile.radius, config.scene.target.radius
     run_dir = Path(points[0]["run_dir"])
@@ -576,6 +582,11 @@ def _fill(rung: Rung, results: list[Any], points: list[dict[str, Any]], sweep: S
     rung.costs["wall_total"] = float(sum(v for c, v in rung.costs.items() if c.startswith("wall_")))
     reused = read_records(run_dir).get("hydro", {}).get("reused_from")
     rung.hydro_from = Path(reused).name if reused else ""
+
+
+def _number(value: Any) -> float:
+    """``value`` as a float; NaN for None (a summary entry that is missing or was not computed)."""
+    return float("nan") if value is None else float(value)
 
 
 def _handoff_fraction(summary: dict[str, Any], key: str) -> float:
@@ -694,7 +705,7 @@ def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str]
     costs = [c for c in FIGURE_COSTS if any(math.isfinite(r[c]) and r[c] > 0 for r in rows)]
     columns = ["value", *costs]
     pressures = [a for a in answers if a.startswith("peak_pressure")]
-    fig, axes = plt.subplots(3, len(columns), figsize=(4.2 * len(columns), 9.0), squeeze=False,
+    fig, axes = plt.subplots(4, len(columns), figsize=(4.2 * len(columns), 12.0), squeeze=False,
                              constrained_layout=True)
     for col, column in enumerate(columns):
         if column == "value":
@@ -739,6 +750,17 @@ def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str]
             ax.legend(fontsize=7)
         ax.set_ylabel("peak pressure (Pa)")
         ax = axes[2, col]
+        yk = np.array([r["target_kinetic_energy"] for r in rows], dtype=float)
+        ok = shown & np.isfinite(yk)
+        if ok.any():
+            ax.plot(x[ok], yk[ok], "o-")
+            if extrapolations["target_kinetic_energy"].ok:
+                ext_k = extrapolations["target_kinetic_energy"]
+                ax.axhline(ext_k.value, color="k", ls="--", lw=1,
+                           label=f"Richardson {ext_k.value:.4g} J (p = {ext_k.order:.2g})")
+                ax.legend(fontsize=7)
+        ax.set_ylabel("target kinetic energy at hand-off (J)")
+        ax = axes[3, col]
         yn = np.array([r["N_lr"] for r in rows], dtype=float)
         ax.plot(x[shown], yn[shown], "o-")
         if np.any(yn[shown] > 0):
@@ -769,7 +791,7 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
         ladder_rows = [r for r in rows if r["ladder"] == key]
         spread = any(r["handoffs"] > 1 for r in ladder_rows)
         head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'sem':>7} {'spread':>7} " if spread else "") + f"{'N_lr':>7} " \
-            + f"{'unbound':>8} {'near-esc':>8} " + " ".join(
+            + f"{'unbound':>8} {'near-esc':>8} {'K_T J':>10} " + " ".join(
             f"{'P(' + format(d, 'g') + 'Rp) Pa':>13}" for d in depths) + f" {'wall s':>8} {'cell-upd':>10} {'status'}"
         lines.append(head)
         for row in ladder_rows:
@@ -777,6 +799,7 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
                          + (f"{_fmt(row['M_lr_over_M_T_sem']):>7.7} {_fmt(row['M_lr_over_M_T_spread']):>7.7} "
                             if spread else "") + f"{_fmt(row['N_lr']):>7} "
                          + f"{_fmt(row['unbound_at_handoff']):>8.8} {_fmt(row['near_escape_at_handoff']):>8.8} "
+                         + f"{_fmt(row['target_kinetic_energy']):>10.10} "
                          + " ".join(f"{_fmt(row[f'peak_pressure_at_{d:g}Rp']):>13}" for d in depths)
                          + f" {_fmt(row['wall_total']):>8} {_fmt(row['cell_updates']):>10} {row['status']}")
         for name, ext in by_answer.items():

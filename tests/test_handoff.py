@@ -12,7 +12,7 @@ import rebound
 from impactpipe.handoff import HandoffBudget, ParticleSet, blocks_to_spheres, read_particles, write_particles
 from impactpipe.handoff.budget import BUDGET_UNITS
 from impactpipe.handoff.particles import PARTICLE_UNITS
-from impactpipe.handoff.moments import block_moments, merge_fine_blocks
+from impactpipe.handoff.moments import block_moments, merge_fine_blocks, target_kinetic_energy
 from impactpipe.handoff.spheres import ring_sphere_count
 from impactpipe.handoff.store import read_budget
 from impactpipe.hydro.snapshot import Snapshot, TracerSet
@@ -518,6 +518,25 @@ def test_hand_off_from_merged_blocks_conserves_and_reports():
                                atol=1e-9 * budget.mesh_mass)
     assert budget.unresolved_kinetic_energy >= -1e-9 * budget.mesh_kinetic_energy
     np.testing.assert_array_equal(particles.source_level, 0)
+
+
+@pytest.mark.parametrize("geometry", ["3d", "2d-cylindrical"])
+def test_target_kinetic_energy_of_a_homologously_expanding_ball(geometry):
+    """A ball expanding homologously, v = c (x - x0) + V, has K = (2 pi / 5) rho c^2 R^5 within
+    its radius in its centre-of-mass frame (the drift V removed), and 1/32 of it within R / 2."""
+    radius, rate, drift = 1000.0, 0.01, np.array([0.0, 0.0, 40.0])
+    snap = uniform_sphere(geometry)
+    centre = np.array([0.0, 150.0, 0.0]) if geometry == "2d-cylindrical" else np.array([0.0, 0.0, 150.0])
+    mesh_drift = np.array([0.0, 40.0, 0.0]) if geometry == "2d-cylindrical" else drift
+    c = snap.block_cell_centers()
+    snap.velocity = rate * (c - centre[None, :, None, None, None]) + mesh_drift[None, :, None, None, None]
+    if geometry == "2d-cylindrical":
+        snap.velocity[:, 2] = 0.0
+    exact = 2.0 * np.pi / 5.0 * RHO * rate**2 * radius**5
+    assert target_kinetic_energy(snap, 1.5 * radius) == pytest.approx(exact, rel=0.01)
+    assert target_kinetic_energy(snap, 0.5 * radius) == pytest.approx(exact / 32.0, rel=0.05)
+    assert target_kinetic_energy(snap, 1.5 * radius, chunk=7) == pytest.approx(
+        target_kinetic_energy(snap, 1.5 * radius), rel=1e-12)
 
 
 def test_merging_to_an_edge_no_ancestor_has_is_refused():

@@ -35,8 +35,9 @@ def test_summary_holds_the_published_quantities(quickstart):
     out, _ = quickstart
     summary = json.loads((out / "summary.json").read_text())
     for key in ("Q", "Q_R", "gamma", "M_lr_over_M_T", "M_slr_over_M_T", "N_init", "N_lr", "handoff_time",
-                "hydro_budget", "handoff_budget", "nbody_budget", "versions"):
+                "hydro_budget", "handoff_budget", "nbody_budget", "versions", "target_kinetic_energy"):
         assert key in summary, key
+    assert 0.0 < summary["target_kinetic_energy"] < summary["handoff_budget"]["mesh_kinetic_energy"]
     assert set(summary["stages"]) == {"hydro", "handoff", "nbody", "analysis"}
     assert all(s["wall_seconds"] > 0 for s in summary["stages"].values())
     assert summary["Q"] == pytest.approx(0.5 * 0.1 ** 3 * 250.0 ** 2)
