@@ -45,7 +45,7 @@ from impactpipe.hydro.sweep_layout import (
     allocate_scratch,
 )
 from impactpipe.hydro.timestep import cell_thermodynamics, max_signal_rate
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.pipeline.runstore import atomic_path, compression
 
 logger = logging.getLogger(__name__)
 
@@ -472,7 +472,8 @@ class Simulation:
                         mesh_grp.create_dataset(key, data=np.asarray(value))
                 state_grp = fh.create_group("state")
                 for name in FIELDS:
-                    state_grp.create_dataset(name, data=getattr(self.state, name))
+                    array = getattr(self.state, name)
+                    state_grp.create_dataset(name, data=array, **compression(array))
                 ctr = fh.create_group("counters")
                 ctr.create_dataset("boundary", data=self.boundary)
                 ctr.create_dataset("floors", data=self.floors).attrs["names"] = json.dumps(FLOOR_NAMES)

@@ -182,13 +182,29 @@ def write_provenance(h5obj: Any, attrs: Mapping[str, str]) -> None:
         h5obj.attrs[key] = value
 
 
+#: Arrays of at least this many bytes are stored compressed (:func:`compression`).
+COMPRESS_MIN_BYTES = 1 << 16
+
+
+def compression(data: np.ndarray) -> dict[str, Any]:
+    """h5py dataset options for ``data``: deflate (gzip level 1, a filter every HDF5 reader has)
+    after the byte shuffle, for arrays of at least COMPRESS_MIN_BYTES; none for small ones.
+    Lossless; hydro snapshots shrink about 3x and checkpoints about 4x for a few tenths of a
+    second per write (docs/architecture.md, "Conventions")."""
+    if data.ndim == 0 or data.nbytes < COMPRESS_MIN_BYTES:
+        return {}
+    return {"compression": "gzip", "compression_opts": 1, "shuffle": True}
+
+
 def write_dataset(group: Any, name: str, data: Any, units: str, description: str | None = None) -> Any:
-    """Create dataset ``name`` in an h5py group with a ``units`` attribute (and a description).
+    """Create dataset ``name`` in an h5py group with a ``units`` attribute (and a description);
+    large arrays are compressed (:func:`compression`).
 
     ``units`` uses yt-style strings: "m", "kg", "s", "m/s", "kg/m**3", "Pa", "J/kg", "K",
     "dimensionless".
     """
-    dset = group.create_dataset(name, data=np.asarray(data))
+    array = np.asarray(data)
+    dset = group.create_dataset(name, data=array, **compression(array))
     dset.attrs["units"] = units
     if description:
         dset.attrs["description"] = description
