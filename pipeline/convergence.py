@@ -791,7 +791,7 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
         ladder_rows = [r for r in rows if r["ladder"] == key]
         spread = any(r["handoffs"] > 1 for r in ladder_rows)
         head = f"  {'value':>8} {'M_lr/M_T':>9} " + (f"{'sem':>7} {'spread':>7} " if spread else "") + f"{'N_lr':>7} " \
-            + f"{'unbound':>8} {'near-esc':>8} {'K_T J':>10} " + " ".join(
+            + f"{'unbound':>8} {'near-esc':>8} {'K_T (J)':>11} " + " ".join(
             f"{'P(' + format(d, 'g') + 'Rp) Pa':>13}" for d in depths) + f" {'wall s':>8} {'cell-upd':>10} {'status'}"
         lines.append(head)
         for row in ladder_rows:
@@ -799,7 +799,7 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
                          + (f"{_fmt(row['M_lr_over_M_T_sem']):>7.7} {_fmt(row['M_lr_over_M_T_spread']):>7.7} "
                             if spread else "") + f"{_fmt(row['N_lr']):>7} "
                          + f"{_fmt(row['unbound_at_handoff']):>8.8} {_fmt(row['near_escape_at_handoff']):>8.8} "
-                         + f"{_fmt(row['target_kinetic_energy']):>10.10} "
+                         + f"{_fmt(row['target_kinetic_energy']):>11} "
                          + " ".join(f"{_fmt(row[f'peak_pressure_at_{d:g}Rp']):>13}" for d in depths)
                          + f" {_fmt(row['wall_total']):>8} {_fmt(row['cell_updates']):>10} {row['status']}")
         for name, ext in by_answer.items():
