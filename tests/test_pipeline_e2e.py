@@ -92,6 +92,10 @@ def test_particle_resolution_that_is_no_block_level_is_refused(tmp_path):
     assert "handoff.particle_resolution: 3 is not the resolution of a block level" in result.output
     assert "use one of 4, 2, 1, 0.5" in result.output
     assert not (tmp_path / "run").exists()
+    column = tmp_path / "column.yaml"
+    column.write_text((QUICKSTART.parent / "column_collapse.yaml").read_text() + "handoff: {particle_resolution: 2}\n")
+    result = CliRunner().invoke(main, ["validate", str(column)])
+    assert result.exit_code == 2 and "handoff.particle_resolution: 2 applies to impact scenes only" in result.output
 
 
 def test_particles_carry_the_projectile_fraction(quickstart):
