@@ -21,35 +21,49 @@ class StageProgress:
     ``total`` is the simulated time the stage will reach (or None when unknown).  On a
     terminal a tqdm bar shows the fraction done and the ETA; off a terminal (or with
     ``bar=False``) a log line is written at most every ``log_interval`` wall seconds.
+
+    The rate behind the ETA is measured from the first call on, (t - t_1) / (wall - wall_1):
+    a stage resumed from a checkpoint starts at t_1 > 0, and numba's compilation of the
+    first chunk lies before that call, so neither makes the ETA too short.
     """
 
     def __init__(self, stage: str, total: float | None, bar: bool = True, log_interval: float = 30.0):
         self.stage = stage
         self.total = total
         self.log_interval = log_interval
+        self._use_bar = bar and sys.stderr.isatty() and total is not None and total > 0
+        self._bar = None
+        self._first: tuple[float, float] | None = None  # (wall, t) at the first call
         self._last_log = time.monotonic()
-        self._start = self._last_log
-        use_bar = bar and sys.stderr.isatty() and total is not None and total > 0
-        self._bar = (
-            tqdm(total=float(total), desc=stage, unit="s(sim)", leave=False, dynamic_ncols=True,
-                 bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.4g}/{total:.4g} s [{elapsed}<{remaining}]")
-            if use_bar else None
-        )
 
     def __call__(self, t: float) -> None:
+        now = time.monotonic()
+        if self._first is None:
+            self._first = (now, float(t))
+            if self._use_bar:
+                self._bar = tqdm(total=float(self.total), initial=min(float(t), float(self.total)), desc=self.stage,
+                                 unit="s(sim)", leave=False, dynamic_ncols=True,
+                                 bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.4g}/{total:.4g} s "
+                                            "[{elapsed}<{remaining}]")
         if self._bar is not None:
             self._bar.n = min(float(t), self._bar.total)
             self._bar.refresh()
             return
-        now = time.monotonic()
         if now - self._last_log >= self.log_interval:
             self._last_log = now
             if self.total:
-                frac = min(t / self.total, 1.0)
-                eta = (now - self._start) * (1.0 - frac) / frac if frac > 0 else float("nan")
-                log.info("%s: t = %.4g / %.4g s (%.0f%%), ETA %.0f s", self.stage, t, self.total, 100 * frac, eta)
+                log.info("%s: t = %.4g / %.4g s (%.0f%%), ETA %.0f s", self.stage, t, self.total,
+                         100 * min(t / self.total, 1.0), self.eta(t, now))
             else:
                 log.info("%s: t = %.4g s", self.stage, t)
+
+    def eta(self, t: float, now: float) -> float:
+        """Wall seconds left (s) at simulated time ``t`` and monotonic wall time ``now``, at the rate
+        since the first call; NaN before any progress."""
+        wall0, t0 = self._first
+        if self.total is None or t <= t0:
+            return float("nan")
+        return (now - wall0) * max(self.total - t, 0.0) / (t - t0)
 
     def close(self) -> None:
         """Remove the bar from the terminal."""

@@ -1,6 +1,7 @@
 """Stage orchestration: resume, invalidation by config hash, interruption, atomic writes."""
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -191,6 +192,25 @@ def test_second_signal_while_stopping_does_not_lose_the_interrupted_record(tmp_p
     with pytest.raises(stages.StageInterrupted, match="SIGTERM"):
         stages.run(config(), tmp_path, stages=["hydro"], show_progress=False)
     assert stages.read_records(tmp_path)["hydro"]["status"] == "interrupted"
+
+
+def test_progress_eta_of_a_resumed_stage_counts_from_where_it_resumed(monkeypatch):
+    """A stage resumed at t = 9 of 15 s that then advances 1 s per 100 wall seconds has 500 s
+    left at t = 10 (the old estimate, from t = 0 and the reporter's creation, said 150 s)."""
+    from impactpipe.pipeline import progress
+
+    clock = [1000.0]
+    monkeypatch.setattr(progress.time, "monotonic", lambda: clock[0])
+    reporter = progress.StageProgress("hydro", 15.0, bar=False)
+    reporter(9.0)
+    clock[0] += 100.0
+    reporter(10.0)
+    assert reporter.eta(10.0, clock[0]) == pytest.approx(500.0)
+    clock[0] += 100.0
+    assert reporter.eta(11.0, clock[0]) == pytest.approx(400.0)
+    fresh = progress.StageProgress("hydro", 15.0, bar=False)
+    fresh(9.0)
+    assert math.isnan(fresh.eta(9.0, clock[0] + 50.0)), "no progress since the first call: no rate yet"
 
 
 def test_killed_writer_leaves_no_complete_looking_file(tmp_path):
