@@ -6,10 +6,11 @@ at p = 1), on the adaptive mesh (32^2 root cells, 2 more levels) or, with ``--un
 the uniform 128^2 mesh of its finest cells.  Each call of ``sweep``, ``reflux`` and
 ``Simulation.regrid`` is wrapped: max |p - 1| over the mesh before and after it, and the
 increases are summed per operation; the largest increase of max |sum_k alpha_k - 1| (how
-far a call leaves cells over- or under-full) is kept per operation (docs/hydro.md, "Moving
-interfaces across level faces"):
+far a call leaves cells over- or under-full) is kept per operation; ``--every N`` also prints
+max |p - 1| and max |u - u0| every N steps (docs/hydro.md, "Moving interfaces across level
+faces"):
 
-    NUMBA_NUM_THREADS=1 python benchmarks/amr_interface_probe.py --steps 100 [--uniform]
+    NUMBA_NUM_THREADS=1 python benchmarks/amr_interface_probe.py --steps 1600 --every 100 [--uniform]
 """
 
 import argparse
@@ -23,6 +24,7 @@ from impactpipe.hydro.eos import pack_eos
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
+VELOCITY = np.array([1.0, 0.5, 0.0])
 
 
 def build(uniform: bool) -> Simulation:
@@ -35,7 +37,7 @@ def build(uniform: bool) -> Simulation:
     eos = pack_eos([GAS, HEAVY])
     state = HydroState.empty(mesh, 2)
     c = mesh.cell_centers()
-    u0 = np.array([1.0, 0.5, 0.0])
+    u0 = VELOCITY
     state.set_material(mesh, 1.0, 0, eos, 1.0, u0, pressure=1.0)
     disc = (((c[:, 0] - 0.3) ** 2 + (c[:, 1] - 0.3) ** 2) < 0.02).astype(float)
     state.set_material(mesh, disc, 1, eos, 1000.0, u0, pressure=1.0)
@@ -47,6 +49,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--uniform", action="store_true", help="uniform 128^2 mesh instead of the adaptive one")
+    parser.add_argument("--every", type=int, default=0, help="print max |p - 1| and |u - u0| every N steps")
     args = parser.parse_args()
     sim = build(args.uniform)
     increase = {"sweep": 0.0, "reflux": 0.0, "regrid": 0.0}
@@ -70,8 +73,12 @@ def main() -> None:
     solver.sweep = wrapped("sweep", solver.sweep)
     solver.reflux = wrapped("reflux", solver.reflux)
     Simulation.regrid = wrapped("regrid", Simulation.regrid)
-    for _ in range(args.steps):
+    for step in range(1, args.steps + 1):
         sim.step()
+        if args.every and step % args.every == 0:
+            velocity = sim.snapshot().fields["velocity"]
+            print(f"step {step} t = {sim.time:.3f}: max |p - 1| = {error():.1e}, "
+                  f"max |u - u0| = {np.abs(velocity - VELOCITY[:2]).max():.1e}")
     print(f"{'uniform 128^2' if args.uniform else 'adaptive'}: after {args.steps} steps max |p - 1| = {error():.3e}")
     print("summed increases of max |p - 1| by operation:", {k: f"{v:.2e}" for k, v in increase.items()})
     print("largest increase of max |sum_k alpha_k - 1| in one call, by operation:",

@@ -77,7 +77,7 @@ def test_handoff_at_a_coarser_particle_resolution_reuses_the_hydro_run(quickstar
     assert budget["block_edge"] == pytest.approx(4 * 100.0 / 2)
     assert budget["sphere_blocks"] < budget["n_blocks"] == fine_budget["n_blocks"]
     assert coarse["N_init"] < fine["N_init"]
-    assert budget["mesh_mass"] == fine_budget["mesh_mass"]
+    assert budget["mesh_mass"] == pytest.approx(fine_budget["mesh_mass"], rel=1e-13)  # summed in another order
     assert abs(budget["mass_residual"]) <= 1e-12 * budget["mesh_mass"]
     assert budget["unresolved_kinetic_energy"] > fine_budget["unresolved_kinetic_energy"]
     particles = read_particles(tmp_path / "handoff.h5")

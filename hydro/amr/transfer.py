@@ -15,9 +15,12 @@ the child's and the parent's volume centroids: +-1/4 in planar axes, the annulus
 slopes s_d(q) = minmod(q_c - q_c-1, q_c+1 - q_c) along each used axis d:
 
 - where one material fills the parent and its neighbours (alpha >= PHI_SECOND_ORDER, as for
-  the sweeps' second-order reconstruction), every conserved amount U except the volume
-  fractions is linear, U_f = U_c + sum_d s_d(U) o_d (second order in smooth flow), unless
-  that leaves a child with negative internal energy (E < |m|^2 / 2 rho);
+  the sweeps' second-order reconstruction), the partial densities, momentum, total energy
+  and the filling material's internal energy are linear, U_f = U_c + sum_d s_d(U) o_d
+  (second order in smooth flow), unless that leaves a child with negative internal energy
+  (E < |m|^2 / 2 rho); a trace of another material keeps the parent's density and specific
+  internal energy (its volume fraction and internal energy scale with its linear partial
+  density), and the filling material's volume fraction takes the difference;
 - elsewhere (interfaces, free surfaces, and the exception above) only the volume fractions
   are linear, alpha_k,f = alpha_k,c + lambda sum_d s_d(alpha_k) o_d, and each material keeps
   its density rho_k, specific internal energy e_k and transported scalars, the cell its
@@ -50,7 +53,13 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
 from impactpipe.hydro.reconstruct import minmod_slope
-from impactpipe.hydro.sweep_layout import AMOUNT_MASS_FLOOR, AMOUNT_MASS_VOID, FLOOR_PARTIAL_DENSITY, PHI_SECOND_ORDER
+from impactpipe.hydro.sweep_layout import (
+    AMOUNT_MASS_FLOOR,
+    AMOUNT_MASS_VOID,
+    FLOOR_PARTIAL_DENSITY,
+    FULL_TOLERANCE,
+    PHI_SECOND_ORDER,
+)
 
 # Plan columns: destination block and padded cell, source block and padded cell.
 P_DST, P_DX, P_DY, P_DZ, P_SRC, P_SX, P_SY, P_SZ = range(8)
@@ -73,10 +82,15 @@ def _centroid(lo, dx, i, radial):
 
 @njit(cache=True)
 def _offset(src_lo, src_dx, si, dst_lo, dst_dx, di, radial):
-    """Offset of a destination cell's centroid from a source cell's, in source cells."""
+    """Offset of a destination cell's centroid from a source cell's, in source cells.
+
+    A child lies inside its parent (|offset| < 1/2); across a periodic boundary the two
+    centroids differ by the domain length, a whole number of source cells, which is removed.
+    """
     if src_dx == 0.0:
         return 0.0
-    return (_centroid(dst_lo, dst_dx, di, radial) - _centroid(src_lo, src_dx, si, radial)) / src_dx
+    offset = (_centroid(dst_lo, dst_dx, di, radial) - _centroid(src_lo, src_dx, si, radial)) / src_dx
+    return offset - np.floor(offset + 0.5)
 
 
 @njit(cache=True)
@@ -109,6 +123,12 @@ def _linear(f, b, c, ix, iy, iz, o0, o1, o2, ndim):
 @njit(cache=True)
 def _single_material(alpha, b, ix, iy, iz, ndim):
     """True when one material fills cell (ix, iy, iz) of block b and its face neighbours."""
+    return _filling_material(alpha, b, ix, iy, iz, ndim) >= 0
+
+
+@njit(cache=True)
+def _filling_material(alpha, b, ix, iy, iz, ndim):
+    """The material that fills cell (ix, iy, iz) of block b and its face neighbours, or -1."""
     for k in range(alpha.shape[1]):
         full = alpha[b, k, ix, iy, iz] >= PHI_SECOND_ORDER
         full = full and alpha[b, k, ix - 1, iy, iz] >= PHI_SECOND_ORDER and alpha[b, k, ix + 1, iy, iz] >= PHI_SECOND_ORDER
@@ -119,8 +139,8 @@ def _single_material(alpha, b, ix, iy, iz, ndim):
             full = full and alpha[b, k, ix, iy, iz - 1] >= PHI_SECOND_ORDER
             full = full and alpha[b, k, ix, iy, iz + 1] >= PHI_SECOND_ORDER
         if full:
-            return True
-    return False
+            return k
+    return -1
 
 
 @njit(cache=True)
@@ -209,17 +229,43 @@ def _put_fraction_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, nd
 
 
 @njit(cache=True)
+def _put_trace_children(alpha, arho, arhoe, n_alpha, n_arho, n_arhoe, b, ix, iy, iz, db, dx_, dy, dz,
+                        o0, o1, o2, ndim):
+    """Volume fractions and internal energies of a conserved-linear child (partial densities set).
+
+    The filling material f's internal energy is linear; every other material k (a trace)
+    keeps its parent's density and specific internal energy, alpha_k,child =
+    alpha_k (alpha_k rho_k)_child / (alpha_k rho_k), so a trace's pressure is its parent's,
+    and f takes the difference, alpha_f,child = alpha_f - sum_k (alpha_k,child - alpha_k).
+    All are linear in the child's offset, so the children keep every amount of the parent.
+    """
+    fill = _filling_material(alpha, b, ix, iy, iz, ndim)
+    moved = 0.0
+    for k in range(alpha.shape[1]):
+        if k == fill:
+            continue
+        a = alpha[b, k, ix, iy, iz]
+        ar = arho[b, k, ix, iy, iz]
+        ratio = n_arho[db, k, dx_, dy, dz] / ar if ar > 0.0 else 1.0
+        n_alpha[db, k, dx_, dy, dz] = ratio * a
+        n_arhoe[db, k, dx_, dy, dz] = ratio * arhoe[b, k, ix, iy, iz]
+        moved += ratio * a - a
+    n_alpha[db, fill, dx_, dy, dz] = alpha[b, fill, ix, iy, iz] - moved
+    n_arhoe[db, fill, dx_, dy, dz] = _linear(arhoe, b, fill, ix, iy, iz, o0, o1, o2, ndim)
+
+
+@njit(cache=True)
 def _put_state_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, linear, lam):
     """Prolong every conserved field to one child: conserved-linear or fraction-linear."""
     if linear:
         alpha, arho, arhoe, mom, energy, arhoq = src
         n_alpha, n_arho, n_arhoe, n_mom, n_energy, n_arhoq = dst
-        _put_child(alpha, n_alpha, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, False)
         _put_child(arhoq, n_arhoq, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, False)
         _put_child(arho, n_arho, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
-        _put_child(arhoe, n_arhoe, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
         _put_child(mom, n_mom, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
         _put_child(energy, n_energy, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, True)
+        _put_trace_children(alpha, arho, arhoe, n_alpha, n_arho, n_arhoe, b, ix, iy, iz, db, dx_, dy, dz,
+                            o0, o1, o2, ndim)
     else:
         _put_fraction_child(src, dst, b, ix, iy, iz, db, dx_, dy, dz, o0, o1, o2, ndim, lam)
 
@@ -393,12 +439,20 @@ def reflux(axis, plan, volume, face_flux, alpha, arho, arhoe, arhoq, mom, energy
     total energy, transported scalars).  ``plan`` rows are (coarse block, side, coarse cell,
     fine block, first fine face cell); ``volume`` the coarse cells' volumes V (m^3).
 
-    Mass, momentum, total energy and transported scalars get the exact flux difference.  A
-    material already in the cell keeps its density and specific internal energy (its volume
-    fraction changes by Delta(alpha_k rho_k) / rho_k, its internal energy by
-    e_k Delta(alpha_k rho_k)), so the correction moves no cell off pressure equilibrium; a
-    material new to the cell takes the volume and energy differences of the fluxes.  The
-    total energy stays exact; the sweeps reconcile the material energies with it.  A
+    Every column gets the exact flux difference Delta, as if the sweep had used the fine
+    fluxes: alpha_k += Delta(alpha_k,face s dt A) / V, alpha_k rho_k += Delta(mass_k) / V,
+    alpha_k rho_k e_k += Delta(internal energy_k) / V, and so on, with the sweep's volume
+    closure: a cell without void (sum_k alpha_k >= 1 - FULL_TOLERANCE) stays exactly as full,
+    each material taking its share alpha_k of the summed volume difference (equal strain,
+    as the closure of an overfull cell), alpha_k += Delta_k - alpha_k sum_j Delta_j.  So a
+    cell that one material fills keeps alpha = 1 and takes the mass difference in its
+    density.  Each material takes the mass, volume and internal energy the fine faces carried
+    at their own density and energy, as a uniform mesh would: for ideal gases at equal
+    pressure p, Delta(alpha_k rho_k e_k) = p Delta alpha_k / (gamma_k - 1), so no material's
+    pressure moves (converting the mass difference into volume at the coarse cell's density
+    left a moving interface's cells over- or under-full by up to 7e-8 per reflux, which the
+    next sweep's closure turned into pressure).  In a cell with void the void takes the
+    difference.  The total energy stays exact; the sweeps reconcile the material energies with it.  A
     material driven below zero leaves the cell: the mass that brings it to zero is counted as
     added by the floors, or what remains of it as removed by the void cleanup (``floors``,
     ``amounts``).
@@ -421,17 +475,19 @@ def reflux(axis, plan, volume, face_flux, alpha, arho, arhoe, arhoq, mom, energy
         else:
             j1, j2 = ix, iy
         sign = 1.0 / volume[e] if side == 0 else -1.0 / volume[e]
+        filled = 0.0
         for k in range(nmat):
-            d_vol = sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, k, a1, a2)
-            d_mass = sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, nmat + k, a1, a2)
-            d_eint = sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, 2 * nmat + k, a1, a2)
+            filled += alpha[cb, k, ix, iy, iz]
+        strain = 0.0
+        if filled >= 1.0 - FULL_TOLERANCE:
+            for k in range(nmat):
+                strain += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, k, a1, a2)
+        for k in range(nmat):
             a = alpha[cb, k, ix, iy, iz]
-            ar = arho[cb, k, ix, iy, iz]
-            if a > 0.0 and ar > 0.0:
-                d_vol = d_mass * a / ar
-                d_eint = d_mass * arhoe[cb, k, ix, iy, iz] / ar
-            ar += d_mass
-            if ar < 0.0 or a + d_vol < 0.0:
+            a_new = a + sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, k, a1, a2) - a * strain
+            ar = arho[cb, k, ix, iy, iz] + sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, nmat + k,
+                                                                  a1, a2)
+            if ar < 0.0 or a_new < 0.0:
                 if ar < 0.0:
                     amounts[cb, AMOUNT_MASS_FLOOR] -= ar * volume[e]
                 else:
@@ -441,9 +497,10 @@ def reflux(axis, plan, volume, face_flux, alpha, arho, arhoe, arhoq, mom, energy
                 arho[cb, k, ix, iy, iz] = 0.0
                 arhoe[cb, k, ix, iy, iz] = 0.0
             else:
-                alpha[cb, k, ix, iy, iz] = a + d_vol
+                alpha[cb, k, ix, iy, iz] = a_new
                 arho[cb, k, ix, iy, iz] = ar
-                arhoe[cb, k, ix, iy, iz] += d_eint
+                arhoe[cb, k, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
+                                                                    2 * nmat + k, a1, a2)
         for c in range(3):
             mom[cb, c, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
                                                               3 * nmat + c, a1, a2)
