@@ -427,7 +427,8 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
                    "reaccumulation's scatter.")
 @click.option("--seeds", type=int, default=None, metavar="N",
               help="Hand off every rung with the seeds 1..N (ring phases and velocity noise) from its one hydro "
-                   "run and take the mean M_lr/M_T, with its standard error (sem column).")
+                   "run and take the mean M_lr/M_T, with its standard error (sem column) and the 68 % "
+                   "range of the Richardson estimate under those errors.")
 @click.option("--reuse-hydro", "reuse_hydro", multiple=True, type=click.Path(file_okay=False), metavar="RUN_DIR",
               help="A finished run whose hydro stage the rungs with the same hydro settings adopt instead of "
                    "running it (e.g. the base config's run, for N-body or hand-off ladders); repeatable.")

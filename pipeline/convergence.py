@@ -239,6 +239,95 @@ def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0, min_order:
     return Extrapolation("extrapolated", order=p, ratios=(r21, r32), value=value, errors=f - value)
 
 
+#: Resamplings of the rung means behind :func:`richardson_uncertainty`.
+UNCERTAINTY_DRAWS = 4000
+
+
+@dataclass
+class Uncertainty:
+    """How the seed scatter of a ladder's rung means carries into its Richardson estimate.
+
+    Attributes:
+        draws: resamplings of the rung means.
+        refused: share of the draws that Richardson refused (non-monotone, order below
+            ``MIN_ORDER``, ...).
+        low, median, high: 16th, 50th and 84th percentiles of f* over the accepted draws.
+        within: per rung (input order), the share of all draws in which the rung's mean lies
+            within the tolerance of that draw's f* (a refused draw counts as not within).
+        next_value: the answer projected one refinement beyond the finest rung from the
+            unperturbed means, f* + (f1 - f*) / r21^p (NaN when they do not extrapolate).
+        next_within: share of all draws in which that draw's projection lies within the
+            tolerance of its f*.
+    """
+
+    draws: int
+    refused: float
+    low: float
+    median: float
+    high: float
+    within: np.ndarray
+    next_value: float
+    next_within: float
+
+    def as_dict(self, values: list[Any]) -> dict[str, Any]:
+        """JSON form, ``within`` keyed by the rungs' ladder values."""
+        return {"draws": self.draws, "refused": self.refused, "f_star_16": self.low, "f_star_50": self.median,
+                "f_star_84": self.high, "within_tolerance": {str(v): float(w) for v, w in zip(values, self.within)},
+                "next_refinement": self.next_value, "next_refinement_within_tolerance": self.next_within}
+
+
+def _next_refinement(h: np.ndarray, f: np.ndarray, ext: Extrapolation) -> float:
+    """f* + (f1 - f*) / r21^p: the answer of one more refinement by r21 (NaN unless ``ext.ok``)."""
+    if not ext.ok:
+        return float("nan")
+    finest = int(np.nanargmin(np.where(np.isfinite(f), h, np.nan)))
+    return float(ext.value + (f[finest] - ext.value) / ext.ratios[0] ** ext.order)
+
+
+def richardson_uncertainty(h: np.ndarray, f: np.ndarray, sem: np.ndarray, tolerance: float,
+                           draws: int = UNCERTAINTY_DRAWS, seed: int = 0) -> Uncertainty | None:
+    """Richardson f* and the cheapest-rung test under the rungs' standard errors.
+
+    Each draw replaces every rung's mean f_i by f_i + sem_i x N(0, 1) (the rungs' hand-offs
+    are independent runs) and extrapolates with :func:`richardson`.  Returns None unless every
+    rung with an answer has a finite, positive standard error (``--seeds`` or several hand-off
+    times).  Deterministic for a given ``seed``.
+    """
+    h = np.asarray(h, dtype=float)
+    f = np.asarray(f, dtype=float)
+    sem = np.asarray(sem, dtype=float)
+    good = np.isfinite(f) & np.isfinite(h)
+    if good.sum() < 3 or not (np.isfinite(sem[good]).all() and (sem[good] > 0).all()):
+        return None
+    rng = np.random.default_rng(seed)
+    within = np.zeros(h.size)
+    next_within = 0
+    values = []
+    for _ in range(draws):
+        sample = np.where(good, f + np.nan_to_num(sem) * rng.standard_normal(h.size), np.nan)
+        ext = richardson(h, sample)
+        if not ext.ok:
+            continue
+        values.append(ext.value)
+        within += np.abs(sample - ext.value) <= tolerance
+        next_within += abs(_next_refinement(h, sample, ext) - ext.value) <= tolerance
+    low, median, high = (np.percentile(values, (16, 50, 84)) if values else (float("nan"),) * 3)
+    return Uncertainty(draws=draws, refused=1.0 - len(values) / draws, low=float(low), median=float(median),
+                       high=float(high), within=within / draws,
+                       next_value=_next_refinement(h, f, richardson(h, f)), next_within=next_within / draws)
+
+
+def uncertainty_text(key: str, values: list[Any], unc: Uncertainty, tolerance: float) -> str:
+    """One line: the 68 % range of f* and each rung's (and the next refinement's) chance of lying within tolerance."""
+    rungs = ", ".join(f"{v}: {w:.2f}" for v, w in zip(values, unc.within))
+    projected = (f"{unc.next_value:.4g} projected, " if math.isfinite(unc.next_value)
+                 else "no projection from the means themselves, ")
+    return (f"{key}: M_lr/M_T f* from {unc.draws} resamplings of the rung means within their sem: "
+            f"68 % in [{unc.low:.4g}, {unc.high:.4g}] (median {unc.median:.4g}, {unc.refused:.0%} refused); "
+            f"share within +-{tolerance:g} of f*: {rungs}; one refinement beyond the finest rung: "
+            f"{projected}within in {unc.next_within:.2f}")
+
+
 def cheapest_within(h: np.ndarray, f: np.ndarray, reference: float, tolerance: float) -> int | None:
     """Index of the coarsest rung (largest h) such that it and every finer rung lie within
     ``tolerance`` of ``reference``; None when there is none or the reference is not finite."""
@@ -495,6 +584,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
     extrapolations: dict[str, dict[str, Extrapolation]] = {}
     cheapest: dict[str, int | None] = {}
     reference: dict[str, tuple[str, float]] = {}
+    uncertainty: dict[str, Uncertainty | None] = {}
     for key in ladders:
         ladder = [r for r in rungs if r.ladder == key]
         h = np.array([r.step for r in ladder])
@@ -513,10 +603,12 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
         f_mlr = np.array([r.answers.get("M_lr_over_M_T", np.nan) for r in ladder])
         reference[key] = _tolerance_reference(key, h, f_mlr, mlr)
         cheapest[key] = cheapest_within(h, f_mlr, reference[key][1], tolerance)
+        if key in STEP_SIZE:
+            uncertainty[key] = richardson_uncertainty(h, f_mlr, np.array([r.sem for r in ladder]), tolerance)
     files = _write_outputs(out, rungs, ladders, extrapolations, cheapest, reference, answers, tolerance, base,
-                           sorted(handoff_times) if handoff_times else None)
+                           sorted(handoff_times) if handoff_times else None, uncertainty)
     return {"rungs": rungs, "richardson": extrapolations, "cheapest": cheapest, "reference": reference,
-            "files": files}
+            "uncertainty": uncertainty, "files": files}
 
 
 def _tolerance_reference(key: str, h: np.ndarray, f: np.ndarray, mlr: Extrapolation) -> tuple[str, float]:
@@ -644,7 +736,8 @@ def rung_rows(rungs: list[Rung], extrapolations: dict[str, dict[str, Extrapolati
 def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                    extrapolations: dict[str, dict[str, Extrapolation]], cheapest: dict[str, int | None],
                    reference: dict[str, tuple[str, float]], answers: list[str], tolerance: float,
-                   base: Any, handoff_times: list[float] | None) -> list[Path]:
+                   base: Any, handoff_times: list[float] | None,
+                   uncertainty: dict[str, Uncertainty | None]) -> list[Path]:
     rows = rung_rows(rungs, extrapolations, answers)
     extra = [f"{a}_{s}" for a in answers if a != "N_lr" for s in ("error_estimate", "change_from_previous")]
     columns = ["ladder", "value", "step_size", "status", *answers, "M_lr_over_M_T_spread", "M_lr_over_M_T_sem",
@@ -661,6 +754,8 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
         ladder = [r for r in rungs if r.ladder == key]
         comments.append(_cheapest_text(key, ladder, index, reference[key], extrapolations[key]["M_lr_over_M_T"],
                                        tolerance))
+        if uncertainty.get(key) is not None:
+            comments.append(uncertainty_text(key, [r.value for r in ladder], uncertainty[key], tolerance))
     files = [out / TABLE_FILE, out / RICHARDSON_FILE, out / JSON_FILE]
     runstore.write_text_atomic(out / TABLE_FILE, _csv(columns, rows, comments))
     rich_rows = []
@@ -680,6 +775,8 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
                                       for k, i in cheapest.items()},
         "cheapest_measured_against": {k: (None if cheapest[k] is None else {"basis": b, "M_lr_over_M_T": v})
                                       for k, (b, v) in reference.items()},
+        "richardson_uncertainty": {k: (None if u is None else u.as_dict([r.value for r in rungs if r.ladder == k]))
+                                   for k, u in uncertainty.items()},
     })
     for key in ladders:
         path = out / f"convergence_{key.split('.')[-1]}.png"
@@ -809,4 +906,7 @@ def format_table(result: dict[str, Any], depths: list[float], tolerance: float) 
         ladder = [r for r in result["rungs"] if r.ladder == key]
         lines.append("  " + _cheapest_text(key, ladder, index, result["reference"][key],
                                            by_answer["M_lr_over_M_T"], tolerance))
+        if result["uncertainty"].get(key) is not None:
+            lines.append("  " + uncertainty_text(key, [r.value for r in ladder], result["uncertainty"][key],
+                                                 tolerance))
     return lines

@@ -15,7 +15,8 @@ from sweep_stand_ins import _finish
 from impactpipe.pipeline import stages
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config, load_yaml
-from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson, run_ladders)
+from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson,
+                                             richardson_uncertainty, run_ladders)
 
 HERE = Path(__file__).parent
 QUICKSTART = HERE.parent / "configs" / "quickstart.yaml"
@@ -114,6 +115,27 @@ def test_cheapest_within_needs_every_finer_rung_inside_the_band():
     assert cheapest_within(h, f, 0.72, 0.015) == 3
     assert cheapest_within(h, f, 0.60, 0.05) is None
     assert cheapest_within(h, f, float("nan"), 0.05) is None
+
+
+def test_richardson_uncertainty_carries_the_seed_scatter_into_the_limit_and_the_tolerance_test():
+    """f = 0.5 + 0.4 h at h = 1/20, 1/40, 1/80 (first order): exact means give f* = 0.5 and a
+    next refinement at 0.5 + 0.4 / 160; resampling within the standard errors brackets 0.5
+    with a 68 % range that grows with the errors, and the share of draws in which a rung lies
+    within the tolerance of f* falls for rungs farther than the tolerance."""
+    h = np.array([1 / 20, 1 / 40, 1 / 80])
+    f = 0.5 + 0.4 * h
+    tight = richardson_uncertainty(h, f, np.full(3, 1e-4), tolerance=0.015)
+    assert tight.refused == 0.0 and tight.low < 0.5 < tight.high and tight.high - tight.low < 0.002
+    assert tight.next_value == pytest.approx(0.5 + 0.4 / 160, abs=1e-12)
+    # 20 cells lies 0.02 from f*, 40 cells 0.01, 80 cells 0.005, the next refinement 0.0025
+    assert tight.within[0] < 0.01 and tight.within[1] > 0.99 and tight.within[2] > 0.99 and tight.next_within > 0.99
+    loose = richardson_uncertainty(h, f, np.full(3, 3e-3), tolerance=0.011)
+    assert loose.high - loose.low > 5 * (tight.high - tight.low) and loose.refused > tight.refused
+    assert loose.low < 0.5 < loose.high
+    assert 0.05 < loose.within[1] < 0.95, "40 cells is 0.01 from f*: the scatter makes it uncertain"
+    again = richardson_uncertainty(h, f, np.full(3, 3e-3), tolerance=0.011)
+    assert (again.low, again.high) == (loose.low, loose.high), "deterministic for a given seed"
+    assert richardson_uncertainty(h, f, np.array([1e-3, np.nan, 1e-3]), tolerance=0.05) is None
 
 
 def test_parse_vary_errors_name_the_argument():
@@ -312,7 +334,11 @@ def test_ladders_averaged_over_seeds_and_a_particle_resolution_ladder(tmp_path):
     assert {r["handoffs"] for r in rows} == {"3"}
     assert [float(r["M_lr_over_M_T_sem"]) for r in rows] == pytest.approx([SEED_SLOPE / np.sqrt(3.0)] * len(rows),
                                                                          rel=1e-5)
-    assert json.loads((out / "convergence.json").read_text())["ladders"]["handoff.particle_resolution"] == particles
+    saved = json.loads((out / "convergence.json").read_text())
+    assert saved["ladders"]["handoff.particle_resolution"] == particles
+    spread = saved["richardson_uncertainty"]["handoff.particle_resolution"]
+    assert spread["f_star_16"] < ext.value < spread["f_star_84"]
+    assert set(spread["within_tolerance"]) == {"1.0", "2.0", "4.0"}
     bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
                                     "--vary", "handoff.seed=1,2", "--seeds", "3"])
     assert bad.exit_code == 2 and "--seeds: not with a handoff.seed ladder" in bad.output
