@@ -340,6 +340,12 @@ class Refinement(Strict):
                                   description="pressure floor of the jump indicator, fraction of the largest |p|")
     boxes: list[RefinementBox] = Field(default_factory=list)
 
+    @field_validator("interfaces", mode="before")
+    @classmethod
+    def _unquoted_off(cls, value: Any) -> Any:
+        """YAML 1.1 reads an unquoted ``off`` as false; it means the mode ``off``."""
+        return "off" if value is False else value
+
 
 class Tracers(Strict):
     enabled: bool | Literal["auto"] = "auto"

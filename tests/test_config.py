@@ -58,6 +58,17 @@ def test_yaml_floats_without_exponent_sign_are_numbers():
     assert load_yaml("a: 10.0e3\nb: 1e-3\nc: 4.0e-7\nd: 5") == {"a": 10000.0, "b": 0.001, "c": 4.0e-7, "d": 5}
 
 
+def test_unquoted_off_is_the_interfaces_mode_off(tmp_path):
+    """YAML 1.1 reads `interfaces: off` as false; it means the mode, and true is still refused."""
+    text = (HERE.parent / "configs" / "reference" / "case8c.yaml").read_text()
+    cfg = tmp_path / "off.yaml"
+    cfg.write_text(text.replace("  self_gravity: false\n", "  self_gravity: false\n  refinement: {interfaces: off}\n"))
+    assert load_config(cfg).hydro.refinement.interfaces == "off"
+    cfg.write_text(text.replace("  self_gravity: false\n", "  self_gravity: false\n  refinement: {interfaces: on}\n"))
+    with pytest.raises(ConfigError, match="hydro.refinement.interfaces: must be one of 'all', 'active' or 'off'"):
+        load_config(cfg)
+
+
 def test_presets_resolve_and_overrides_win(tmp_path):
     text = "name: x\nscene:\n  problem: impact\n  target: {material: b, radius: 1.0e4}\n" \
            "  projectile: {material: b, radius: 830}\n  impact: {velocity: 1900}\n" \
