@@ -142,6 +142,9 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     t_wall = time.perf_counter()
     config = ctx.config
     values = derived.derive(config)
+    coarse = derived.resolution_warnings(config)
+    for message in coarse:
+        log.warning("hydro: %s", message)
     end_time = float(values["end_time"])
     work = ctx.run_dir / WORK_FILE
     checkpoint = ctx.run_dir / CHECKPOINT_FILE
@@ -195,6 +198,7 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     return {
         "tracers": tracer_summary,
         "physics_not_modelled": warnings,
+        "resolution_warnings": coarse,
         "hydro_budget": budget,
         "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts},
     }

@@ -44,7 +44,7 @@ def _load_or_exit(path: str):
         for message in errors:
             click.echo(f"{path}: {message}", err=True)
         sys.exit(2)
-    for message in derived.physics_warnings(values):
+    for message in derived.physics_warnings(values) + derived.resolution_warnings(config):
         click.echo(f"{path}: warning: {message}", err=True)
     return config, values
 

@@ -83,3 +83,16 @@ def test_validate_prints_every_choice_and_its_rule():
     assert result.exit_code == 0, result.output
     for key in ("geometry", "end_time", "self_gravity", "tracers", "strength", "margin"):
         assert key in result.output, key
+
+
+def test_an_under_resolved_projectile_is_warned_about_before_any_work(tmp_path):
+    """1 cell per projectile radius (2 across) warns before any work (validate, run), naming the key and the
+    value; the quickstart's 4 cells and scenes without a projectile do not."""
+    coarse = tmp_path / "coarse.yaml"
+    coarse.write_text(QUICKSTART.read_text().replace("cells_per_projectile_radius: 4", "cells_per_projectile_radius: 1"))
+    result = CliRunner().invoke(main, ["validate", str(coarse)])
+    assert result.exit_code == 0, result.output
+    assert ("warning: hydro.cells_per_projectile_radius: 1 (2 cells across the projectile) is under-resolved"
+            in result.output)
+    assert derived.resolution_warnings(load_config(QUICKSTART)) == []
+    assert derived.resolution_warnings(parse_config(SOD)) == []
