@@ -47,10 +47,7 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    scaled down together if the void is smaller, doing the work p_k / 2 per unit volume.  Each material takes the work
    -p_k (change of its volume fraction from the closure).  Total energy is conserved by
    the fluxes; the difference between E - |m|^2 / (2 rho) and sum alpha_k rho_k e_k is
-   given to the materials (counted as reconciled energy): a gain in proportion to their
-   volume fractions (each material's pressure then rises by about Gamma_k times the gain
-   per unit volume, so the cell stays near pressure equilibrium), a loss in proportion to
-   their internal energies.
+   given to the materials in proportion to their mass (counted as reconciled energy).
 5. Transported per-material scalars (the generic hook for material strength): each column
    j of ``arhoq[NB, M * NQ, ...]`` holds a mass-weighted amount alpha_k rho_k q_k,j of
    material k = column // NQ; it moves with material k's mass flux at the donor cell's
@@ -617,25 +614,15 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         esum += arhoe[b, k, ix, iy, iz]
     delta = (e_int - esum) / rho
     amounts[b, AMOUNT_ENERGY_RECONCILED] += abs(e_int - esum) * vol
-    # a gain is shared by volume fraction, so each material's pressure rises by about
-    # Gamma_k (e_int - esum) / phi (a share by mass would raise a dense trace's pressure
-    # rho_k / rho times more); a loss by internal energy, so cold material is not driven
+    # a gain is shared by mass; a loss by internal energy, so cold material is not driven
     # below zero while the cell as a whole still has internal energy to give
     shrink = e_int / esum if (delta < 0.0 and esum > 0.0 and e_int >= 0.0) else -1.0
-    filled = 0.0
-    for k in range(nmat):
-        if arho[b, k, ix, iy, iz] > 0.0:
-            filled += alpha[b, k, ix, iy, iz]
     added = 0.0
     for k in range(nmat):
-        ae = arhoe[b, k, ix, iy, iz]
         if shrink >= 0.0:
-            ae *= shrink
-        elif filled > 0.0:
-            if arho[b, k, ix, iy, iz] > 0.0:
-                ae += (e_int - esum) * alpha[b, k, ix, iy, iz] / filled
+            ae = arhoe[b, k, ix, iy, iz] * shrink
         else:
-            ae += delta * arho[b, k, ix, iy, iz]
+            ae = arhoe[b, k, ix, iy, iz] + delta * arho[b, k, ix, iy, iz]
         if ae < 0.0:
             added -= ae
             ae = 0.0

@@ -261,11 +261,11 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alp
     e_int = e_tot - 0.5 * (mn * mn + m1 * m1 + m2 * m2) / ar
     vol = sc[W_VOL, i]
     amounts[b, AMOUNT_ENERGY_RECONCILED] += abs(e_int - ae) * vol
-    gain = e_int - ae
-    if gain < 0.0 and ae > 0.0 and e_int >= 0.0:
+    delta = (e_int - ae) / ar
+    if delta < 0.0 and ae > 0.0 and e_int >= 0.0:
         ae *= e_int / ae
     else:
-        ae += gain
+        ae += delta * ar
     if ae < 0.0:
         floors[b, FLOOR_INTERNAL_ENERGY] += 1
         amounts[b, AMOUNT_ENERGY_FLOOR] -= ae * vol
