@@ -69,6 +69,17 @@ def assert_mass_budgets_close(summary):
     assert abs(nbody["mass_error"]) < 1e-12
 
 
+def run_quickstart_variant(tmp_path, text):
+    """Run the config ``text`` through every stage; its summary.json, mass budgets checked."""
+    config = tmp_path / "variant.yaml"
+    config.write_text(text)
+    result = CliRunner().invoke(main, ["run", str(config), "--out", str(tmp_path / "run"), "-q"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert_mass_budgets_close(summary)
+    return summary
+
+
 @pytest.mark.parametrize("target, projectile", [("ice", "iron"), ("iron", "ice")])
 def test_density_contrast_impacts(target, projectile):
     """Iron into ice and ice into iron at 5 km/s (density ratio 8.5)."""
@@ -97,15 +108,9 @@ def test_tiny_and_huge_bodies_through_every_stage(radius, tmp_path):
     budget closes, and the outcome is the regime's: the 1 m body (strengthless, escape speed
     ~1e-3 m/s) disperses, the 500 km body (escape speed ~600 m/s) reaccumulates.  Self-gravity
     in the hydro stage, which the 500 km body would need (validate says so), is off."""
-    text = QUICKSTART.read_text().replace("radius: 1.0e3", f"radius: {radius!r}").replace(
-        "radius: 1.0e2", f"radius: {0.1 * radius!r}").replace("  block_cells: 4\n",
-                                                            "  block_cells: 4\n  self_gravity: false\n")
-    config = tmp_path / "scaled.yaml"
-    config.write_text(text)
-    result = CliRunner().invoke(main, ["run", str(config), "--out", str(tmp_path / "run"), "-q"])
-    assert result.exit_code == 0, result.output
-    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert_mass_budgets_close(summary)
+    summary = run_quickstart_variant(tmp_path, QUICKSTART.read_text().replace(
+        "radius: 1.0e3", f"radius: {radius!r}").replace("radius: 1.0e2", f"radius: {0.1 * radius!r}").replace(
+        "  block_cells: 4\n", "  block_cells: 4\n  self_gravity: false\n"))
     assert summary["handoff_time"] == pytest.approx(1.2731 * radius / 1.0e3, rel=1e-3)
     assert summary["stages"]["nbody"]["steps"] > 10
     if radius < 1e3:
@@ -121,13 +126,8 @@ def test_slowest_and_fastest_impacts_through_every_stage(velocity, tmp_path):
     """The quickstart at 10 m/s (subsonic, Q = 0.05 J/kg: the target stays whole while the
     projectile bounces or merges) and 30 km/s (Tillotson's expanded hot branch, Q = 4.5e5 J/kg,
     far above Q*_D: the target is destroyed): every stage runs and every mass budget closes."""
-    text = QUICKSTART.read_text().replace("velocity: 250.0", f"velocity: {velocity!r}")
-    config = tmp_path / "speed.yaml"
-    config.write_text(text)
-    result = CliRunner().invoke(main, ["run", str(config), "--out", str(tmp_path / "run"), "-q"])
-    assert result.exit_code == 0, result.output
-    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert_mass_budgets_close(summary)
+    summary = run_quickstart_variant(tmp_path, QUICKSTART.read_text().replace("velocity: 250.0",
+                                                                             f"velocity: {velocity!r}"))
     assert summary["Q"] == pytest.approx(0.5 * 0.1 ** 3 * velocity ** 2)
     if velocity < 100.0:
         assert summary["M_lr_over_M_T"] > 0.99
