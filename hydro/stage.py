@@ -204,6 +204,14 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     }
 
 
+#: Floor amounts that change the mesh totals, with the sign of their change (added +1, removed -1).
+COUNTED_CHANGES = {
+    "mass": (("mass_added_by_floors", 1.0), ("mass_removed_by_void_cleanup", -1.0)),
+    "energy": (("energy_added_by_floors", 1.0), ("energy_removed_by_void_cleanup", -1.0),
+               ("energy_removed_by_velocity_limit", -1.0), ("energy_removed_by_energy_limit", -1.0)),
+}
+
+
 def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: dict[str, float],
                         gravity_work: float = 0.0) -> dict[str, float]:
     """Mass, momentum and energy: at the start, on the mesh at the end, what left it, what floors changed (SI).
@@ -212,6 +220,9 @@ def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: 
     scheme failed to conserve, floors included; ``added`` is the work done by external
     gravity for the energy (``energy_added_by_gravity``, J; :mod:`impactpipe.hydro.gravity`)
     and 0 for the mass.  A run starting with zero energy is measured against the gravity work.
+    ``*_unaccounted`` is the same with every counted change of the floors (``floors``, the
+    solver's ``floor_amounts``; :data:`COUNTED_CHANGES`) taken back: zero up to round-off
+    when nothing changed the totals uncounted.
     """
     out: dict[str, float] = {"energy_added_by_gravity": float(gravity_work)}
     for key in ("mass", "energy"):
@@ -220,7 +231,10 @@ def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: 
         out[f"{key}_on_mesh"] = float(final[key])
         out[f"{key}_left_mesh"] = float(final[f"outflow_{key}"])
         scale = abs(float(initial[key])) or abs(added) or 1.0
-        out[f"{key}_error"] = float((final[key] + final[f"outflow_{key}"] - initial[key] - added) / scale)
+        change = final[key] + final[f"outflow_{key}"] - initial[key] - added
+        out[f"{key}_error"] = float(change / scale)
+        counted = sum(sign * floors.get(name, 0.0) for name, sign in COUNTED_CHANGES[key])
+        out[f"{key}_unaccounted"] = float((change - counted) / scale)
     for axis, name in enumerate("xyz"):
         out[f"momentum_{name}_initial"] = float(initial["momentum"][axis])
         out[f"momentum_{name}_on_mesh"] = float(final["momentum"][axis])

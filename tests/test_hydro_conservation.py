@@ -5,6 +5,7 @@ import pytest
 
 from impactpipe.hydro import BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.stage import conservation_budget
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
@@ -74,3 +75,17 @@ def test_cylindrical_uniform_state_at_rest_stays_at_rest(boundary):
     assert np.abs(snap.velocity).max() < 1e-12 * c
     assert np.abs(snap.pressure / 1.0e5 - 1.0).max() < 1e-12
     assert np.abs(snap.density - 1.0).max() < 1e-12
+
+
+def test_budget_takes_back_the_counted_floor_changes():
+    """*_error keeps the counted fixes, *_unaccounted takes them back (both relative)."""
+    initial = {"mass": 10.0, "energy": 100.0, "momentum": np.zeros(3)}
+    final = {"mass": 9.25, "energy": 96.0, "momentum": np.zeros(3), "outflow_mass": 0.5, "outflow_energy": 1.0,
+             "outflow_momentum": np.zeros(3)}
+    floors = {"mass_added_by_floors": 0.25, "mass_removed_by_void_cleanup": 0.5, "energy_added_by_floors": 1.0,
+              "energy_removed_by_void_cleanup": 2.0, "energy_removed_by_velocity_limit": 1.5,
+              "energy_removed_by_energy_limit": 0.5, "energy_reconciled": 7.0}
+    budget = conservation_budget(initial, final, floors)
+    assert budget["mass_error"] == pytest.approx(-0.025) and budget["mass_unaccounted"] == pytest.approx(0.0)
+    assert budget["energy_error"] == pytest.approx(-0.03) and budget["energy_unaccounted"] == pytest.approx(0.0)
+    assert conservation_budget(initial, final, {})["mass_unaccounted"] == pytest.approx(-0.025)

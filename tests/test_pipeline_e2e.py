@@ -50,6 +50,7 @@ def test_mass_budget_closes_through_every_stage(quickstart):
     summary = json.loads((out / "summary.json").read_text())
     hydro, handoff, nbody = summary["hydro_budget"], summary["handoff_budget"], summary["nbody_budget"]
     assert abs(hydro["mass_error"]) < 1e-12
+    assert abs(hydro["mass_unaccounted"]) < 1e-12 and abs(hydro["energy_unaccounted"]) < 1e-12
     mesh_end = hydro["mass_on_mesh"]
     assert handoff["mesh_mass"] == pytest.approx(mesh_end, rel=1e-12)
     assert handoff["particle_mass"] + handoff["dropped_mass"] == pytest.approx(handoff["mesh_mass"], rel=1e-12)
