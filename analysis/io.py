@@ -4,7 +4,7 @@ Layout: nested groups of datasets.  :func:`write_analysis` takes a nested mappin
 whose leaves are ``(value, units)`` or ``(value, units, description)`` tuples
 (the ``as_datasets()`` methods of the result objects return such mappings), so a
 dataset cannot be written without units.  Root attributes carry provenance
-(:func:`impactpipe.pipeline.runstore.provenance`) and any other string metadata.
+(:func:`impactpipe.storage.provenance`) and any other string metadata.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from impactpipe.pipeline.runstore import atomic_path, write_dataset, write_provenance
+from impactpipe.storage import atomic_path, write_dataset, write_provenance
 
 
 @dataclass

@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib import colors as mcolors
 from matplotlib.figure import Figure
 
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.storage import atomic_path
 
 from .qstar import QStarFit
 

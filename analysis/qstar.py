@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.storage import atomic_path
 
 logger = logging.getLogger(__name__)
 

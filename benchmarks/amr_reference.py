@@ -25,7 +25,7 @@ import time
 import numba
 import numpy as np
 
-from impactpipe.hydro.stage import build_simulation
+from impactpipe.pipeline.adapters.hydro import build_simulation
 from impactpipe.pipeline.config import load_config
 from impactpipe.pipeline.derived import derive
 

@@ -8,7 +8,7 @@ the overhead min(with) / min(without) - 1.  Issue goal: 1e4 tracers add under 10
 import time
 from pathlib import Path
 
-from impactpipe.hydro.stage import add_tracers, build_simulation
+from impactpipe.pipeline.adapters.hydro import add_tracers, build_simulation
 from impactpipe.pipeline import derived
 from impactpipe.pipeline.config import load_config
 

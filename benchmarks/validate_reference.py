@@ -53,7 +53,7 @@ import numpy as np
 import yaml
 
 from impactpipe.analysis.qstar import fit_qstar, plus_minus
-from impactpipe.pipeline import runstore
+from impactpipe import storage
 from impactpipe.pipeline.config import ConfigError, load_config
 from impactpipe.pipeline.handoff_scan import handoff_scan
 from impactpipe.pipeline.stages import read_records, resolved_dict, resolved_yaml
@@ -222,13 +222,13 @@ def run_validation(options: dict[str, Any], executor: cf.Executor | None = None,
     for plan in plans:  # validate every point of every sweep before any work
         path = out / f"case{plan['family']}.sweep.yaml"
         out.mkdir(parents=True, exist_ok=True)
-        runstore.write_text_atomic(path, yaml.safe_dump(plan["spec"], sort_keys=False))
+        storage.write_text_atomic(path, yaml.safe_dump(plan["spec"], sort_keys=False))
         sweeps.append(load_sweep(path))
     scan_config = None
     if options["handoff_times"] and "8c" in options["cases"]:
         config = load_config(REFERENCE_DIR / "case8c.yaml", overrides=overrides_for(options))
         scan_config = out / "case8c-scan.yaml"
-        runstore.write_text_atomic(scan_config, resolved_yaml(config))
+        storage.write_text_atomic(scan_config, resolved_yaml(config))
     close = None
     guard = contextlib.nullcontext()
     if executor is None:
@@ -251,8 +251,8 @@ def run_validation(options: dict[str, Any], executor: cf.Executor | None = None,
         if close is not None:
             close()
     report = build_report(options, points, scan, time.perf_counter() - t0)
-    runstore.write_json_atomic(out / "validation.json", report)
-    runstore.write_text_atomic(out / "validation.md", "\n".join(format_report(report)) + "\n")
+    storage.write_json_atomic(out / "validation.json", report)
+    storage.write_text_atomic(out / "validation.md", "\n".join(format_report(report)) + "\n")
     return report
 
 

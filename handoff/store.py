@@ -20,7 +20,7 @@ import numpy as np
 
 from impactpipe.handoff.budget import BUDGET_UNITS, HandoffBudget
 from impactpipe.handoff.particles import PARTICLE_UNITS, ParticleSet
-from impactpipe.pipeline.runstore import atomic_path, write_dataset, write_provenance
+from impactpipe.storage import atomic_path, write_dataset, write_provenance
 
 #: HandoffBudget fields stored as attributes of /budget rather than datasets.
 _ATTRIBUTES = ("geometry", "mirrored_y0")

@@ -36,7 +36,7 @@ import numpy as np
 
 from impactpipe.hydro.amr_hierarchy import VELOCITY_COMPONENTS, block_grid, cell_fields
 from impactpipe.hydro.snapshot import Snapshot
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.storage import atomic_path
 
 VTKHDF_VERSION = (1, 0)
 #: VTK cell type and corner offsets (x, y, z in cell units, VTK's corner order) per dimension.

@@ -2,7 +2,7 @@
 
 Each snapshot group carries the attributes ``time`` (s), ``geometry`` and
 ``material_names`` (JSON list) and one dataset per :class:`~impactpipe.hydro.snapshot.Snapshot`
-array, each with a ``units`` attribute (:func:`impactpipe.pipeline.runstore.write_dataset`).
+array, each with a ``units`` attribute (:func:`impactpipe.storage.write_dataset`).
 Extra fields go to ``extra/<name>`` with the units and description of
 :data:`EXTRA_UNITS` (the material-strength fields), or ``units = "unspecified"`` for any other.
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from impactpipe.hydro.snapshot import Snapshot, TracerSet
 from impactpipe.hydro.tracers import HISTORY_UNITS, TRACER_UNITS, Tracers
-from impactpipe.pipeline.runstore import write_dataset
+from impactpipe.storage import write_dataset
 
 SNAPSHOT_GROUP = "snapshots"
 TRACER_GROUP = "tracers"

@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm, Normalize  # noqa: E402
 
-from impactpipe.pipeline.runstore import atomic_path  # noqa: E402
+from impactpipe.storage import atomic_path  # noqa: E402
 
 from .snapshot import Snapshot  # noqa: E402
 

@@ -45,7 +45,7 @@ from impactpipe.hydro.sweep_layout import (
     allocate_scratch,
 )
 from impactpipe.hydro.timestep import cell_thermodynamics, max_signal_rate
-from impactpipe.pipeline.runstore import atomic_path, compression
+from impactpipe.storage import atomic_path, compression
 
 logger = logging.getLogger(__name__)
 

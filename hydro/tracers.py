@@ -79,7 +79,7 @@ from impactpipe.hydro.eos import pressure_sound_speed, temperature
 from impactpipe.hydro.mesh import GHOST, OUTFLOW, REFLECTING, BlockMesh, block_keys
 from impactpipe.hydro.snapshot import TracerSet
 from impactpipe.hydro.timestep import ALPHA_MIN
-from impactpipe.pipeline.runstore import write_dataset
+from impactpipe.storage import write_dataset
 
 #: Boundary code for a periodic face in the fold / wrap kernels (the mesh neighbour table
 #: holds a block index there; OUTFLOW and REFLECTING are the mesh's codes).

@@ -64,7 +64,7 @@ import numpy as np
 import rebound
 
 from impactpipe.handoff.particles import ParticleSet
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.storage import atomic_path
 
 from . import diagnostics as dg
 from .resolver import (CTX_N_BOUNCE, CTX_N_HANDOFF, CTX_N_MERGE, CTX_N_OVERLAP, CTX_N_SEPARATING, CTX_PARTICLE_STEPS,

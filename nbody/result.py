@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, fields
 import h5py
 import numpy as np
 
-from impactpipe.pipeline.runstore import atomic_path, write_dataset
+from impactpipe.storage import atomic_path, write_dataset
 
 NO_PARTICLES_LEFT = "no_particles_left"  # every particle was removed, or the hand-off had none
 STABLE_ORBITS = "stable_orbits"  # nothing merged, escaped or stopped orbiting for max_quiet_dynamical_times

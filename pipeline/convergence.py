@@ -58,7 +58,9 @@ import numpy as np
 import yaml
 from scipy import optimize
 
-from . import derived, runstore
+from impactpipe import storage
+
+from . import derived
 from .config import ConfigError, key_paths
 from .stages import STAGES, read_records, stage_hashes
 from .sweep import Sweep, SweepSpec, donor_problems, handoff_time_params, open_runner, with_replicates
@@ -561,7 +563,7 @@ def run_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir:
         raise LadderError(messages)
     out = sweep.directory
     out.mkdir(parents=True, exist_ok=True)
-    runstore.write_text_atomic(sweep.source, yaml.safe_dump(
+    storage.write_text_atomic(sweep.source, yaml.safe_dump(
         {**sweep.spec.model_dump(mode="json", exclude_none=True), "ladders": ladders,
          "depths_in_projectile_radii": list(depths), "handoff_times": handoff_times, "seeds": seeds},
         sort_keys=False))
@@ -757,17 +759,17 @@ def _write_outputs(out: Path, rungs: list[Rung], ladders: dict[str, list[Any]],
         if uncertainty.get(key) is not None:
             comments.append(uncertainty_text(key, [r.value for r in ladder], uncertainty[key], tolerance))
     files = [out / TABLE_FILE, out / RICHARDSON_FILE, out / JSON_FILE]
-    runstore.write_text_atomic(out / TABLE_FILE, _csv(columns, rows, comments))
+    storage.write_text_atomic(out / TABLE_FILE, _csv(columns, rows, comments))
     rich_rows = []
     for key, by_answer in extrapolations.items():
         for name, ext in by_answer.items():
             rich_rows.append({"ladder": key, "answer": name, "status": ext.status, "order": ext.order,
                               "ratio_r21": ext.ratios[0], "ratio_r32": ext.ratios[1], "extrapolated": ext.value,
                               "step_size": STEP_SIZE[key][0] if key in STEP_SIZE else ""})
-    runstore.write_text_atomic(out / RICHARDSON_FILE, _csv(
+    storage.write_text_atomic(out / RICHARDSON_FILE, _csv(
         ["ladder", "answer", "status", "order", "ratio_r21", "ratio_r32", "extrapolated", "step_size"], rich_rows,
         ["Richardson estimate f = f* + C h^p from the three finest rungs of each ladder"]))
-    runstore.write_json_atomic(out / JSON_FILE, {
+    storage.write_json_atomic(out / JSON_FILE, {
         "base": base.name, "ladders": ladders, "tolerance": tolerance,
         "handoff_times": handoff_times,
         "rows": rows, "richardson": rich_rows,
@@ -873,7 +875,7 @@ def _figure(path: Path, rows: list[dict[str, Any]], key: str, answers: list[str]
             elif key in STEP_SIZE:
                 row_axes.set_xscale("log")
     fig.suptitle(f"ladder in {key}: answers against the value and the cost of each rung", fontsize=10)
-    with runstore.atomic_path(path) as tmp:
+    with storage.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=150, format="png")
     plt.close(fig)
 

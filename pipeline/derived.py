@@ -12,6 +12,12 @@ from typing import Any
 
 import numpy as np
 
+from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
+from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS
+from impactpipe.hydro.problems import PROBLEMS, impact
+from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS
+from impactpipe.nbody.simulation import dynamical_time
+
 from .config import Config
 
 G = 6.674e-11
@@ -25,8 +31,6 @@ SELF_GRAVITY_VELOCITY_FRACTION = 0.05
 
 def reference_state(material: dict[str, Any]) -> tuple[float, float]:
     """(rho0, bulk sound speed at rho0 and zero internal energy) of a resolved material (SI)."""
-    from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
-
     arrays = pack_eos([material["eos"]])
     rho0 = reference_density(arrays.kind[0], arrays.params[0], arrays.table)
     _, c2, _ = pressure_sound_speed(arrays.kind[0], arrays.params[0], arrays.table, rho0, 0.0)
@@ -42,10 +46,18 @@ def geometry(config: Config) -> tuple[str, str]:
         if scene.impact.angle == 90.0:
             return "2d-cylindrical", "head-on impact (angle 90) is axisymmetric"
         return "3d", f"oblique impact (angle {scene.impact.angle:g}) needs 3d"
-    from impactpipe.hydro.problems import PROBLEMS
-
     default = inspect.signature(PROBLEMS[scene.problem].setup).parameters["geometry"].default
     return default, f"default of the {scene.problem} problem"
+
+
+def tracers_enabled(config: Config) -> tuple[bool, str]:
+    """(on, why) for tracers: auto turns them on for impacts, whose analysis needs peak pressures."""
+    setting = config.hydro.tracers.enabled
+    if setting != "auto":
+        return bool(setting), "set in the config"
+    if config.scene.problem == "impact":
+        return True, "auto: on for impacts (peak pressures for the shock histories of the analysis)"
+    return False, f"auto: off for the {config.scene.problem} verification problem"
 
 
 def central_pressure(rho: float, radius: float) -> float:
@@ -62,8 +74,6 @@ def derive(config: Config) -> dict[str, Any]:
     out: dict[str, Any] = {"geometry": geom, "geometry_rule": why}
     materials = config.resolved_materials()
     out["strength"] = {name: strength_choice(mat["strength"]) for name, mat in materials.items()}
-    from impactpipe.hydro.stage import tracers_enabled
-
     out["tracers"], out["tracers_rule"] = tracers_enabled(config)
     out["levels"], out["levels_rule"] = mesh_levels(config, geom)
     out["mesh"] = ("uniform, one level at the finest cell size" if out["levels"] == 1 else
@@ -103,8 +113,6 @@ def derive(config: Config) -> dict[str, Any]:
     if out["domain"] is not None:
         out["handoff_block_edge"], out["handoff_block_edge_rule"] = handoff_block_edge(
             config, out["domain"]["block_cells"])
-    from impactpipe.nbody.simulation import dynamical_time
-
     out["nbody_dynamical_time"] = dynamical_time(rho_t)
     out["nbody_time_cap"], out["nbody_time_cap_rule"] = nbody_time_cap(config.nbody.stop, out["nbody_dynamical_time"])
     return out
@@ -144,9 +152,6 @@ def mesh_levels(config: Config, geom: str) -> tuple[int, str]:
     surfaces and the shocks, the coarsest the quiet interior and the void.  Other scenes run
     one level (their own resolution keys set the mesh).
     """
-    from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS
-    from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS
-
     chosen = config.hydro.max_levels
     if config.scene.problem != "impact":
         return (1, "one level: only impact scenes refine adaptively") if chosen == "auto" else \
@@ -190,8 +195,6 @@ def impact_domain(config: Config, geom: str, total_mass: float, end_time: float)
     material may leave through the outflow faces and is counted there (hydro budget
     ``*_left_mesh``).  The box itself is :func:`impactpipe.hydro.problems.impact.domain`.
     """
-    from impactpipe.hydro.problems import impact
-
     if geom not in impact.GEOMETRIES:
         return None
     scene = config.scene
@@ -297,10 +300,6 @@ def as_plain(values: dict[str, Any]) -> dict[str, Any]:
 
 def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     """Requests this version cannot carry out, as ``key: message`` lines (checked before any work)."""
-    from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS
-    from impactpipe.hydro.problems import PROBLEMS
-    from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS
-
     errors = []
     if config.scene.problem not in PROBLEMS:
         errors.append(f"scene.problem: '{config.scene.problem}' has no hydro setup in this version "
@@ -370,8 +369,6 @@ def _particle_resolution_errors(config: Config, values: dict[str, Any]) -> list[
 
 def _impact_geometry_errors(scene, geom: str) -> list[str]:
     """An impact scene's geometry, angle and full_domain that do not fit together, as ``key: message`` lines."""
-    from impactpipe.hydro.problems import impact
-
     if geom not in impact.GEOMETRIES:
         return [f"scene.geometry: an impact runs in {', '.join(impact.GEOMETRIES)} (got {geom}); "
                 f"use auto (2d-cylindrical for angle 90, 3d otherwise)"]

@@ -18,7 +18,9 @@ import numpy as np
 import yaml
 from scipy import stats
 
-from . import derived, runstore
+from impactpipe import storage
+
+from . import derived
 from .config import load_config
 from .sweep import load_sweep, run_sweep
 
@@ -52,7 +54,7 @@ def handoff_scan(config_path: str | Path, times: list[float], out_dir: str | Pat
         "axes": {"handoff.time": times},
         "execution": execution or {},
     }
-    runstore.write_text_atomic(out / SCAN_FILE, yaml.safe_dump(spec, sort_keys=False))
+    storage.write_text_atomic(out / SCAN_FILE, yaml.safe_dump(spec, sort_keys=False))
     sweep = load_sweep(out / SCAN_FILE)
     result = run_sweep(sweep, executor=executor, show_progress=show_progress)
     rows = []
@@ -77,7 +79,7 @@ def handoff_scan(config_path: str | Path, times: list[float], out_dir: str | Pat
              "# " + slope_text(slope, slope_err, int(late.sum()), late_from),
              "handoff_time_s,M_lr_over_M_T,N_lr,late,status"]
     lines += [f"{ti:.6g},{mi:.6g},{ni:.0f},{int(li)},{r[3]}" for ti, mi, ni, li, r in zip(t, mlr, n_lr, late, rows)]
-    runstore.write_text_atomic(out / TABLE_FILE, "\n".join(lines) + "\n")
+    storage.write_text_atomic(out / TABLE_FILE, "\n".join(lines) + "\n")
     _figure(out / FIGURE_FILE, t, mlr, late, late_from, slope)
     return {"times": t, "mlr_over_mt": mlr, "n_lr": n_lr, "slope": slope, "slope_err": slope_err,
             "late_from": late_from, "n_late": int(late.sum()), "points": result["points"]}
@@ -109,6 +111,6 @@ def _figure(path: Path, t, mlr, late, late_from: float, slope: float) -> None:
     ax.set_xlabel("hand-off time (s)")
     ax.set_ylabel("M_lr / M_T")
     ax.legend()
-    with runstore.atomic_path(path) as tmp:
+    with storage.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=150, format="png")
     plt.close(fig)

@@ -24,7 +24,9 @@ from typing import Any
 
 import yaml
 
-from . import runstore
+from impactpipe import storage
+
+from . import derived
 from .config import STAGES, Config
 from .progress import StageProgress
 
@@ -39,10 +41,10 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
 }
 STAGE_FILES = {"hydro": "hydro.h5", "handoff": "handoff.h5", "nbody": "nbody.h5", "analysis": "analysis.h5"}
 STAGE_FUNCTIONS = {
-    "hydro": "impactpipe.hydro.stage:run_hydro_stage",
-    "handoff": "impactpipe.handoff.stage:run_handoff_stage",
-    "nbody": "impactpipe.nbody.stage:run_nbody_stage",
-    "analysis": "impactpipe.analysis.stage:run_analysis_stage",
+    "hydro": "impactpipe.pipeline.adapters.hydro:run_hydro_stage",
+    "handoff": "impactpipe.pipeline.adapters.handoff:run_handoff_stage",
+    "nbody": "impactpipe.pipeline.adapters.nbody:run_nbody_stage",
+    "analysis": "impactpipe.pipeline.adapters.analysis:run_analysis_stage",
 }
 RECORD_FILE = "stages.json"
 SUMMARY_FILE = "summary.json"
@@ -55,9 +57,12 @@ class StageInterrupted(Exception):
 
 @dataclass
 class StageContext:
-    """What a stage function gets: the validated config, the run directory and helpers."""
+    """What a stage adapter gets: the validated config, its derived values
+    (:func:`impactpipe.pipeline.derived.derive`, computed once per run), the run directory
+    and helpers."""
 
     config: Config
+    values: dict[str, Any]
     run_dir: Path
     show_progress: bool = True
     summary: dict[str, Any] = field(default_factory=dict)
@@ -73,7 +78,7 @@ class StageContext:
 
     def provenance(self, started: str, wall_seconds: float) -> dict[str, str]:
         """Provenance attributes for a stage's output file."""
-        return runstore.provenance(resolved_yaml(self.config), started, wall_seconds)
+        return storage.provenance(resolved_yaml(self.config), started, wall_seconds)
 
 
 def resolved_dict(config: Config) -> dict[str, Any]:
@@ -158,7 +163,7 @@ def adopt_stages(run_dir: Path, source_dir: Path, config: Config) -> list[str]:
         if records.get(stage, {}).get("hash") == hashes[stage] and (run_dir / STAGE_FILES[stage]).is_file():
             continue
         target = run_dir / STAGE_FILES[stage]
-        with runstore.atomic_path(target) as tmp:
+        with storage.atomic_path(target) as tmp:
             tmp.unlink()
             try:
                 os.link(source_file, tmp)
@@ -168,13 +173,13 @@ def adopt_stages(run_dir: Path, source_dir: Path, config: Config) -> list[str]:
         adopted.append(stage)
     if adopted:
         run_dir.mkdir(parents=True, exist_ok=True)
-        runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+        storage.write_json_atomic(run_dir / RECORD_FILE, records)
         summary_path = run_dir / SUMMARY_FILE
         source_summary = source_dir / SUMMARY_FILE
         if source_summary.is_file() and not summary_path.is_file():
             summary = _adopted_summary(json.loads(source_summary.read_text()), adopted)
             summary["run_dir"] = str(run_dir.resolve())
-            runstore.write_json_atomic(summary_path, summary)
+            storage.write_json_atomic(summary_path, summary)
     return adopted
 
 
@@ -242,15 +247,16 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
     """
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     run_dir.mkdir(parents=True, exist_ok=True)
-    runstore.write_text_atomic(run_dir / RESOLVED_CONFIG_FILE, resolved_yaml(config))
+    storage.write_text_atomic(run_dir / RESOLVED_CONFIG_FILE, resolved_yaml(config))
     hashes = stage_hashes(config)
     records = read_records(run_dir)
     summary_path = run_dir / SUMMARY_FILE
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     summary.update({"name": config.name, "problem": config.scene.problem, "run_dir": str(run_dir.resolve()),
-                    "versions": runstore.package_versions(), "git_commit": runstore.SOURCE_COMMIT})
+                    "versions": storage.package_versions(), "git_commit": storage.SOURCE_COMMIT})
     summary.setdefault("stages", {})
-    ctx = StageContext(config=config, run_dir=run_dir, show_progress=show_progress, summary=summary)
+    ctx = StageContext(config=config, values=derived.derive(config), run_dir=run_dir, show_progress=show_progress,
+                       summary=summary)
     with _signals_raise():
         for stage, reason in plan(config, run_dir, stages, from_stage, force):
             if reason.startswith("skip"):
@@ -258,27 +264,27 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
                 continue
             log.info("%s: %s", stage, reason[5:])
             _invalidate_after(stage, records)
-            records[stage] = {"status": "running", "hash": hashes[stage], "started": runstore.utc_now()}
-            runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+            records[stage] = {"status": "running", "hash": hashes[stage], "started": storage.utc_now()}
+            storage.write_json_atomic(run_dir / RECORD_FILE, records)
             ctx.stage_hash = hashes[stage]
             t0 = time.perf_counter()
             try:
                 result = load_stage_function(stage, stage_functions)(ctx)
             except StageInterrupted:
                 records[stage]["status"] = "interrupted"
-                runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+                storage.write_json_atomic(run_dir / RECORD_FILE, records)
                 raise
             except Exception as exc:
                 records[stage]["status"] = "failed"
                 records[stage]["error"] = f"{type(exc).__name__}: {exc}"
-                runstore.write_json_atomic(run_dir / RECORD_FILE, records)
+                storage.write_json_atomic(run_dir / RECORD_FILE, records)
                 raise
             wall = time.perf_counter() - t0
-            records[stage].update({"status": "complete", "wall_seconds": wall, "finished": runstore.utc_now()})
+            records[stage].update({"status": "complete", "wall_seconds": wall, "finished": storage.utc_now()})
             summary["stages"][stage] = {"wall_seconds": wall, **result.pop("stage", {}), "summary_keys": sorted(result)}
             summary.update(result)
-            runstore.write_json_atomic(run_dir / RECORD_FILE, records)
-            runstore.write_json_atomic(summary_path, summary)
+            storage.write_json_atomic(run_dir / RECORD_FILE, records)
+            storage.write_json_atomic(summary_path, summary)
             log.info("%s: done in %.1f s -> %s", stage, wall, run_dir / STAGE_FILES[stage])
     return summary
 

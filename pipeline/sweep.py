@@ -38,6 +38,8 @@ import numpy as np
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
+from impactpipe import storage
+
 from . import runstore
 from .config import Config, ConfigError, Strict, _LineFinder, key_paths, load_yaml, parse_config, unknown_keys
 from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
@@ -369,7 +371,7 @@ class SweepRunner:
 
     def _record(self, name: str, **fields_: Any) -> None:
         self.points.setdefault(name, {}).update(fields_)
-        runstore.write_json_atomic(self.sweep.directory / POINTS_FILE, self.points)
+        storage.write_json_atomic(self.sweep.directory / POINTS_FILE, self.points)
 
     def add_point(self, params: dict[str, Any], group: str = "", replicate_of: dict[str, Any] | None = None) -> str:
         """Register a point; returns its name.  ``replicate_of``: the parameters of the point
@@ -709,7 +711,7 @@ def write_results(sweep: Sweep, points: dict[str, dict[str, Any]]) -> None:
     replicate_columns, replicate_rows = replicate_means(points) if sweep.spec.replicates else ([], [])
     if replicate_rows:
         _write_csv(sweep.directory / REPLICATES_CSV, replicate_columns, replicate_rows)
-    with runstore.atomic_path(sweep.directory / RESULTS_H5) as tmp:
+    with storage.atomic_path(sweep.directory / RESULTS_H5) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["sweep"] = str(sweep.source)
             _write_columns(f, columns, rows)
@@ -727,7 +729,7 @@ def _write_columns(group: h5py.Group, columns: list[str], rows: list[dict[str, A
         data = np.array([np.nan if v == "" else v for v in values], dtype=float) if numeric \
             else np.array([str(v) for v in values], dtype=h5py.string_dtype())
         units = {"Q": "J/kg", "Q_R": "J/kg"}.get(col, "s" if col.startswith("wall_") else "dimensionless")
-        runstore.write_dataset(group, col, data, units)
+        storage.write_dataset(group, col, data, units)
 
 
 def replicate_means(points: dict[str, dict[str, Any]]) -> tuple[list[str], list[dict[str, Any]]]:
@@ -775,7 +777,7 @@ def _write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> No
     writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
-    runstore.write_text_atomic(path, buffer.getvalue())
+    storage.write_text_atomic(path, buffer.getvalue())
 
 
 # --------------------------------------------------------------------------- entry points
@@ -914,7 +916,7 @@ def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: 
     if messages:
         raise SweepError(messages)
     sweep.directory.mkdir(parents=True, exist_ok=True)
-    runstore.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
+    storage.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
     qstar = []
     with open_runner(sweep, executor, show_progress, "sweep") as runner:
         for run_dir in reuse_runs:

@@ -8,7 +8,7 @@ import math
 import os
 import time
 
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.storage import atomic_path
 
 #: Q*_D of the synthetic law (J/kg): M_lr/M_T = 1 - 0.5 Q / QSTAR.
 QSTAR = 1790.0

@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config
-from impactpipe.pipeline.runstore import write_text_atomic
+from impactpipe.storage import write_text_atomic
 from impactpipe.pipeline.stages import resolved_yaml
 
 BASE = Path(__file__).parent / "configs" / "sweep_base.yaml"

@@ -12,7 +12,7 @@ from impactpipe.hydro.gravity import ExternalGravity
 from impactpipe.hydro.mesh import BlockMesh
 from impactpipe.hydro.problems import column_collapse
 from impactpipe.hydro.problems.common import preset_material
-from impactpipe.hydro.stage import conservation_budget
+from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.state import HydroState
 from impactpipe.pipeline.config import ConfigError, parse_config
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from impactpipe.hydro.stage import build_simulation
+from impactpipe.pipeline.adapters.hydro import build_simulation
 from impactpipe.pipeline import derived
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config, parse_config

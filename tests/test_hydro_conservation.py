@@ -5,7 +5,7 @@ import pytest
 
 from impactpipe.hydro import BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos
-from impactpipe.hydro.stage import conservation_budget
+from impactpipe.hydro.budget import conservation_budget
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}

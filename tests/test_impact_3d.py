@@ -18,7 +18,7 @@ from impactpipe.hydro.mesh import REFLECTING
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.problems.impact import projectile_start
-from impactpipe.hydro.stage import add_tracers, problem_parameters
+from impactpipe.pipeline.adapters.hydro import add_tracers, problem_parameters
 from impactpipe.pipeline import derived
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import parse_config

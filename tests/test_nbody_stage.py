@@ -14,7 +14,7 @@ from impactpipe.nbody import read_result
 from impactpipe.pipeline import derived, stages
 from impactpipe.pipeline.config import parse_config
 from impactpipe.pipeline.convergence import costs_of
-from impactpipe.pipeline.runstore import atomic_path, write_dataset
+from impactpipe.storage import atomic_path, write_dataset
 
 CONFIG = """
 name: nbody-stage

@@ -13,7 +13,7 @@ import pytest
 
 from impactpipe.pipeline import stages
 from impactpipe.pipeline.config import parse_config
-from impactpipe.pipeline.runstore import atomic_path
+from impactpipe.storage import atomic_path
 
 CONFIG = """
 name: orchestration
@@ -181,14 +181,14 @@ def test_second_signal_while_stopping_does_not_lose_the_interrupted_record(tmp_p
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(5)
 
-    write = stages.runstore.write_json_atomic
+    write = stages.storage.write_json_atomic
     def write_with_second_signal(path, data):
         if data.get("hydro", {}).get("status") == "interrupted":
             os.kill(os.getpid(), signal.SIGTERM)
         write(path, data)
 
     monkeypatch.setattr(stages, "load_stage_function", lambda stage_name, overrides=None: stage)
-    monkeypatch.setattr(stages.runstore, "write_json_atomic", write_with_second_signal)
+    monkeypatch.setattr(stages.storage, "write_json_atomic", write_with_second_signal)
     with pytest.raises(stages.StageInterrupted, match="SIGTERM"):
         stages.run(config(), tmp_path, stages=["hydro"], show_progress=False)
     assert stages.read_records(tmp_path)["hydro"]["status"] == "interrupted"
@@ -217,7 +217,7 @@ def test_killed_writer_leaves_no_complete_looking_file(tmp_path):
     target = tmp_path / "out.h5"
     script = textwrap.dedent(f"""
         import time, h5py, numpy as np
-        from impactpipe.pipeline.runstore import atomic_path
+        from impactpipe.storage import atomic_path
         with atomic_path({str(target)!r}) as tmp:
             with h5py.File(tmp, "w") as f:
                 f["x"] = np.zeros(1000)
@@ -265,11 +265,11 @@ def test_atomic_path_gives_new_files_the_umask_mode_and_keeps_a_replaced_files_m
 def test_provenance_records_the_commit_of_the_imported_source(monkeypatch):
     """A sweep worker keeps running the code it imported; a commit made meanwhile must not
     appear in the provenance of its later outputs."""
-    from impactpipe.pipeline import runstore
+    from impactpipe import storage
 
-    imported = runstore.SOURCE_COMMIT
-    monkeypatch.setattr(runstore, "git_commit", lambda: "0123456789abcdef-made-after-import")
-    attrs = runstore.provenance("name: x\n", runstore.utc_now(), 1.0)
+    imported = storage.SOURCE_COMMIT
+    monkeypatch.setattr(storage, "git_commit", lambda: "0123456789abcdef-made-after-import")
+    attrs = storage.provenance("name: x\n", storage.utc_now(), 1.0)
     assert attrs["git_commit"] == (imported or "unknown")
 
 

@@ -51,6 +51,7 @@ from impactpipe.hydro.problems.common import (
     tensile_strengths,
 )
 from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.tracers import place_on_grid, place_on_rays
 
 #: Material index of the projectile (the target is 0).
 PROJECTILE_MATERIAL = 1
@@ -215,3 +216,38 @@ def surface_crosses(mesh: BlockMesh, center, radius: float) -> np.ndarray:
     nearest = np.sqrt((np.maximum(np.maximum(lo - c, c - hi), 0.0) ** 2).sum(axis=1))
     farthest = np.sqrt((np.maximum(np.abs(lo - c), np.abs(hi - c)) ** 2).sum(axis=1))
     return (nearest <= radius) & (farthest >= radius)
+
+
+#: Rays of the 2d-cylindrical tracer layout (the count per ray is ``count`` / rays).
+TRACER_RAYS = 30
+
+
+def tracer_grid_spacing(target_radius: float, count: int) -> float:
+    """Lattice spacing h (m) of the 3d tracer grid: the whole target holds about ``count`` tracers.
+
+    h = (V_T / count)^(1/3), V_T = (4 pi / 3) R_T^3.
+    """
+    return (4.0 * np.pi / 3.0 * target_radius ** 3 / count) ** (1.0 / 3.0)
+
+
+def tracer_positions(geometry: str, target_radius: float, projectile_radius: float, count: int,
+                     full_domain: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (m), material indices) of the impact scene's tracers, about ``count`` of them.
+
+    2d-cylindrical: rays from the impact point plus a projectile grid (:func:`place_on_rays`).
+    3d: cubic lattices filling both bodies (:func:`place_on_grid`), spacing
+    :func:`tracer_grid_spacing` in the target and min(h, R_P / 4) in the projectile; a
+    half-domain run (mirror plane y = 0, ``full_domain`` False) keeps the lattice points with
+    y > 0 (none lies on y = 0), and the hand-off mirrors them with the mesh.
+    """
+    r_t, r_p = target_radius, projectile_radius
+    if geometry == "3d":
+        positions, materials = place_on_grid((0.0, 0.0, 0.0), r_t, (0.0, 0.0, r_t + r_p), r_p,
+                                             tracer_grid_spacing(r_t, max(count, 1)))
+        if not full_domain:
+            half = positions[:, 1] > 0.0
+            positions, materials = positions[half], materials[half]
+        return positions, materials
+    rays = min(TRACER_RAYS, max(1, count))
+    return place_on_rays((0.0, r_t), r_t, 0.0, n_rays=rays, count=max(count, rays),
+                         projectile_radius=r_p, projectile_center_z=r_t + r_p)

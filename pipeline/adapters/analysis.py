@@ -1,4 +1,4 @@
-"""The analysis stage of the pipeline: remnants, impact energies, shock histories, figures.
+"""The analysis stage\'s adapter: remnants, impact energies, shock histories, figures.
 
 Reads ``handoff.h5`` and ``nbody.h5``, writes ``analysis.h5`` and (with
 ``analysis.plots``) PNG figures into ``plots/``; returns the summary entries
@@ -16,14 +16,15 @@ import numpy as np
 
 from impactpipe.handoff.store import read_particles
 from impactpipe.nbody.result import read_result
-from impactpipe.pipeline import derived, runstore
-from impactpipe.pipeline.stages import StageContext
+from impactpipe import storage
+from impactpipe.analysis.energies import impact_energy, mass_ratio, reduced_impact_energy
+from impactpipe.analysis.io import write_analysis
+from impactpipe.analysis.plots import plot_cumulative_pressure, plot_origin_positions, plot_velocity_distribution
+from impactpipe.analysis.provenance import provenance_owner, shock_history
+from impactpipe.analysis.remnants import find_remnants
 
-from .energies import impact_energy, mass_ratio, reduced_impact_energy
-from .io import write_analysis
-from .plots import plot_cumulative_pressure, plot_origin_positions, plot_velocity_distribution
-from .provenance import provenance_owner, shock_history
-from .remnants import find_remnants
+from ..stages import StageContext
+
 
 log = logging.getLogger(__name__)
 
@@ -32,10 +33,10 @@ PLOTS_DIR = "plots"
 
 def run_analysis_stage(ctx: StageContext) -> dict[str, Any]:
     """Analyse the run in ``ctx.run_dir``; returns the summary entries."""
-    started = runstore.utc_now()
+    started = storage.utc_now()
     t0 = time.perf_counter()
     config = ctx.config
-    values = derived.derive(config)
+    values = ctx.values
     particles = read_particles(ctx.path("handoff"))
     result = read_result(ctx.path("nbody"))
     m_t, m_p = values["target_mass"], values["projectile_mass"]

@@ -1,4 +1,4 @@
-"""The hand-off stage of the pipeline: the last hydro snapshot becomes N-body particles in handoff.h5."""
+"""The hand-off stage\'s adapter: the last hydro snapshot becomes N-body particles in handoff.h5."""
 
 from __future__ import annotations
 
@@ -10,22 +10,23 @@ import h5py
 
 from impactpipe.hydro.io import read_snapshot, read_tracers
 from impactpipe.hydro.problems.impact import PROJECTILE_MATERIAL
-from impactpipe.pipeline import derived, runstore
-from impactpipe.pipeline.stages import StageContext
+from impactpipe import storage
+from impactpipe.handoff.mirror import mirror_across_y0
+from impactpipe.handoff.moments import target_kinetic_energy
+from impactpipe.handoff.spheres import blocks_to_spheres
+from impactpipe.handoff.store import write_particles
 
-from .mirror import mirror_across_y0
-from .moments import target_kinetic_energy
-from .spheres import blocks_to_spheres
-from .store import write_particles
+from ..stages import StageContext
+
 
 log = logging.getLogger(__name__)
 
 def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     """Hand off the final hydro snapshot of ``ctx.run_dir``; returns the summary entries."""
-    started = runstore.utc_now()
+    started = storage.utc_now()
     t0 = time.perf_counter()
     config = ctx.config
-    values = derived.derive(config)
+    values = ctx.values
     hydro_path = ctx.path("hydro")
     snapshot = read_snapshot(hydro_path, index=snapshot_index(hydro_path, config.handoff.time))
     tracers = read_tracers(hydro_path)

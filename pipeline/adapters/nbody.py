@@ -1,4 +1,4 @@
-"""The N-body stage of the pipeline: reaccumulate the hand-off particles, write nbody.h5.
+"""The N-body stage\'s adapter: reaccumulate the hand-off particles, write nbody.h5.
 
 The REBOUND Simulationarchive ``nbody.bin`` is the checkpoint: an interrupted stage
 resumes from its last snapshot when the particles and settings are unchanged, and starts
@@ -15,11 +15,12 @@ from typing import Any
 import numpy as np
 
 from impactpipe.handoff.store import read_particles
-from impactpipe.pipeline import derived, runstore
-from impactpipe.pipeline.stages import StageContext
+from impactpipe import storage
+from impactpipe.nbody.driver import ArchiveMismatch, reaccumulate
+from impactpipe.nbody.result import LEFT_BOX, LOST, NO_PARTICLES_LEFT, write_result
 
-from .driver import ArchiveMismatch, reaccumulate
-from .result import LEFT_BOX, LOST, NO_PARTICLES_LEFT, write_result
+from ..stages import StageContext
+
 
 log = logging.getLogger(__name__)
 
@@ -30,10 +31,10 @@ LEFT_BOX_WARNING = 1.0e-3
 
 def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
     """Reaccumulate the particles of ``handoff.h5``; returns the summary entries."""
-    started = runstore.utc_now()
+    started = storage.utc_now()
     t0 = time.perf_counter()
     config = ctx.config
-    values = derived.derive(config)
+    values = ctx.values
     particles = read_particles(ctx.path("handoff"))
     nbody = config.nbody
     progress = ctx.progress("nbody", nbody.stop.max_time)

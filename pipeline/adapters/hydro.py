@@ -1,4 +1,4 @@
-"""The hydro stage of the pipeline: set up the scene, run it to the hand-off time, write hydro.h5.
+"""The hydro stage's adapter: set up the config's scene, run it to the hand-off time, write hydro.h5.
 
 Snapshots are appended to a working file (``.hydro.work.h5``) as the run goes; a restart
 checkpoint (``hydro.checkpoint.h5``) is written every ``hydro.checkpoint_wall_seconds``.
@@ -20,13 +20,15 @@ from typing import Any
 import h5py
 import numpy as np
 
-from impactpipe.pipeline import derived, runstore
-from impactpipe.pipeline.stages import StageContext
+from impactpipe import storage
+from impactpipe.hydro.budget import conservation_budget
+from impactpipe.hydro.io import append_snapshot, write_tracers
+from impactpipe.hydro.problems import PROBLEMS, impact
+from impactpipe.hydro.solver import HydroFailure, Simulation
+from impactpipe.hydro.tracers import Tracers
 
-from .io import append_snapshot, write_tracers
-from .problems import PROBLEMS
-from .solver import HydroFailure, Simulation
-from .tracers import Tracers, place_on_grid, place_on_rays
+from .. import derived
+from ..stages import StageContext
 
 log = logging.getLogger(__name__)
 
@@ -88,60 +90,21 @@ def build_simulation(config, values: dict[str, Any]) -> Simulation:
     return PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
 
 
-#: Rays of the 2d-cylindrical tracer layout (the count per ray is hydro.tracers.count / rays).
-TRACER_RAYS = 30
-
-
-def tracers_enabled(config) -> tuple[bool, str]:
-    """(on, why) for tracers: auto turns them on for impacts, whose analysis needs peak pressures."""
-    setting = config.hydro.tracers.enabled
-    if setting != "auto":
-        return bool(setting), "set in the config"
-    if config.scene.problem == "impact":
-        return True, "auto: on for impacts (peak pressures for the shock histories of the analysis)"
-    return False, f"auto: off for the {config.scene.problem} verification problem"
-
-
-def tracer_grid_spacing(target_radius: float, count: int) -> float:
-    """Lattice spacing h (m) of the 3d tracer grid: the whole target holds about ``count`` tracers.
-
-    h = (V_T / count)^(1/3), V_T = (4 pi / 3) R_T^3.
-    """
-    return (4.0 * np.pi / 3.0 * target_radius ** 3 / count) ** (1.0 / 3.0)
-
-
 def add_tracers(sim: Simulation, config, end_time: float) -> None:
-    """Place the impact scene's tracers.
-
-    2d-cylindrical: rays from the impact point plus a projectile grid (:func:`place_on_rays`).
-    3d: cubic lattices filling both bodies (:func:`place_on_grid`), spacing
-    :func:`tracer_grid_spacing` in the target and min(h, R_P / 4) in the projectile; a
-    half-domain run (mirror plane y = 0) keeps the lattice points with y > 0 (none lies on
-    y = 0), and the hand-off mirrors them with the mesh.
-    """
+    """Place the impact scene's tracers (:func:`impactpipe.hydro.problems.impact.tracer_positions`)."""
     scene = config.scene
-    r_t, r_p = scene.target.radius, scene.projectile.radius
-    count = config.hydro.tracers.count
-    if sim.mesh.geometry == "3d":
-        positions, materials = place_on_grid((0.0, 0.0, 0.0), r_t, (0.0, 0.0, r_t + r_p), r_p,
-                                             tracer_grid_spacing(r_t, max(count, 1)))
-        if not scene.full_domain:
-            half = positions[:, 1] > 0.0
-            positions, materials = positions[half], materials[half]
-    else:
-        rays = min(TRACER_RAYS, max(1, count))
-        positions, materials = place_on_rays((0.0, r_t), r_t, 0.0, n_rays=rays, count=max(count, rays),
-                                             projectile_radius=r_p, projectile_center_z=r_t + r_p)
+    positions, materials = impact.tracer_positions(sim.mesh.geometry, scene.target.radius, scene.projectile.radius,
+                                                   config.hydro.tracers.count, scene.full_domain)
     sim.tracers = Tracers(positions, materials, history_interval=config.hydro.tracers.history_interval,
                           end_time=end_time)
 
 
 def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     """Run the hydro stage for ``ctx.config``; returns its summary entries."""
-    started = runstore.utc_now()
+    started = storage.utc_now()
     t_wall = time.perf_counter()
     config = ctx.config
-    values = derived.derive(config)
+    values = ctx.values
     coarse = derived.resolution_warnings(config)
     for message in coarse:
         log.warning("hydro: %s", message)
@@ -177,7 +140,7 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     budget = conservation_budget(initial, sim.totals(), sim.floor_amounts,
                                  sim.gravity.work if sim.gravity is not None else 0.0)
     with h5py.File(work, "a") as f:
-        runstore.write_provenance(f, ctx.provenance(started, wall))
+        storage.write_provenance(f, ctx.provenance(started, wall))
         group = f.require_group("budget")
         for key, value in budget.items():
             group.attrs[key] = value
@@ -202,45 +165,6 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         "hydro_budget": budget,
         "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts},
     }
-
-
-#: Floor amounts that change the mesh totals, with the sign of their change (added +1, removed -1).
-COUNTED_CHANGES = {
-    "mass": (("mass_added_by_floors", 1.0), ("mass_removed_by_void_cleanup", -1.0)),
-    "energy": (("energy_added_by_floors", 1.0), ("energy_removed_by_void_cleanup", -1.0),
-               ("energy_removed_by_velocity_limit", -1.0), ("energy_removed_by_energy_limit", -1.0)),
-}
-
-
-def conservation_budget(initial: dict[str, Any], final: dict[str, Any], floors: dict[str, float],
-                        gravity_work: float = 0.0) -> dict[str, float]:
-    """Mass, momentum and energy: at the start, on the mesh at the end, what left it, what floors changed (SI).
-
-    ``*_error`` is (mesh + left - initial - added) relative to the initial value: what the
-    scheme failed to conserve, floors included; ``added`` is the work done by external
-    gravity for the energy (``energy_added_by_gravity``, J; :mod:`impactpipe.hydro.gravity`)
-    and 0 for the mass.  A run starting with zero energy is measured against the gravity work.
-    ``*_unaccounted`` is the same with every counted change of the floors (``floors``, the
-    solver's ``floor_amounts``; :data:`COUNTED_CHANGES`) taken back: zero up to round-off
-    when nothing changed the totals uncounted.
-    """
-    out: dict[str, float] = {"energy_added_by_gravity": float(gravity_work)}
-    for key in ("mass", "energy"):
-        added = gravity_work if key == "energy" else 0.0
-        out[f"{key}_initial"] = float(initial[key])
-        out[f"{key}_on_mesh"] = float(final[key])
-        out[f"{key}_left_mesh"] = float(final[f"outflow_{key}"])
-        scale = abs(float(initial[key])) or abs(added) or 1.0
-        change = final[key] + final[f"outflow_{key}"] - initial[key] - added
-        out[f"{key}_error"] = float(change / scale)
-        counted = sum(sign * floors.get(name, 0.0) for name, sign in COUNTED_CHANGES[key])
-        out[f"{key}_unaccounted"] = float((change - counted) / scale)
-    for axis, name in enumerate("xyz"):
-        out[f"momentum_{name}_initial"] = float(initial["momentum"][axis])
-        out[f"momentum_{name}_on_mesh"] = float(final["momentum"][axis])
-        out[f"momentum_{name}_left_mesh"] = float(final["outflow_momentum"][axis])
-    out.update({f"floor_{key}": float(value) for key, value in floors.items()})
-    return out
 
 
 def _append(work: Path, snapshot) -> None:
@@ -269,7 +193,7 @@ def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: s
     checkpoint.unlink(missing_ok=True)
     work.unlink(missing_ok=True)
     sim = build_simulation(config, values)
-    if tracers_enabled(config)[0]:
+    if values["tracers"]:
         if config.scene.problem != "impact":
             raise ValueError("hydro.tracers.enabled: tracers are placed for impact scenes only in this version")
         add_tracers(sim, config, float(values["end_time"]))
