@@ -22,7 +22,7 @@ import impactpipe.hydro.solver as solver
 from impactpipe.hydro import BlockMesh, HydroState, Simulation
 from impactpipe.hydro.amr.regrid import RefinementRule
 from impactpipe.hydro.eos import pack_eos
-from impactpipe.hydro.mesh import GHOST
+from impactpipe.hydro.mesh.blocks import GHOST
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}

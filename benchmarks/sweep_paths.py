@@ -4,7 +4,7 @@ Builds each case of benchmarks/hydro_throughput.py (--quick meshes), takes 2 war
 then times STEPS steps with ``Simulation.plain_pencils`` on and STEPS with it off, from the
 same state, REPEATS times alternating; prints the median nanoseconds per cell and step of
 each path, their ratio, and whether the two paths left the same state (they must: bit for
-bit, tests/test_hydro_sweep_plain.py).  One thread unless NUMBA_NUM_THREADS says otherwise:
+bit, tests/test_hydro_plain_pencils.py).  One thread unless NUMBA_NUM_THREADS says otherwise:
 
     NUMBA_NUM_THREADS=1 python benchmarks/sweep_paths.py [CASE ...]
 """

@@ -29,9 +29,9 @@ from dataclasses import fields, replace
 
 import numpy as np
 
-from impactpipe.hydro.snapshot import Snapshot, TracerSet
+from impactpipe.hydro.output.snapshot import Snapshot, TracerSet
 
-#: Snapshot ``extra`` fields that change sign under y -> -y (hydro/io.py EXTRA_UNITS names).
+#: Snapshot ``extra`` fields that change sign under y -> -y (hydro/output/io.py EXTRA_UNITS names).
 ODD_EXTRA_FIELDS = ("deviatoric_stress_xy", "deviatoric_stress_yz")
 
 #: TracerSet vector fields whose y component changes sign.

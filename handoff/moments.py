@@ -26,7 +26,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.hydro.output.snapshot import Snapshot
 
 #: Relative slack when comparing block edges (they are sums of binary fractions of the root edge).
 _EDGE_TOLERANCE = 1e-9

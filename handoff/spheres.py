@@ -58,7 +58,7 @@ from impactpipe.handoff.mirror import mirror_across_y0
 from impactpipe.handoff.moments import block_moments, merge_fine_blocks
 from impactpipe.handoff.particles import ParticleSet
 from impactpipe.handoff.tracers import block_tracer_records, fill_from_nearest
-from impactpipe.hydro.snapshot import Snapshot, TracerSet
+from impactpipe.hydro.output.snapshot import Snapshot, TracerSet
 
 log = logging.getLogger(__name__)
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from impactpipe.hydro.snapshot import TracerSet
+from impactpipe.hydro.output.snapshot import TracerSet
 
 # Relative slack on the max-norm distance (in units of the block half-width) below which a
 # point counts as inside a block: absorbs round-off for points on a block face.

@@ -5,9 +5,18 @@ Public API: :class:`Simulation`, :class:`HydroFailure`, :class:`BlockMesh`,
 (:func:`read_snapshot`, :func:`write_snapshot`, :func:`append_snapshot`), Lagrangian
 tracers (:class:`Tracers`, tracer I/O :func:`write_tracers`, :func:`read_tracers`,
 :func:`read_tracer_history`) and the data contracts :class:`Snapshot` and :class:`TracerSet`.
+
+Rooms, one job each: ``solver`` (the :class:`Simulation` driver: step, CFL, regrid,
+checkpoints), ``scheme/`` (the directional sweep kernels, reconstruction, the HLLC face
+solver, the time step), ``mesh/`` (blocks, the conserved state, ghost layers), ``amr/``
+(refinement criteria, regrid, transfers between levels), ``eos/``, ``strength/``,
+``gravity``, ``tracers/`` (placement, block lookup, sampling, motion), ``output/``
+(snapshot files and the snapshot contract, VTKHDF export, figures, yt), ``budget`` (the
+conservation budget), ``problems/`` (each scene with its parameters) and ``exact/`` (exact
+solutions of the verification problems).
 """
 
-from impactpipe.hydro.io import (
+from impactpipe.hydro.output.io import (
     append_snapshot,
     read_snapshot,
     read_tracer_history,
@@ -15,12 +24,12 @@ from impactpipe.hydro.io import (
     write_snapshot,
     write_tracers,
 )
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems import PROBLEMS
-from impactpipe.hydro.snapshot import Snapshot, TracerSet
+from impactpipe.hydro.output.snapshot import Snapshot, TracerSet
 from impactpipe.hydro.solver import HydroFailure, Simulation
-from impactpipe.hydro.state import HydroState
-from impactpipe.hydro.tracers import Tracers
+from impactpipe.hydro.mesh.state import HydroState
+from impactpipe.hydro.tracers.motion import Tracers
 
 __all__ = [
     "PROBLEMS", "BlockMesh", "HydroFailure", "HydroState", "Simulation", "Snapshot", "TracerSet", "Tracers",

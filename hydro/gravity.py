@@ -26,8 +26,8 @@ from collections.abc import Iterable
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.mesh import CYLINDRICAL, GHOST, BlockMesh
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
+from impactpipe.hydro.mesh.state import HydroState
 
 
 @njit(cache=True, parallel=True)

@@ -2,8 +2,8 @@
 
 One step: on an adaptive mesh, every ``refinement.interval`` steps, a regrid
 (:mod:`impactpipe.hydro.amr.regrid`); dt from the CFL condition over all blocks
-(:mod:`impactpipe.hydro.timestep`; one global step for every level); then one sweep per used
-axis (:mod:`impactpipe.hydro.sweep`), each after filling the ghosts along its axis and, on an
+(:mod:`impactpipe.hydro.scheme.timestep`; one global step for every level); then one sweep per used
+axis (:mod:`impactpipe.hydro.scheme.directional`), each after filling the ghosts along its axis and, on an
 adaptive mesh, followed by refluxing the coarse cells beside finer blocks
 (:func:`impactpipe.hydro.amr.transfer.reflux`); the sweep order alternates every step
 (x y z, then z y x), which makes the splitting second order over a pair of steps (Strang).  The state at the start of the step is kept, so a
@@ -26,14 +26,14 @@ import numpy as np
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.boundary import fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
-from impactpipe.hydro.mesh import BlockMesh
-from impactpipe.hydro.snapshot import Snapshot
-from impactpipe.hydro.state import FIELDS, HydroState
+from impactpipe.hydro.mesh.blocks import BlockMesh
+from impactpipe.hydro.output.snapshot import Snapshot
+from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
-from impactpipe.hydro.sweep import sweep
-from impactpipe.hydro.sweep_layout import (
+from impactpipe.hydro.scheme.directional import sweep
+from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_NAMES,
     BND_ENERGY,
     BND_MASS,
@@ -44,7 +44,7 @@ from impactpipe.hydro.sweep_layout import (
     NFLOOR,
     allocate_scratch,
 )
-from impactpipe.hydro.timestep import cell_thermodynamics, max_signal_rate
+from impactpipe.hydro.scheme.timestep import cell_thermodynamics, max_signal_rate
 from impactpipe.storage import atomic_path, compression
 
 logger = logging.getLogger(__name__)
@@ -91,7 +91,7 @@ class Simulation:
         time: initial time (s).
         tracers: Lagrangian tracers carried with the flow, or None.  Any object with
             ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
-            ``save(h5group)`` and ``mesh_changed(mesh)`` (see :mod:`impactpipe.hydro.tracers`).
+            ``save(h5group)`` and ``mesh_changed(mesh)`` (see :mod:`impactpipe.hydro.tracers.motion`).
         refinement: when and where an adaptive mesh (``mesh.max_level`` > 0) refines; the
             default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
         gravity: external gravity, applied in two half kicks around the stress update, or None: an
@@ -142,7 +142,7 @@ class Simulation:
         self.step_count = 0
         self.cell_updates = 0
         #: Pencils that one material fills alone take the sweep's plain path
-        #: (:mod:`impactpipe.hydro.sweep_plain`); False sends every pencil through the general
+        #: (:mod:`impactpipe.hydro.scheme.plain_pencils`); False sends every pencil through the general
         #: path, which gives the same answer to round-off at about twice the cost.
         self.plain_pencils = True
         self.dt_first: float | None = None
@@ -524,7 +524,7 @@ class Simulation:
                 sim.strength.counts[:] = fh["counters/strength_counts"][()]
                 sim.strength.amounts[:] = fh["counters/strength_amounts"][()]
             if "tracers" in fh:
-                from impactpipe.hydro.tracers import Tracers
+                from impactpipe.hydro.tracers.motion import Tracers
 
                 sim.tracers = Tracers.load(fh["tracers"])
         return sim

@@ -312,8 +312,8 @@ def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool,
     import h5py
     import numpy as np
 
-    from impactpipe.hydro.io import read_snapshot, read_tracers
-    from impactpipe.hydro.plots import FIELDS, plot_peak_pressure_along_axis_ray, plot_snapshot
+    from impactpipe.hydro.output.io import read_snapshot, read_tracers
+    from impactpipe.hydro.output.plots import FIELDS, plot_peak_pressure_along_axis_ray, plot_snapshot
 
     path = Path(run_dir) / "hydro.h5"
     if not path.is_file():
@@ -354,8 +354,8 @@ def export_cmd(run_dir: str, at_time: float | None, every: bool, file_format: st
     """Write hydro snapshots of RUN_DIR for ParaView (docs/visualisation.md)."""
     import h5py
 
-    from impactpipe.hydro.export import write_vtkhdf
-    from impactpipe.hydro.snapshot_lookup import find_snapshot, hydro_file, snapshot_times
+    from impactpipe.hydro.output.export import write_vtkhdf
+    from impactpipe.hydro.output.lookup import find_snapshot, hydro_file, snapshot_times
 
     if every and (at_time is not None or out_path):
         click.echo("--all writes every snapshot to RUN_DIR/export/; it takes no --time or --out", err=True)

@@ -353,8 +353,8 @@ def peak_pressure_at_depths(hydro_path: str | Path, target_radius: float, depths
     """Peak pressure (Pa) at distances ``depths_m`` (m) below the impact point (0, R_T) along the
     tracer ray next to the symmetry axis; log-log interpolation between tracers, NaN outside
     the ray, without tracers, or when ``hydro_path`` is not an HDF5 file (stand-in stages)."""
-    from impactpipe.hydro.io import read_tracers
-    from impactpipe.hydro.plots import axis_ray
+    from impactpipe.hydro.output.io import read_tracers
+    from impactpipe.hydro.output.plots import axis_ray
 
     out = np.full(len(depths_m), np.nan)
     if not h5py.is_hdf5(hydro_path):

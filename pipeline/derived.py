@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
-from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS
+from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS
 from impactpipe.hydro.problems import PROBLEMS, impact
-from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS
+from impactpipe.hydro.output.snapshot import GEOMETRY_DIMENSIONS
 from impactpipe.nbody.simulation import dynamical_time
 
 from .config import Config

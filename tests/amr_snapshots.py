@@ -4,7 +4,7 @@ import h5py
 import numpy as np
 
 from impactpipe.hydro import PROBLEMS, append_snapshot
-from impactpipe.hydro.snapshot import GEOMETRY_DIMENSIONS, Snapshot
+from impactpipe.hydro.output.snapshot import GEOMETRY_DIMENSIONS, Snapshot
 
 GAS = {"gas": {"eos": {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}}}
 

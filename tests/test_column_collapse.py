@@ -9,11 +9,11 @@ import pytest
 
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.gravity import ExternalGravity
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems import column_collapse
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.budget import conservation_budget
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.pipeline.config import ConfigError, parse_config
 
 G = 9.81

@@ -15,7 +15,7 @@ from impactpipe.handoff.particles import PARTICLE_UNITS
 from impactpipe.handoff.moments import block_moments, merge_fine_blocks, target_kinetic_energy
 from impactpipe.handoff.spheres import ring_sphere_count
 from impactpipe.handoff.store import read_budget
-from impactpipe.hydro.snapshot import Snapshot, TracerSet
+from impactpipe.hydro.output.snapshot import Snapshot, TracerSet
 
 RHO = 2700.0  # target bulk density of the synthetic bodies (kg/m^3)
 

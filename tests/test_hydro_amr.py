@@ -10,7 +10,7 @@ from impactpipe.hydro.amr.regrid import RefinementRule, refine_to
 from impactpipe.hydro.amr.transfer import _offset
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.exact.sedov import sedov_solution
-from impactpipe.hydro.mesh import GHOST
+from impactpipe.hydro.mesh.blocks import GHOST
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
@@ -189,7 +189,7 @@ def test_refinement_pressure_is_limited_by_the_damaged_tensile_strength():
     """
     from impactpipe.hydro.amr.criteria import mixture_pressure
     from impactpipe.hydro.problems.common import preset_material
-    from impactpipe.hydro.timestep import cell_thermodynamics
+    from impactpipe.hydro.scheme.timestep import cell_thermodynamics
 
     spec = preset_material("basalt")["eos"]
     eos = pack_eos([spec])

@@ -9,7 +9,7 @@ from amr_snapshots import LEAF_SETS, handmade_snapshot, sedov_run
 from click.testing import CliRunner
 
 from impactpipe.hydro import export
-from impactpipe.hydro.export import write_vtkhdf
+from impactpipe.hydro.output.export import write_vtkhdf
 from impactpipe.pipeline.cli import main
 
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from impactpipe.hydro.boundary import fill_ghosts
-from impactpipe.hydro.mesh import GHOST, OUTFLOW, REFLECTING, BlockMesh
+from impactpipe.hydro.mesh.boundary import fill_ghosts
+from impactpipe.hydro.mesh.blocks import GHOST, OUTFLOW, REFLECTING, BlockMesh
 
 
 def test_neighbour_table_2d_periodic_and_walls():

@@ -6,7 +6,7 @@ import pytest
 from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
-from impactpipe.hydro.timestep import DISTENDED_FRACTION, material_state, max_signal_rate
+from impactpipe.hydro.scheme.timestep import DISTENDED_FRACTION, material_state, max_signal_rate
 from impactpipe.hydro.eos import pressure_sound_speed
 
 BASALT = preset_material("basalt")["eos"]

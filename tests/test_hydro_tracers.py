@@ -1,4 +1,4 @@
-"""Lagrangian tracers (hydro/tracers.py): transport, integrator order, peaks, void, exits, I/O,
+"""Lagrangian tracers (hydro/tracers/): transport, integrator order, peaks, void, exits, I/O,
 adaptive meshes (locate, level-aware stencil, regrids)."""
 
 import h5py
@@ -10,14 +10,9 @@ from impactpipe.hydro.amr.regrid import RefinementRule, refine_to
 from impactpipe.hydro.eos import pack_eos, temperature
 from impactpipe.hydro.exact.impedance import planar_impact_state
 from impactpipe.hydro.problems.common import preset_material
-from impactpipe.hydro.tracers import (
-    TRACER_UNITS,
-    Tracers,
-    interpolate_velocity,
-    locate,
-    place_on_grid,
-    place_on_rays,
-)
+from impactpipe.hydro.tracers.locate import locate
+from impactpipe.hydro.tracers.motion import TRACER_UNITS, Tracers, interpolate_velocity
+from impactpipe.hydro.tracers.placement import place_on_grid, place_on_rays
 
 GAS_SPEC = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 GASES = {"heavy": {"eos": GAS_SPEC}, "light": {"eos": {"model": "ideal_gas", "gamma": 1.67, "cv": 3000.0}}}

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from impactpipe.handoff import blocks_to_spheres
 from impactpipe.handoff.mirror import mirror_across_y0
-from impactpipe.hydro.mesh import REFLECTING
+from impactpipe.hydro.mesh.blocks import REFLECTING
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.problems.impact import projectile_start

@@ -7,7 +7,7 @@ import pytest
 
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed
-from impactpipe.hydro.mesh import GHOST
+from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.update import WK_PHI, update_stress

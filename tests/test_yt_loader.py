@@ -5,9 +5,9 @@ import pytest
 import yt
 from amr_snapshots import LEAF_SETS, handmade_snapshot, refine_block, sedov_run
 
-from impactpipe.hydro.amr_hierarchy import complete_hierarchy
-from impactpipe.hydro.snapshot import Snapshot
-from impactpipe.hydro.yt_loader import load, to_yt
+from impactpipe.hydro.output.hierarchy import complete_hierarchy
+from impactpipe.hydro.output.snapshot import Snapshot
+from impactpipe.hydro.output.yt_loader import load, to_yt
 
 yt.set_log_level(40)
 

@@ -33,9 +33,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.mesh import GHOST
-from impactpipe.hydro.sweep_layout import PHI_SECOND_ORDER
-from impactpipe.hydro.timestep import damaged_tensile_strength, material_state
+from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.scheme.pencil_layout import PHI_SECOND_ORDER
+from impactpipe.hydro.scheme.timestep import damaged_tensile_strength, material_state
 
 #: A volume fraction changing by more than this across a cell marks an interface or free
 #: surface (not the percent-level void that tensile failure opens inside a body).
@@ -52,7 +52,7 @@ def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table,
     """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``.
 
     p_k is limited by the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps
-    (:func:`impactpipe.hydro.timestep.damaged_tensile_strength`).
+    (:func:`impactpipe.hydro.scheme.timestep.damaged_tensile_strength`).
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from impactpipe.hydro.mesh import GHOST, BlockMesh
+from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
 
 
 def _face_cells(mesh: BlockMesh, blocks: np.ndarray, sides: np.ndarray, axis: int, depth_cells) -> tuple:

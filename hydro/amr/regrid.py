@@ -37,8 +37,8 @@ from impactpipe.hydro.amr.criteria import (
 )
 from impactpipe.hydro.amr.plans import axis0_weights
 from impactpipe.hydro.amr.transfer import prolong_blocks, restrict_blocks
-from impactpipe.hydro.mesh import BlockMesh, block_keys
-from impactpipe.hydro.state import FIELDS, HydroState
+from impactpipe.hydro.mesh.blocks import BlockMesh, block_keys
+from impactpipe.hydro.mesh.state import FIELDS, HydroState
 
 
 #: Values of :attr:`RefinementRule.interfaces`.

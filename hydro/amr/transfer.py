@@ -43,7 +43,7 @@ coarse/fine face; the fine blocks' fluxes through the same face (area-weighted s
     Delta U_c = +-(sum_f dt A_f F_f - dt A_c F_c) / V_c      (+ on its low face, - on its high face)
 
 which makes what left the fine blocks exactly what entered the coarse one.  The amounts
-dt A F per face come from :func:`impactpipe.hydro.sweep.sweep` (``face_flux``).
+dt A F per face come from :func:`impactpipe.hydro.scheme.directional.sweep` (``face_flux``).
 """
 
 from __future__ import annotations
@@ -51,9 +51,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
-from impactpipe.hydro.reconstruct import minmod_slope
-from impactpipe.hydro.sweep_layout import (
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.scheme.reconstruct import minmod_slope
+from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_MASS_FLOOR,
     AMOUNT_MASS_VOID,
     FLOOR_PARTIAL_DENSITY,
@@ -517,7 +517,7 @@ def face_flux_columns(nmat: int, nq_total: int) -> int:
 
 
 def allocate_face_flux(nblocks: int, padded_shape, ndim: int, nmat: int, nq_total: int) -> np.ndarray:
-    """Zeroed ``face_flux[NB, 2, NQ, N1, N2]`` for :func:`impactpipe.hydro.sweep.sweep`.
+    """Zeroed ``face_flux[NB, 2, NQ, N1, N2]`` for :func:`impactpipe.hydro.scheme.directional.sweep`.
 
     N1, N2 are the padded sizes of a sweep's two transverse axes (1 where unused), the same
     for every sweep axis since all used axes have the same padded size.

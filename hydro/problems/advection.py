@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')

@@ -34,7 +34,7 @@ import numpy as np
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.gravity import ExternalGravity
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import (
     check_geometry,
     material_list,
@@ -43,7 +43,7 @@ from impactpipe.hydro.problems.common import (
     tensile_strengths,
 )
 from impactpipe.hydro.solver import Simulation
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-planar',)

@@ -7,9 +7,9 @@ from importlib import resources
 import yaml
 
 from impactpipe.hydro.eos import SPECIFIC_HEAT_DEFAULTS, pack_eos
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.solver import Simulation
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.state import HydroState
 
 
 def material_list(materials: dict[str, dict], used: list[str]):

@@ -41,7 +41,7 @@ import numpy as np
 
 from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
 from impactpipe.hydro.eos import pack_eos, reference_density
-from impactpipe.hydro.mesh import DEFAULT_BLOCK_CELLS, BlockMesh
+from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS, BlockMesh
 from impactpipe.hydro.problems.common import (
     check_geometry,
     material_list,
@@ -50,8 +50,8 @@ from impactpipe.hydro.problems.common import (
     strength_specs,
     tensile_strengths,
 )
-from impactpipe.hydro.state import HydroState
-from impactpipe.hydro.tracers import place_on_grid, place_on_rays
+from impactpipe.hydro.mesh.state import HydroState
+from impactpipe.hydro.tracers.placement import place_on_grid, place_on_rays
 
 #: Material index of the projectile (the target is 0).
 PROJECTILE_MATERIAL = 1

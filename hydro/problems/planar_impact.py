@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.eos import reference_density
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import (
     check_geometry,
     material_list,
@@ -22,7 +22,7 @@ from impactpipe.hydro.problems.common import (
     strength_specs,
     tensile_strengths,
 )
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar',)

@@ -19,9 +19,9 @@ import numpy as np
 
 from impactpipe.hydro.eos import energy_from_pressure
 from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')

@@ -34,9 +34,9 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
-from impactpipe.hydro.sweep_layout import BND_ENERGY, BND_MOMENTUM
+from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 
 
 @njit(cache=True, inline="always")

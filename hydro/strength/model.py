@@ -41,9 +41,9 @@ import numpy as np
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.boundary import fill_field_ghosts
-from impactpipe.hydro.mesh import GHOST, REFLECTING, BlockMesh
-from impactpipe.hydro.state import HydroState
+from impactpipe.hydro.mesh.boundary import fill_field_ghosts
+from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
+from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
 from impactpipe.hydro.strength.parameters import DAMAGE0, StrengthArrays
 from impactpipe.hydro.strength.update import (
@@ -200,7 +200,7 @@ class MaterialStrength:
         return {name: float(v) for name, v in zip(AMOUNT_NAMES, self.amounts.sum(axis=0))}
 
     def cell_fields(self, state: HydroState) -> dict[str, np.ndarray]:
-        """Interior block-shaped fields for snapshots (see :data:`impactpipe.hydro.io.EXTRA_UNITS`).
+        """Interior block-shaped fields for snapshots (see :data:`impactpipe.hydro.output.io.EXTRA_UNITS`).
 
         ``deviatoric_stress_<ij>``: mixture sum_k alpha_k S_k,ij (Pa); ``von_mises_stress``:
         sqrt(3/2 S:S) of the mixture (Pa); ``plastic_strain``, ``damage``: mass-weighted

@@ -8,7 +8,7 @@ from typing import Any
 
 import h5py
 
-from impactpipe.hydro.io import read_snapshot, read_tracers
+from impactpipe.hydro.output.io import read_snapshot, read_tracers
 from impactpipe.hydro.problems.impact import PROJECTILE_MATERIAL
 from impactpipe import storage
 from impactpipe.handoff.mirror import mirror_across_y0

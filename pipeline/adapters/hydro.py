@@ -22,10 +22,10 @@ import numpy as np
 
 from impactpipe import storage
 from impactpipe.hydro.budget import conservation_budget
-from impactpipe.hydro.io import append_snapshot, write_tracers
+from impactpipe.hydro.output.io import append_snapshot, write_tracers
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.solver import HydroFailure, Simulation
-from impactpipe.hydro.tracers import Tracers
+from impactpipe.hydro.tracers.motion import Tracers
 
 from .. import derived
 from ..stages import StageContext

@@ -1,6 +1,6 @@
 """Conserved multi-material state on the block mesh (structure of arrays over blocks).
 
-Arrays, shape ``(NB, C, NX, NY, NZ)`` with ghosts (see :mod:`impactpipe.hydro.mesh`):
+Arrays, shape ``(NB, C, NX, NY, NZ)`` with ghosts (see :mod:`impactpipe.hydro.mesh.blocks`):
 
 =========  ======  ============================================  ===========
 name       C       meaning                                       units
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from impactpipe.hydro.eos import energy_from_pressure
-from impactpipe.hydro.mesh import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh
 
 FIELDS = ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq")
 

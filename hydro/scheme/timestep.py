@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
-from impactpipe.hydro.mesh import GHOST
+from impactpipe.hydro.mesh.blocks import GHOST
 
 #: Volume fraction below which a material is left out of a cell's thermodynamics.
 ALPHA_MIN = 1.0e-10

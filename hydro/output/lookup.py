@@ -7,8 +7,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from impactpipe.hydro.io import SNAPSHOT_GROUP, read_snapshot
-from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.hydro.output.io import SNAPSHOT_GROUP, read_snapshot
+from impactpipe.hydro.output.snapshot import Snapshot
 
 HYDRO_FILE = "hydro.h5"
 

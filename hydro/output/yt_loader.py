@@ -1,7 +1,7 @@
 """Open hydro snapshots in yt (``pip install "impactpipe[viz]"``).
 
     import yt
-    from impactpipe.hydro.yt_loader import load
+    from impactpipe.hydro.output.yt_loader import load
 
     ds = load("runs/quickstart", time=1.0)   # the nearest snapshot; or index=-1, or a hydro.h5 path
     ds.all_data().quantities.total_quantity(("gas", "mass"))   # kg
@@ -10,7 +10,7 @@
 How: ``yt.load_amr_grids`` with one yt grid per mesh block.  A snapshot holds only the
 leaf blocks of the block quadtree / octree, and yt's grid hierarchy needs every level-L
 grid nested in a level-(L-1) grid, so the ancestors of the leaves are rebuilt by
-:func:`impactpipe.hydro.amr_hierarchy.complete_hierarchy` (conservative averages of their
+:func:`impactpipe.hydro.output.hierarchy.complete_hierarchy` (conservative averages of their
 children: by volume for per-volume fields, by mass for per-mass fields).  yt masks every
 cell covered by a finer grid, so selections, totals, slices and projections see the leaf
 cells only, each once; the ancestors' averages appear only in data yt builds at a coarser
@@ -25,7 +25,7 @@ and 3d load as "cartesian" (a 2d-planar run has its 1 m depth as the z extent, a
 "cylindrical" with yt's axis order (r, z, theta), dimensions [nr, nz, 1] and theta over
 [0, 2 pi], so yt's cell volumes are the full annuli pi (r+^2 - r-^2) dz.
 
-Fields (:func:`impactpipe.hydro.amr_hierarchy.cell_fields`), each as ``("stream", name)``
+Fields (:func:`impactpipe.hydro.output.hierarchy.cell_fields`), each as ``("stream", name)``
 and ``("gas", name)``: density, pressure (kg/m**3, Pa), velocity_x/_y/_z (velocity_r/_z/
 _theta in r-z; m/s), specific_internal_energy (J/kg, also ``("gas",
 "specific_thermal_energy")``), temperature (K), sound_speed (m/s; the EOS's, replacing
@@ -42,14 +42,14 @@ from pathlib import Path
 
 import numpy as np
 
-from impactpipe.hydro.amr_hierarchy import complete_hierarchy, material_field_names
-from impactpipe.hydro.snapshot import Snapshot
-from impactpipe.hydro.snapshot_lookup import find_snapshot
+from impactpipe.hydro.output.hierarchy import complete_hierarchy, material_field_names
+from impactpipe.hydro.output.snapshot import Snapshot
+from impactpipe.hydro.output.lookup import find_snapshot
 
 try:
     import yt
 except ImportError as exc:  # yt is an optional dependency
-    raise ImportError('impactpipe.hydro.yt_loader needs yt: pip install "impactpipe[viz]"') from exc
+    raise ImportError('impactpipe.hydro.output.yt_loader needs yt: pip install "impactpipe[viz]"') from exc
 
 #: yt's name for a geometry, and the extent (lo, hi) yt gets on the unused axes.
 YT_GEOMETRY = {

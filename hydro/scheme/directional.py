@@ -1,6 +1,6 @@
 """One directionally split sweep of the multi-material Godunov scheme (the hydro kernel).
 
-Conserved fields per cell (``hydro.state``): volume fraction ``alpha_k``, partial density
+Conserved fields per cell (:mod:`impactpipe.hydro.mesh.state`): volume fraction ``alpha_k``, partial density
 ``alpha_k rho_k`` (kg/m^3), material internal energy density ``alpha_k rho_k e_k`` (J/m^3),
 momentum density (kg/m^2/s) and total energy density E (J/m^3).  Void fills ``1 - sum alpha_k``.
 
@@ -31,7 +31,7 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    A cell next to void, or whose face state loses positivity (density <= 0, or a pressure
    drop from p > 0 to below -TENSION_TOLERANCE K), uses its cell values; face e_k of a cell
    with e_k >= 0 are clipped at 0.
-3. Faces: :func:`impactpipe.hydro.riemann.hllc_face` (free surface next to void) gives the
+3. Faces: :func:`impactpipe.hydro.scheme.riemann.hllc_face` (free surface next to void) gives the
    face velocity s, pressure p* and upwind star factors.  Material k's volume flux is
    alpha_k,face s with the compressive ultrabee face value of alpha_k (capped so no more than
    the donor's material volume leaves), its mass flux alpha_k,face rho_k,K chi s (capped by the
@@ -59,10 +59,10 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    failure recorded in ``failure`` for the solver to raise.
 
 A pencil that one material fills alone takes the plain path of
-:mod:`impactpipe.hydro.sweep_plain` (the same arithmetic without the multi-material
+:mod:`impactpipe.hydro.scheme.plain_pencils` (the same arithmetic without the multi-material
 machinery); the predictor and flux pieces both paths use are in
-:mod:`impactpipe.hydro.sweep_steps`, the thresholds, counter slots and scratch rows in
-:mod:`impactpipe.hydro.sweep_layout`.
+:mod:`impactpipe.hydro.scheme.pencil_steps`, the thresholds, counter slots and scratch rows in
+:mod:`impactpipe.hydro.scheme.pencil_layout`.
 """
 
 from __future__ import annotations
@@ -71,9 +71,9 @@ import numpy as np
 from numba import get_thread_id, njit, prange
 
 from impactpipe.hydro.eos import reference_density
-from impactpipe.hydro.mesh import CYLINDRICAL, GHOST
-from impactpipe.hydro.riemann import UPWIND_LEFT, UPWIND_NONE
-from impactpipe.hydro.sweep_layout import (
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.scheme.riemann import UPWIND_LEFT, UPWIND_NONE
+from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_ENERGY_CAP,
     AMOUNT_ENERGY_FLOOR,
     AMOUNT_ENERGY_LIMITER,
@@ -129,7 +129,7 @@ from impactpipe.hydro.sweep_layout import (
     W_VOL,
     pencil_cell_index,
 )
-from impactpipe.hydro.sweep_plain import (
+from impactpipe.hydro.scheme.plain_pencils import (
     EMPTY_PENCIL,
     face_flux_plain,
     gather_plain,
@@ -137,7 +137,7 @@ from impactpipe.hydro.sweep_plain import (
     reconstruct_plain,
     update_plain,
 )
-from impactpipe.hydro.sweep_steps import (
+from impactpipe.hydro.scheme.pencil_steps import (
     cell_value_faces,
     flow_fluxes,
     material_face_flux,
@@ -145,7 +145,7 @@ from impactpipe.hydro.sweep_steps import (
     predict_material,
     upwind_face,
 )
-from impactpipe.hydro.timestep import ALPHA_MIN, PHI_VOID, damaged_tensile_strength, material_state
+from impactpipe.hydro.scheme.timestep import ALPHA_MIN, PHI_VOID, damaged_tensile_strength, material_state
 
 
 @njit(cache=True, parallel=True)
@@ -160,7 +160,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     another refinement level (``neighbor_level`` != 0) the amounts dt A F are stored in
     ``face_flux[b, side, :, j1, j2]`` for refluxing (:mod:`impactpipe.hydro.amr.transfer`).
     With ``plain_pencils`` a pencil that one material fills alone takes the plain path
-    (:mod:`impactpipe.hydro.sweep_plain`); without, every pencil takes the general path.
+    (:mod:`impactpipe.hydro.scheme.plain_pencils`); without, every pencil takes the general path.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
@@ -222,7 +222,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         sc[W_IVR, i] = 1.0 / dx
                         sc[W_VOL, i] = dx * d1 * d2
                 # 1-3. cell values, face states and fluxes: the plain path for a pencil that one material
-                # fills alone (hydro.sweep_plain), the general path otherwise
+                # fills alone (hydro.scheme.plain_pencils), the general path otherwise
                 m = -1
                 if plain_pencils:
                     m = plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell)

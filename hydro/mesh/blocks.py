@@ -16,13 +16,13 @@ face inside the domain, the index of a leaf across it (periodic wrap included): 
 of the same level, the coarser block (``neighbor_level`` = -1) or one of the 2^(ndim-1)
 finer blocks (``neighbor_level`` = +1); for a domain face a negative boundary code
 (:data:`OUTFLOW`, :data:`REFLECTING`).  Same-level faces and domain faces are filled by
-:func:`impactpipe.hydro.boundary.fill_ghosts`, coarse/fine faces by restriction and
+:func:`impactpipe.hydro.mesh.boundary.fill_ghosts`, coarse/fine faces by restriction and
 prolongation (:mod:`impactpipe.hydro.amr.transfer`).
 
 Field arrays have shape ``(NB, C, NX, NY, NZ)`` with ``NX = nx + 2 g`` on used axes and
 ``1`` (no ghosts) on unused ones; ``g = GHOST = 2`` serves the second-order stencil.
 
-Geometries (:data:`impactpipe.hydro.snapshot.GEOMETRIES`): 1d-planar (unit cross-section,
+Geometries (:data:`impactpipe.hydro.output.snapshot.GEOMETRIES`): 1d-planar (unit cross-section,
 1 m^2), 2d-planar (unit depth, 1 m), 2d-cylindrical (axes r, z; cells are full annuli of
 volume pi (r_hi^2 - r_lo^2) dz) and 3d.
 """
@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from impactpipe.hydro.snapshot import GEOMETRIES, GEOMETRY_DIMENSIONS
+from impactpipe.hydro.output.snapshot import GEOMETRIES, GEOMETRY_DIMENSIONS
 
 GHOST = 2
 OUTFLOW = -1

@@ -23,7 +23,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
-from impactpipe.hydro.mesh import REFLECTING
+from impactpipe.hydro.mesh.blocks import REFLECTING
 
 
 @njit(cache=True, parallel=True)

@@ -1,7 +1,7 @@
 """The sweep's path for plain pencils: every cell full of one material, the others absent.
 
 Most pencils of a scene are plain: a single-material box everywhere, the inside of each
-body of an impact.  There the multi-material machinery of :mod:`impactpipe.hydro.sweep` does
+body of an impact.  There the multi-material machinery of :mod:`impactpipe.hydro.scheme.directional` does
 no work (every volume fraction face value is 1, the volume closure and the energy
 reconciliation are identities, no cell is small, mixed or void), so these functions do the
 same arithmetic for material m alone:
@@ -18,10 +18,10 @@ same arithmetic for material m alone:
   rho e = E - |m|^2 / (2 rho).  A cell whose new state needs a rule of the general update
   (density at or below PHI_SMALL rho0, where the small-cell limits and the discard density
   apply, a volume fraction below PHI_VOID, a NaN) is left untouched and handed back to
-  :func:`impactpipe.hydro.sweep._update_cell`.
+  :func:`impactpipe.hydro.scheme.directional._update_cell`.
 
-The answers agree with the general path bit for bit (tests/test_hydro_sweep_plain.py): the
-shared pieces are in :mod:`impactpipe.hydro.sweep_steps`, and the rest repeats the general
+The answers agree with the general path bit for bit (tests/test_hydro_plain_pencils.py): the
+shared pieces are in :mod:`impactpipe.hydro.scheme.pencil_steps`, and the rest repeats the general
 path's order of operations.  A step costs 1.3-1.8x less with the plain path
 (docs/performance.md, benchmarks/sweep_paths.py).
 """
@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from impactpipe.hydro.sweep_layout import (
+from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_ENERGY_FLOOR,
     AMOUNT_ENERGY_RECONCILED,
     F_E,
@@ -64,7 +64,7 @@ from impactpipe.hydro.sweep_layout import (
     W_VOL,
     pencil_cell_index,
 )
-from impactpipe.hydro.sweep_steps import (
+from impactpipe.hydro.scheme.pencil_steps import (
     cell_value_faces,
     flow_fluxes,
     material_face_flux,
@@ -72,7 +72,7 @@ from impactpipe.hydro.sweep_steps import (
     predict_material,
     upwind_face,
 )
-from impactpipe.hydro.timestep import PHI_VOID, damaged_tensile_strength, material_state
+from impactpipe.hydro.scheme.timestep import PHI_VOID, damaged_tensile_strength, material_state
 
 
 #: :func:`plain_material` of a pencil with no material, momentum or energy in any cell.
@@ -172,7 +172,7 @@ def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
     """Step 2 for cell i of a plain pencil: MUSCL-Hancock face states of (u, p, alpha_m, rho_m, e_m).
 
     The same predictor and admissibility rules as the general path
-    (:func:`impactpipe.hydro.sweep._reconstruct_cell`): a face pressure from p > 0 below
+    (:func:`impactpipe.hydro.scheme.directional._reconstruct_cell`): a face pressure from p > 0 below
     -TENSION_TOLERANCE K, or below the tensile limit -alpha_m Y_T,m (1 - D_m) and below p, or
     a non-positive face density gives the cell values (first order, counted).
     """
@@ -195,7 +195,7 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
 
     No void on either side; material m's volume flux is alpha_face s with the ultrabee face
     value and its mass flux alpha_face rho_m,K chi s, capped as in the general path
-    (:func:`impactpipe.hydro.sweep._face_flux`); absent materials carry zero fluxes.
+    (:func:`impactpipe.hydro.scheme.directional._face_flux`); absent materials carry zero fluxes.
     """
     row = W_MAT + W_STRIDE * m
     qrow = Q_MAT + 3 * m

@@ -1,7 +1,7 @@
 """What the sweep kernel shares with its plain-pencil path: thresholds, counter slots, scratch rows.
 
 The thresholds are the sweep's rules for mixed, partly void and nearly empty cells
-(:mod:`impactpipe.hydro.sweep`, module docstring); the counter slots index the per-block
+(:mod:`impactpipe.hydro.scheme.directional`, module docstring); the counter slots index the per-block
 arrays ``floors`` (counts), ``amounts`` (kg, J, kg m/s), ``boundary`` and ``failure`` that
 the solver reports; the scratch rows are the per-thread working layout of one pencil.
 """
@@ -100,7 +100,7 @@ def scratch_rows(nmat: int, nq: int = 0) -> int:
 
 
 def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int, nq: int = 0) -> np.ndarray:
-    """Per-thread scratch ``(nthreads, rows, pencil_cells + 1)`` for :func:`impactpipe.hydro.sweep.sweep`."""
+    """Per-thread scratch ``(nthreads, rows, pencil_cells + 1)`` for :func:`impactpipe.hydro.scheme.directional.sweep`."""
     return np.zeros((nthreads, scratch_rows(nmat, nq), pencil_cells + 1))
 
 

@@ -1,14 +1,14 @@
 """Snapshot I/O: ``hydro.h5`` holds snapshots under ``/snapshots/<index:04d>``.
 
 Each snapshot group carries the attributes ``time`` (s), ``geometry`` and
-``material_names`` (JSON list) and one dataset per :class:`~impactpipe.hydro.snapshot.Snapshot`
+``material_names`` (JSON list) and one dataset per :class:`~impactpipe.hydro.output.snapshot.Snapshot`
 array, each with a ``units`` attribute (:func:`impactpipe.storage.write_dataset`).
 Extra fields go to ``extra/<name>`` with the units and description of
 :data:`EXTRA_UNITS` (the material-strength fields), or ``units = "unspecified"`` for any other.
 
 Tracers go to the group ``/tracers``: one dataset per
-:class:`~impactpipe.hydro.snapshot.TracerSet` field and, when written from a
-:class:`~impactpipe.hydro.tracers.Tracers` with a history, ``history_time`` (K,) and
+:class:`~impactpipe.hydro.output.snapshot.TracerSet` field and, when written from a
+:class:`~impactpipe.hydro.tracers.motion.Tracers` with a history, ``history_time`` (K,) and
 ``history_position`` (K, N, 3), all with ``units`` attributes.
 """
 
@@ -20,8 +20,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from impactpipe.hydro.snapshot import Snapshot, TracerSet
-from impactpipe.hydro.tracers import HISTORY_UNITS, TRACER_UNITS, Tracers
+from impactpipe.hydro.output.snapshot import Snapshot, TracerSet
+from impactpipe.hydro.tracers.motion import HISTORY_UNITS, TRACER_UNITS, Tracers
 from impactpipe.storage import write_dataset
 
 SNAPSHOT_GROUP = "snapshots"
@@ -111,8 +111,8 @@ def read_snapshot(path: str | Path, index: int = -1) -> Snapshot:
 def write_tracers(h5file: h5py.File, tracers: Tracers | TracerSet) -> None:
     """Write tracer records into ``/tracers`` of an open file, replacing a previous ``/tracers``.
 
-    ``tracers`` is a :class:`~impactpipe.hydro.tracers.Tracers` (its trajectory history is
-    written too) or a :class:`~impactpipe.hydro.snapshot.TracerSet`.
+    ``tracers`` is a :class:`~impactpipe.hydro.tracers.motion.Tracers` (its trajectory history is
+    written too) or a :class:`~impactpipe.hydro.output.snapshot.TracerSet`.
     """
     history = None
     if isinstance(tracers, Tracers):
@@ -129,7 +129,7 @@ def write_tracers(h5file: h5py.File, tracers: Tracers | TracerSet) -> None:
 
 
 def read_tracers(path: str | Path) -> TracerSet | None:
-    """The :class:`~impactpipe.hydro.snapshot.TracerSet` in ``/tracers`` of ``path``, or None without one."""
+    """The :class:`~impactpipe.hydro.output.snapshot.TracerSet` in ``/tracers`` of ``path``, or None without one."""
     with h5py.File(path, "r") as fh:
         if TRACER_GROUP not in fh:
             return None

@@ -1,6 +1,6 @@
 """Pieces of a pencil update that the sweep's general and plain paths share.
 
-Each works on one cell or face of the per-thread scratch (:mod:`impactpipe.hydro.sweep_layout`),
+Each works on one cell or face of the per-thread scratch (:mod:`impactpipe.hydro.scheme.pencil_layout`),
 so both paths do the same arithmetic (the plain path's bit-for-bit agreement rests on it):
 
 - :func:`predict_flow`: the MUSCL-Hancock half-step face states of the velocity and the
@@ -13,16 +13,16 @@ so both paths do the same arithmetic (the plain path's bit-for-bit agreement res
   face (compressive ultrabee volume fraction, donor caps);
 - :func:`flow_fluxes`: the momentum and total-energy fluxes of the summed mass flux.
 
-The equations and the rules behind the caps are in :mod:`impactpipe.hydro.sweep`.
+The equations and the rules behind the caps are in :mod:`impactpipe.hydro.scheme.directional`.
 """
 
 from __future__ import annotations
 
 from numba import njit
 
-from impactpipe.hydro.reconstruct import mc_slope, ultrabee_face
-from impactpipe.hydro.riemann import UPWIND_LEFT, hllc_face
-from impactpipe.hydro.sweep_layout import (
+from impactpipe.hydro.scheme.reconstruct import mc_slope, ultrabee_face
+from impactpipe.hydro.scheme.riemann import UPWIND_LEFT, hllc_face
+from impactpipe.hydro.scheme.pencil_layout import (
     F_E,
     F_MN,
     F_MT1,

@@ -12,7 +12,7 @@ filter (plane X) mirrors it about the axis.
 Layout (``/VTKHDF``): attributes ``Version`` [1, 0] and ``Type`` "UnstructuredGrid";
 datasets ``NumberOfPoints``, ``NumberOfCells``, ``NumberOfConnectivityIds`` (one
 partition), ``Points`` (NP, 3) m, ``Connectivity``, ``Offsets``, ``Types``;
-``CellData/<field>`` for the fields of :func:`impactpipe.hydro.amr_hierarchy.cell_fields`
+``CellData/<field>`` for the fields of :func:`impactpipe.hydro.output.hierarchy.cell_fields`
 (velocity as one 3-component vector ``velocity``) plus ``level`` and ``block_id``;
 ``FieldData/time`` (s).  VTK has no units: each dataset carries a ``units`` attribute and
 ``/impactpipe`` holds the time, geometry, axes, material names, the JSON map
@@ -34,8 +34,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from impactpipe.hydro.amr_hierarchy import VELOCITY_COMPONENTS, block_grid, cell_fields
-from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.hydro.output.hierarchy import VELOCITY_COMPONENTS, block_grid, cell_fields
+from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.storage import atomic_path
 
 VTKHDF_VERSION = (1, 0)

@@ -1,4 +1,4 @@
-"""The sweep's plain-pencil path (hydro.sweep_plain) against the general path it stands in for.
+"""The sweep's plain-pencil path (hydro.scheme.plain_pencils) against the general path it stands in for.
 
 Each scene runs twice from the same start, once with ``Simulation.plain_pencils`` (the
 default) and once with every pencil on the general path; the states, the floor counters and
@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
-from impactpipe.hydro.boundary import fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.problems.common import preset_material
-from impactpipe.hydro.sweep_plain import EMPTY_PENCIL, plain_material
+from impactpipe.hydro.scheme.plain_pencils import EMPTY_PENCIL, plain_material
 from impactpipe.pipeline.presets import resolve_strength
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}

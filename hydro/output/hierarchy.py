@@ -1,6 +1,6 @@
 """Cell fields of a snapshot, its block grid, and its nested block hierarchy for AMR viewers.
 
-A :class:`~impactpipe.hydro.snapshot.Snapshot` stores only the leaf blocks of the block
+A :class:`~impactpipe.hydro.output.snapshot.Snapshot` stores only the leaf blocks of the block
 quadtree / octree (docs/hydro.md, "Mesh and data layout"): where a block is refined, its
 parent is not stored, so the coarse levels do not cover the domain.  Viewers of nested
 AMR data (``yt.load_amr_grids``) expect every level-L block to lie inside a level-(L-1)
@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from impactpipe.hydro.io import EXTRA_UNITS
-from impactpipe.hydro.snapshot import Snapshot
+from impactpipe.hydro.output.io import EXTRA_UNITS
+from impactpipe.hydro.output.snapshot import Snapshot
 
 #: Names of the three velocity components (snapshot order) per geometry.
 VELOCITY_COMPONENTS = {
@@ -75,7 +75,7 @@ def cell_fields(snapshot: Snapshot) -> list[CellField]:
     density, partial_density_<material>, volume_fraction_<material>, velocity_<component>
     (x, y, z; r, z, theta in 2d-cylindrical), pressure, specific_internal_energy,
     temperature, sound_speed, then the snapshot's extra fields (multi-component extras as
-    <name>_<index>; units from :data:`impactpipe.hydro.io.EXTRA_UNITS`, "dimensionless"
+    <name>_<index>; units from :data:`impactpipe.hydro.output.io.EXTRA_UNITS`, "dimensionless"
     for a field not listed there, whose units the snapshot does not give).
     """
     fields = [CellField("density", "kg/m**3", snapshot.density, "volume", "mixture density sum_k alpha_k rho_k")]

@@ -1,0 +1,427 @@
+"""Massless Lagrangian tracers carried with the material velocity of the hydro mesh.
+
+A tracer is a point x(t) (m, mesh coordinates: (x, 0, 0), (x, y, 0), (r, z, 0) in
+2d-cylindrical, (x, y, z)) attached to one material k.  It moves with the interpolated cell
+velocity and records the peak pressure, its time and the peak temperature of its material.
+
+**Velocity.**  Cell velocity u_c = m_c / rho_c (momentum over mixture density).  At a
+point x the tracer of material k sees
+
+    v(x) = sum_c W_c(x) a_c u_c / sum_c W_c(x) a_c,        a_c = alpha_k rho_k in cell c
+
+over the 2^ndim cells c of the (bi/tri)linear cell-centred stencil around x, with W_c the
+multilinear weights.  Weighting by the tracer's own partial density means void and other
+materials (a_c = 0) do not drag it: a tracer in a slab next to void moves with the slab.
+In a single material of uniform density v is plain multilinear interpolation (exact for a
+linear velocity field).  When every a_c vanishes the tracer takes the velocity of the cell
+that contains it (0 in a void cell).
+
+**Stencil on an adaptive mesh.**  The stencil lives on the cell grid of one level, addressed
+by global cell indices; the leaf holding any cell is found by walking the block tree
+(:func:`block_tree`).  It starts on the owning block's level L.  A stencil cell in a leaf
+of that level is read directly; one in a finer leaf (L + 1) stands for the 2^ndim cells
+covering it, each with W_c / 2^ndim (their mean); when a cell of positive weight lies in a
+coarser leaf, the whole stencil is taken on the grid of level L - 1 instead (the owning
+block's cells then enter by 2^ndim as well).  Every stencil is thus multilinear
+interpolation on one level with exact point values of a linear field, so a linear field is
+interpolated exactly across coarse/fine faces, edges and corners; the price is the coarser
+stencil within about one cell of a coarser leaf.  On a single-level mesh this is the plain
+stencil of the owning block.  At a domain face a reflecting boundary mirrors the cell and
+negates the normal velocity (the symmetry axis r = 0 is one), outflow repeats the edge cell
+(zero gradient), periodic wraps.  Interior cells only are read: ghost layers are stale
+between sweeps (the solver fills each axis's ghosts just before its sweep) and are never
+read, so the tracers do not touch the hydro state.
+
+**Time integration** (Heun, second order): with v_n the field at t_n (sampled in
+:meth:`Tracers.before_step`, before the sweeps) and v_{n+1} the field after the step,
+
+    x* = x_n + dt v_n(x_n),    x_{n+1} = x_n + dt/2 [v_n(x_n) + v_{n+1}(x*)].
+
+The recorded velocity is the step mean (x_{n+1} - x_n) / dt = [v_n(x_n) + v_{n+1}(x*)] / 2.
+A predictor x* outside the domain is folded back for sampling (periodic wrap, mirror with
+the normal velocity negated at a reflecting face, clamp at an outflow face).  After the
+corrector, a position past a periodic face wraps, past a reflecting face (the axis in
+2d-cylindrical: r < 0) is mirrored with its normal velocity negated, and past an outflow
+face the tracer **exits**: it is flagged, its exit time is interpolated linearly in the
+step, t_exit = t_n + dt (x_face - x_n) / (x_{n+1} - x_n), its velocity is kept, and from
+then on it moves **ballistically** (x += dt v, no gravity; in 2d-cylindrical r < 0 is
+mirrored, which is exact for a straight line without swirl).  Exited tracers record no
+more peaks.
+
+**Peaks.**  After every step (and at the first step's start for a tracer without a record)
+the tracer's cell is the containing cell if it holds material k (alpha_k > ALPHA_MIN), else
+the stencil cell with the largest W_c a_c; there p_k = P_k(rho_k, e_k) and
+T_k = T_k(rho_k, e_k) with rho_k = arho_k / alpha_k and e_k = arhoe_k / arho_k
+(:func:`impactpipe.hydro.eos.pressure_sound_speed`, :func:`impactpipe.hydro.eos.temperature`).
+The peak pressure (Pa), its time (s) and the peak temperature (K) are the running maxima
+(NaN until the first record).
+
+**History** (optional): every ``history_interval`` seconds of simulated time the first step
+that reaches k * history_interval appends (time, all positions) to arrays preallocated for
+``end_time`` and doubled when full; 24 bytes per tracer and sample.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from impactpipe.hydro.mesh.blocks import OUTFLOW, REFLECTING, BlockMesh
+from impactpipe.hydro.output.snapshot import TracerSet
+from impactpipe.hydro.tracers.locate import PERIODIC, BlockLocator, as_positions
+from impactpipe.hydro.tracers.sampling import record_peaks, sample_velocity
+from impactpipe.storage import write_dataset
+
+#: Tracer record arrays (the :class:`~impactpipe.hydro.output.snapshot.TracerSet` fields) with their
+#: units and descriptions.
+TRACER_UNITS = {
+    "id": ("dimensionless", "tracer id"),
+    "material": ("dimensionless", "material index into the snapshot's material_names"),
+    "initial_position": ("m", "position at t = 0, mesh coordinates"),
+    "position": ("m", "current position, mesh coordinates"),
+    "velocity": ("m/s", "velocity over the last step (last velocity once exited)"),
+    "peak_pressure": ("Pa", "highest pressure of the tracer's material in its cell"),
+    "peak_pressure_time": ("s", "time of the peak pressure"),
+    "peak_temperature": ("K", "highest temperature of the tracer's material in its cell"),
+    "exited": ("dimensionless", "True once the tracer left the mesh through an outflow face"),
+    "exit_time": ("s", "time the tracer left the mesh, NaN if it did not"),
+}
+#: Optional down-sampled trajectory.
+HISTORY_UNITS = {
+    "history_time": ("s", "times of the trajectory samples"),
+    "history_position": ("m", "(samples, tracers, 3) positions at the sample times"),
+}
+#: History samples allocated when no end time is given (the arrays double when full).
+HISTORY_CHUNK = 64
+
+
+
+@njit(cache=True, parallel=True)
+def _fold(position, velocity, dt, skip, domain_lo, domain_hi, codes, ndim, out, sign):
+    """Points x = position + dt velocity (m) mapped into the domain for sampling, into ``out[N, 3]``
+    with velocity signs ``sign[N, 3]``.
+
+    dt > 0 gives the Heun predictor x* = x_n + dt v_n(x_n); dt = 0 the positions themselves.
+    Per used axis: periodic wraps, reflecting mirrors (x -> 2 x_face - x, sign -1),
+    outflow clamps to the face.  Points inside are copied with sign +1.
+    """
+    for t in prange(position.shape[0]):
+        if skip[t]:
+            continue
+        for d in range(3):
+            x = position[t, d] + dt * velocity[t, d]
+            s = 1.0
+            if d < ndim:
+                lo = domain_lo[d]
+                hi = domain_hi[d]
+                if x < lo or x > hi:
+                    side = 0 if x < lo else 1
+                    code = codes[d, side]
+                    if code == PERIODIC:
+                        length = hi - lo
+                        x = x - length * math.floor((x - lo) / length)
+                        if x >= hi:
+                            x = lo
+                    elif code == REFLECTING:
+                        x = 2.0 * (lo if side == 0 else hi) - x
+                        s = -1.0
+                    if x < lo:
+                        x = lo
+                    elif x > hi:
+                        x = hi
+            out[t, d] = x
+            sign[t, d] = s
+
+
+@njit(cache=True, parallel=True)
+def _correct(position, v_start, v_end, exited, dt, t_start, domain_lo, domain_hi, codes, ndim, cylindrical,
+             velocity, exit_time):
+    """Heun corrector and domain faces, in place.
+
+    Tracers on the mesh: x_{n+1} = x_n + dt (v_start + v_end) / 2, velocity = (v_start +
+    v_end) / 2; then periodic wrap, reflecting mirror (normal velocity negated) or, past an
+    outflow face, exit at t_start + dt (x_face - x_n) / (x_{n+1} - x_n) (earliest face).
+    Exited tracers move ballistically, x += dt velocity; in 2d-cylindrical r < 0 is mirrored.
+    """
+    for t in prange(position.shape[0]):
+        if exited[t]:
+            for d in range(3):
+                position[t, d] += dt * velocity[t, d]
+            if cylindrical and position[t, 0] < 0.0:
+                position[t, 0] = -position[t, 0]
+                velocity[t, 0] = -velocity[t, 0]
+            continue
+        frac = 2.0
+        for d in range(3):
+            x0 = position[t, d]
+            v = 0.5 * (v_start[t, d] + v_end[t, d])
+            x = x0 + dt * v
+            if d < ndim:
+                lo = domain_lo[d]
+                hi = domain_hi[d]
+                if x < lo or x > hi:
+                    side = 0 if x < lo else 1
+                    face = lo if side == 0 else hi
+                    code = codes[d, side]
+                    if code == PERIODIC:
+                        x += (hi - lo) if side == 0 else lo - hi
+                    elif code == REFLECTING:
+                        x = min(max(2.0 * face - x, lo), hi)
+                        v = -v
+                    else:
+                        frac = min(frac, (face - x0) / (x - x0))
+                elif x == hi and codes[d, 1] == PERIODIC:
+                    x = lo
+            position[t, d] = x
+            velocity[t, d] = v
+        if frac <= 1.0:
+            exited[t] = True
+            exit_time[t] = t_start + frac * dt
+
+
+# ---------------------------------------------------------------------------- tracers
+
+
+
+
+class Tracers:
+    """Massless Lagrangian tracers driven by a :class:`~impactpipe.hydro.solver.Simulation`.
+
+    Pass to the Simulation (``Simulation(..., tracers=tracers)`` or ``sim.tracers = tracers``
+    before the first step); it calls :meth:`before_step`, :meth:`after_step`,
+    :meth:`restore_good` and :meth:`save`.  Method and equations: module docstring.
+
+    Args:
+        positions: (N, 3) (or (N, ndim)) initial positions (m), mesh coordinates.
+        materials: (N,) material index of each tracer.
+        ids: (N,) int64 ids (default 1..N).
+        history_interval: simulated seconds between trajectory samples, or None (no history).
+        end_time: expected end time (s), used to preallocate the history.
+
+    Attributes: the :class:`~impactpipe.hydro.output.snapshot.TracerSet` fields (``id``,
+    ``material``, ``initial_position``, ``position``, ``velocity``, ``peak_pressure``,
+    ``peak_pressure_time``, ``peak_temperature``, ``exited``, ``exit_time``), updated in place.
+    """
+
+    def __init__(self, positions, materials, ids=None, history_interval: float | None = None,
+                 end_time: float | None = None):
+        pos = as_positions(positions)
+        n = pos.shape[0]
+        if not np.isfinite(pos).all():
+            raise ValueError("tracer positions must be finite")
+        mat = np.asarray(materials, dtype=np.int64).reshape(-1)
+        if mat.shape != (n,) or (mat < 0).any():
+            raise ValueError("materials must be N non-negative material indices")
+        self.id = np.arange(1, n + 1, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64).copy()
+        if self.id.shape != (n,) or np.unique(self.id).size != n:
+            raise ValueError("ids must be N unique integers")
+        self.material = mat.copy()
+        self.initial_position = pos.copy()
+        self.position = pos.copy()
+        self.velocity = np.zeros((n, 3))
+        self.peak_pressure = np.full(n, np.nan)
+        self.peak_pressure_time = np.full(n, np.nan)
+        self.peak_temperature = np.full(n, np.nan)
+        self.exited = np.zeros(n, dtype=np.bool_)
+        self.exit_time = np.full(n, np.nan)
+        if history_interval is not None and not history_interval > 0.0:
+            raise ValueError(f"history_interval must be > 0 s, got {history_interval}")
+        self.history_interval = None if history_interval is None else float(history_interval)
+        self.history_count = 0
+        self.history_next = 0.0
+        capacity = HISTORY_CHUNK
+        if self.history_interval is not None and end_time is not None:
+            capacity = int(end_time // self.history_interval) + 2
+        self._allocate_history(capacity if self.history_interval is not None else 0)
+        # scratch (no allocation per step)
+        self._v_start = np.zeros((n, 3))
+        self._v_end = np.zeros((n, 3))
+        self._trial = np.zeros((n, 3))
+        self._sign = np.ones((n, 3))
+        self._block = np.full(n, -1, dtype=np.int64)
+        self._t_start = 0.0
+        self._missing = n  # tracers on the mesh without a peak record (a hint: recounted by each record)
+        self._good = {name: getattr(self, name).copy() for name in self._MUTABLE}
+        self._good_counts = (0, 0.0, n)
+        self._mesh = None
+        self._nmat = None
+
+    #: Arrays that a step changes (kept at the start of each step for :meth:`restore_good`).
+    _MUTABLE = ("position", "velocity", "peak_pressure", "peak_pressure_time", "peak_temperature", "exited",
+                "exit_time")
+
+    def __len__(self) -> int:
+        return int(self.id.shape[0])
+
+    def _allocate_history(self, capacity: int) -> None:
+        self.history_time = np.zeros(capacity)
+        self.history_position = np.zeros((capacity, len(self), 3))
+
+    # ------------------------------------------------------------------ mesh binding
+
+    def _bind(self, mesh: BlockMesh, nmat: int) -> None:
+        """Follow ``mesh`` unless it is the bound one; check the material indices against ``nmat``."""
+        if mesh is not self._mesh:
+            self.mesh_changed(mesh)
+        if nmat != self._nmat:
+            if (self.material >= nmat).any():
+                raise ValueError(f"tracer material index >= number of materials ({nmat})")
+            self._nmat = nmat
+
+    def mesh_changed(self, mesh: BlockMesh) -> None:
+        """Bind to a new mesh (the Simulation calls this after every regrid, which renumbers the
+        blocks): check the positions against it, rebuild the block lookup (:class:`BlockLocator`)
+        and re-find the owning block of every tracer on the mesh.  Positions and records stay."""
+        ndim = mesh.ndim
+        if mesh.block_level.max(initial=0) > 0 and mesh.block_cells % 4:
+            raise ValueError(f"tracers on a refined mesh need block_cells divisible by 4, got {mesh.block_cells}")
+        on = ~self.exited
+        if np.any(self.position[on, ndim:] != 0.0):
+            raise ValueError(f"{mesh.geometry}: tracer position components beyond axis {ndim} must be 0")
+        lo, hi = mesh.domain_lo[:ndim], mesh.domain_hi[:ndim]
+        outside = on & ((self.position[:, :ndim] < lo) | (self.position[:, :ndim] > hi)).any(axis=1)
+        if outside.any():
+            raise ValueError(f"{int(outside.sum())} tracers on the mesh lie outside the domain")
+        codes = np.full((3, 2), REFLECTING, dtype=np.int64)
+        kinds = {"periodic": PERIODIC, "reflecting": REFLECTING, "outflow": OUTFLOW}
+        for d, pair in enumerate(mesh.boundaries):
+            codes[d] = [kinds[pair[0]], kinds[pair[1]]]
+        self._codes = codes
+        self._ncell = np.asarray(mesh.interior_shape, dtype=np.int64)
+        self._cells = np.asarray(mesh.blocks_per_axis, dtype=np.int64) * mesh.block_cells
+        self._locate = BlockLocator(mesh)
+        self._mesh = mesh
+        self._locate(self.position, self.exited, self._block)
+
+    @property
+    def owning_block(self) -> np.ndarray:
+        """(N,) index of the block holding each tracer on the bound mesh (-1 once exited), as found
+        by the last step or :meth:`mesh_changed` (a copy)."""
+        return self._block.copy()
+
+    def _sample(self, sim, dt: float, out: np.ndarray) -> None:
+        """Sample the velocity at x_n + dt v_n (folded into the domain, into ``self._trial``; blocks
+        into ``self._block``) into ``out``."""
+        mesh = sim.mesh
+        loc = self._locate
+        _fold(self.position, self._v_start, dt, self.exited, mesh.domain_lo, mesh.domain_hi, self._codes,
+              mesh.ndim, self._trial, self._sign)
+        loc(self._trial, self.exited, self._block)
+        sample_velocity(self._trial, self._sign, self.material, self.exited, self._block, mesh.block_lo,
+                         mesh.block_dx, mesh.block_index, mesh.block_level, mesh.block_cells, self._ncell, mesh.ndim,
+                         self._codes, self._cells, loc.root, loc.children, sim.state.arho, sim.state.momentum, out)
+
+    def _record(self, sim, unrecorded_only: bool) -> None:
+        """Peak pressure / temperature at the current positions (``self._block`` must be current)."""
+        mesh = sim.mesh
+        st = sim.state
+        eos = sim.eos
+        loc = self._locate
+        self._missing = record_peaks(self.position, self.material, self.exited, self._block, unrecorded_only,
+                                      sim.time, mesh.block_lo, mesh.block_dx, mesh.block_index, mesh.block_level,
+                                      mesh.block_cells, self._ncell, mesh.ndim, self._codes, self._cells, loc.root,
+                                      loc.children, st.alpha, st.arho, st.arhoe, eos.kind, eos.params, eos.table,
+                                      self.peak_pressure, self.peak_pressure_time, self.peak_temperature)
+
+    def _sample_history(self, time: float) -> None:
+        if self.history_count == self.history_time.shape[0]:
+            old_t, old_x = self.history_time, self.history_position
+            self._allocate_history(max(2 * old_t.shape[0], HISTORY_CHUNK))
+            self.history_time[: old_t.shape[0]] = old_t
+            self.history_position[: old_t.shape[0]] = old_x
+        self.history_time[self.history_count] = time
+        self.history_position[self.history_count] = self.position
+        self.history_count += 1
+        self.history_next = (math.floor(time / self.history_interval) + 1.0) * self.history_interval
+
+    # ------------------------------------------------------------------ Simulation hooks
+
+    def before_step(self, sim) -> None:
+        """Keep the records for :meth:`restore_good` and sample v_n(x_n) from ``sim.state`` at t_n."""
+        self._bind(sim.mesh, sim.state.nmat)
+        for name in self._MUTABLE:
+            np.copyto(self._good[name], getattr(self, name))
+        self._good_counts = (self.history_count, self.history_next, self._missing)
+        self._t_start = sim.time
+        self._sample(sim, 0.0, self._v_start)
+        if self._missing:
+            self._record(sim, unrecorded_only=True)  # self._block holds the blocks of the positions
+        if self.history_interval is not None and self.history_count == 0:
+            self._sample_history(sim.time)
+
+    def after_step(self, sim, dt: float) -> None:
+        """Heun step over ``dt`` (s) with the field after the sweeps; faces, exits and peak records."""
+        mesh = sim.mesh
+        self._sample(sim, dt, self._v_end)
+        _correct(self.position, self._v_start, self._v_end, self.exited, dt, self._t_start, mesh.domain_lo,
+                 mesh.domain_hi, self._codes, mesh.ndim, mesh.geometry == "2d-cylindrical", self.velocity,
+                 self.exit_time)
+        self._locate(self.position, self.exited, self._block)
+        self._record(sim, unrecorded_only=False)
+        if self.history_interval is not None and sim.time >= self.history_next * (1.0 - 1e-12):
+            self._sample_history(sim.time)
+
+    def restore_good(self) -> None:
+        """Put back the records from the start of the last step (after a failed step)."""
+        for name in self._MUTABLE:
+            np.copyto(getattr(self, name), self._good[name])
+        self.history_count, self.history_next, self._missing = self._good_counts
+
+    # ------------------------------------------------------------------ output and checkpoints
+
+    @property
+    def history(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(times (K,) s, positions (K, N, 3) m) of the trajectory samples, or None without history."""
+        if self.history_interval is None:
+            return None
+        k = self.history_count
+        return self.history_time[:k].copy(), self.history_position[:k].copy()
+
+    def to_tracer_set(self) -> TracerSet:
+        """The records as a :class:`~impactpipe.hydro.output.snapshot.TracerSet` (copies)."""
+        return TracerSet(**{name: getattr(self, name).copy() for name in TRACER_UNITS})
+
+    def save(self, group) -> None:
+        """Write everything needed to continue bit for bit into an (empty) h5py group."""
+        for name, (units, description) in TRACER_UNITS.items():
+            write_dataset(group, name, getattr(self, name), units, description)
+        group.attrs["history_interval"] = np.nan if self.history_interval is None else self.history_interval
+        group.attrs["history_count"] = self.history_count
+        group.attrs["history_next"] = self.history_next
+        group.attrs["history_capacity"] = self.history_time.shape[0]
+        if self.history_interval is not None:
+            k = self.history_count
+            write_dataset(group, "history_time", self.history_time[:k], *HISTORY_UNITS["history_time"])
+            write_dataset(group, "history_position", self.history_position[:k], *HISTORY_UNITS["history_position"])
+
+    @classmethod
+    def load(cls, group) -> "Tracers":
+        """Rebuild the tracers written by :meth:`save`."""
+        interval = float(group.attrs["history_interval"])
+        tracers = cls(group["initial_position"][()], group["material"][()], ids=group["id"][()],
+                      history_interval=None if math.isnan(interval) else interval)
+        for name in Tracers._MUTABLE:
+            np.copyto(getattr(tracers, name), group[name][()])
+        if tracers.history_interval is not None:
+            k = int(group.attrs["history_count"])
+            tracers._allocate_history(int(group.attrs["history_capacity"]))
+            tracers.history_time[:k] = group["history_time"][()]
+            tracers.history_position[:k] = group["history_position"][()]
+            tracers.history_count = k
+            tracers.history_next = float(group.attrs["history_next"])
+        return tracers
+
+
+def interpolate_velocity(sim, positions, materials) -> np.ndarray:
+    """(N, 3) tracer velocity (m/s) at ``positions`` (inside the domain) for tracers of ``materials``,
+    from the current state of ``sim`` (the field a tracer sees; module docstring)."""
+    probe = Tracers(positions, materials)
+    probe._bind(sim.mesh, sim.state.nmat)
+    out = np.zeros((len(probe), 3))
+    probe._sample(sim, 0.0, out)
+    return out
+
+
+# ---------------------------------------------------------------------------- placement
