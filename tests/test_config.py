@@ -10,7 +10,8 @@ from impactpipe.pipeline.config import ConfigError, load_config, load_yaml, pars
 
 HERE = Path(__file__).parent
 BROKEN = sorted((HERE / "configs" / "broken").glob("*.yaml"))
-EXAMPLES = sorted((HERE.parent / "configs").rglob("*.yaml"))
+SWEEPS = sorted((HERE.parent / "configs" / "sweeps").glob("*.yaml"))
+EXAMPLES = sorted(set((HERE.parent / "configs").rglob("*.yaml")) - set(SWEEPS))
 
 
 def _expected(path: Path) -> str:
@@ -85,6 +86,14 @@ def test_example_configs_validate(path):
     result = CliRunner().invoke(main, ["validate", str(path)])
     assert result.exit_code == 0, result.output
     assert "derived:" in result.output
+
+
+@pytest.mark.parametrize("path", SWEEPS, ids=[p.stem for p in SWEEPS])
+def test_committed_sweep_files_load(path, tmp_path):
+    from impactpipe.pipeline.sweep import load_sweep
+
+    sweep = load_sweep(path, output=tmp_path)  # validates the sweep file and every point's config
+    assert sweep.base_path.is_file()
 
 
 def test_every_config_key_is_documented():
