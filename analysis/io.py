@@ -85,7 +85,17 @@ def _read_group(group: h5py.Group, prefix: str, units: dict[str, str]) -> dict[s
 
 
 def read_analysis(path: str | os.PathLike) -> AnalysisData:
-    """Read an analysis.h5 file written by :func:`write_analysis`."""
+    """Read an analysis.h5 file written by :func:`write_analysis`.
+
+    Example, on the quickstart's run directory (:func:`impactpipe.pipeline.run`)::
+
+        >>> from impactpipe.analysis import read_analysis
+        >>> analysis = read_analysis("runs/quickstart/analysis.h5")
+        >>> analysis.units["energies/Q"]
+        'J/kg'
+        >>> round(float(analysis["energies/Q"]), 2)
+        31.25
+    """
     units: dict[str, str] = {}
     with h5py.File(path, "r") as fh:
         data = _read_group(fh, "", units)

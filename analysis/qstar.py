@@ -194,6 +194,14 @@ def fit_qstar(
 
     Raises:
         ValueError: fewer than two fitted runs with distinct Q, or a non-negative slope.
+
+    Example: five runs on the line M_lr/M_T = 1 - Q / 2000 J/kg cross 0.5 at 1000 J/kg::
+
+        >>> from impactpipe.analysis import fit_qstar
+        >>> Q = [400.0, 700.0, 1000.0, 1300.0, 1600.0]
+        >>> fit = fit_qstar(Q, [1.0 - q / 2000.0 for q in Q], n_lr=[500] * 5)
+        >>> round(fit.qstar, 6), fit.brackets
+        (1000.0, True)
     """
     q = np.asarray(Q, dtype=float)
     y = np.asarray(mlr_over_mt, dtype=float)

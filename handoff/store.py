@@ -45,7 +45,15 @@ def write_particles(path: str | os.PathLike, particles: ParticleSet, budget: Han
 
 
 def read_particles(path: str | os.PathLike) -> ParticleSet:
-    """The ParticleSet stored in a handoff.h5 file (units checked against PARTICLE_UNITS)."""
+    """The ParticleSet stored in a handoff.h5 file (units checked against PARTICLE_UNITS).
+
+    Example, on the quickstart's run directory (:func:`impactpipe.pipeline.run`)::
+
+        >>> from impactpipe.handoff import read_particles
+        >>> particles = read_particles("runs/quickstart/handoff.h5")
+        >>> particles.position.shape[1], bool((particles.mass > 0).all())
+        (3, True)
+    """
     with h5py.File(path, "r") as h5:
         group = h5["particles"]
         return ParticleSet(**{f.name: _read(group, f.name, PARTICLE_UNITS[f.name]) for f in fields(ParticleSet)})

@@ -210,7 +210,17 @@ def write_result(path: str | os.PathLike, result: NBodyResult, attrs: dict) -> N
 
 
 def read_result(path: str | os.PathLike) -> NBodyResult:
-    """Read an ``NBodyResult`` written by :func:`write_result`."""
+    """Read an ``NBodyResult`` written by :func:`write_result`.
+
+    Example, on the quickstart's run directory (:func:`impactpipe.pipeline.run`)::
+
+        >>> from impactpipe.nbody import read_result
+        >>> result = read_result("runs/quickstart/nbody.h5")
+        >>> result.status
+        'equilibrium'
+        >>> len(result.members_offset) == len(result) + 1
+        True
+    """
     with h5py.File(path, "r") as f:
         arrays = {name: f[name][()] for name in PARTICLE_FIELD_UNITS}
         diagnostics = {name: f["diagnostics"][name][()] for name in f["diagnostics"]}

@@ -492,6 +492,13 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
 
     ``overrides`` maps dotted key paths (``"hydro.cfl"``) to values applied before
     validation (the sweep and convergence commands use this).  Raises ConfigError.
+
+    Example (from the repository's root)::
+
+        >>> from impactpipe.pipeline import load_config
+        >>> config = load_config("configs/quickstart.yaml", overrides={"scene.impact.velocity": 300.0})
+        >>> config.scene.target.radius, config.scene.impact.velocity
+        (1000.0, 300.0)
     """
     path = Path(path)
     try:

@@ -244,6 +244,16 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
     ``stage_functions`` replaces stage functions by others (``{"nbody": "pkg.mod:func"}``).
     Raises StageInterrupted on SIGINT/SIGTERM (outputs of the interrupted stage are not
     written; its checkpoint, if it keeps one, remains for the next run).
+
+    Example: the quickstart impact through all four stages (the other examples read its
+    files)::
+
+        >>> from impactpipe.pipeline import load_config, run
+        >>> summary = run(load_config("configs/quickstart.yaml"), "runs/quickstart", show_progress=False)
+        >>> sorted(summary["stages"])
+        ['analysis', 'handoff', 'hydro', 'nbody']
+        >>> 0.5 < summary["M_lr_over_M_T"] < 1.0
+        True
     """
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -87,7 +87,17 @@ def snapshot_count(path: str | Path) -> int:
 
 
 def read_snapshot(path: str | Path, index: int = -1) -> Snapshot:
-    """Read snapshot ``index`` (negative counts from the last) from a ``hydro.h5`` file."""
+    """Read snapshot ``index`` (negative counts from the last) from a ``hydro.h5`` file.
+
+    Example, on the quickstart's run directory (:func:`impactpipe.pipeline.run`)::
+
+        >>> from impactpipe.hydro import read_snapshot
+        >>> snapshot = read_snapshot("runs/quickstart/hydro.h5", index=-1)
+        >>> snapshot.geometry, snapshot.material_names
+        ('2d-cylindrical', ['basalt', 'basalt (projectile)'])
+        >>> bool(snapshot.time > 0.0)
+        True
+    """
     with h5py.File(path, "r") as fh:
         if SNAPSHOT_GROUP not in fh or len(fh[SNAPSHOT_GROUP]) == 0:
             raise KeyError(f"{path}: no snapshots")
