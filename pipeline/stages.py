@@ -9,6 +9,7 @@ section reruns the stage that reads it and every stage after it.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import json
@@ -17,7 +18,7 @@ import os
 import shutil
 import signal
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +68,26 @@ class StageContext:
     show_progress: bool = True
     summary: dict[str, Any] = field(default_factory=dict)
     stage_hash: str = ""
+    signals: "StopSignals | None" = None
+
+    @contextlib.contextmanager
+    def stop_at_safe_points(self) -> Iterator[None]:
+        """Within the block SIGINT and SIGTERM only ask the stage to stop: it calls
+        :meth:`stop_requested` at its safe points (a step boundary), writes its checkpoint
+        there and raises :meth:`interrupted`.  A second signal before that stops at once."""
+        if self.signals is None:
+            yield
+            return
+        with self.signals.deferred():
+            yield
+
+    def stop_requested(self) -> str | None:
+        """The name of the signal that asked the stage to stop, or None."""
+        return self.signals.pending if self.signals is not None else None
+
+    def interrupted(self) -> StageInterrupted:
+        """The exception a stage raises at the safe point where it honours a stop request."""
+        return StageInterrupted(f"stopped by {self.stop_requested()}")
 
     def path(self, stage: str) -> Path:
         """The output file of ``stage`` in the run directory."""
@@ -265,9 +286,10 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
     summary.update({"name": config.name, "problem": config.scene.problem, "run_dir": str(run_dir.resolve()),
                     "versions": storage.package_versions(), "git_commit": storage.SOURCE_COMMIT})
     summary.setdefault("stages", {})
+    signals = StopSignals()
     ctx = StageContext(config=config, values=derived.derive(config), run_dir=run_dir, show_progress=show_progress,
-                       summary=summary)
-    with _signals_raise():
+                       summary=summary, signals=signals)
+    with signals:
         for stage, reason in plan(config, run_dir, stages, from_stage, force):
             if reason.startswith("skip"):
                 log.info("%s: %s", stage, reason[6:])
@@ -304,17 +326,27 @@ def _invalidate_after(stage: str, records: dict[str, Any]) -> None:
         records.pop(later, None)
 
 
-class _signals_raise:
+class StopSignals:
     """Context manager turning SIGINT and SIGTERM into StageInterrupted for a clean stop.
 
-    Only the first signal raises: a second one while the stop is under way (a sweep's pool
-    SIGTERMs its workers again once one of them has exited) is logged and ignored, so it
-    cannot abort the interrupted stage's record write and leave the stage marked running.
+    Outside :meth:`deferred` the first signal raises at once.  Inside it (a stage that
+    stops only at its safe points, :meth:`StageContext.stop_at_safe_points`) the first
+    signal is only recorded in ``pending``; the stage polls it at every step boundary, where
+    its state is whole, writes its checkpoint and raises, so a resumed run continues from
+    exactly the state an uninterrupted run passes through.  A second signal while the stop
+    is pending raises at once (the stage then keeps its last periodic checkpoint).  Once a
+    StageInterrupted is under way, further signals are logged and ignored, so they cannot
+    abort the interrupted stage's record write (a sweep's pool SIGTERMs its workers again
+    once one of them has exited).
     """
 
-    def __enter__(self) -> "_signals_raise":
+    def __init__(self) -> None:
+        self.pending: str | None = None
+        self._deferring = False
+        self._raised = False
+
+    def __enter__(self) -> "StopSignals":
         self._old = {}
-        self._stopping = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             try:
                 self._old[sig] = signal.signal(sig, self._handler)
@@ -322,12 +354,26 @@ class _signals_raise:
                 pass
         return self
 
+    @contextlib.contextmanager
+    def deferred(self) -> Iterator[None]:
+        """Within the block a first signal is recorded in ``pending`` instead of raising."""
+        self._deferring = True
+        try:
+            yield
+        finally:
+            self._deferring = False
+
     def _handler(self, signum: int, frame: Any) -> None:
         name = signal.Signals(signum).name
-        if self._stopping:
+        if self._raised:
             log.warning("%s ignored: already stopping after an earlier signal (SIGKILL stops at once)", name)
             return
-        self._stopping = True
+        if self._deferring and self.pending is None:
+            self.pending = name
+            log.warning("%s: stopping at the end of the current step (send it again to stop at once, keeping "
+                        "the last periodic checkpoint)", name)
+            return
+        self._raised = True
         raise StageInterrupted(f"stopped by {name}")
 
     def __exit__(self, *exc: Any) -> None:

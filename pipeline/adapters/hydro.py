@@ -119,21 +119,25 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     last_checkpoint = [time.perf_counter()]
 
     def on_progress(t: float) -> None:
+        """After every step (a whole state): progress, periodic checkpoints, a requested stop."""
         progress(t)
-        if time.perf_counter() - last_checkpoint[0] >= config.hydro.checkpoint_wall_seconds:
+        stop = ctx.stop_requested()
+        if stop is not None or time.perf_counter() - last_checkpoint[0] >= config.hydro.checkpoint_wall_seconds:
             sim.save_checkpoint(checkpoint)
             last_checkpoint[0] = time.perf_counter()
+        if stop is not None:
+            log.info("hydro: stopped by %s at t = %.6g s (step %d); checkpoint kept for the resume", stop, sim.time,
+                     sim.step_count)
+            raise ctx.interrupted()
 
     try:
-        sim.run(end_time, output_times=times, on_output=lambda snap: _append(work, snap), progress=on_progress)
+        with ctx.stop_at_safe_points():
+            sim.run(end_time, output_times=times, on_output=lambda snap: _append(work, snap), progress=on_progress)
     except HydroFailure as exc:
         sim.restore_last_good()
         sim.save_checkpoint(checkpoint)
         log.error("hydro failure: %s; cell state: %s", exc, exc.state)
         raise HydroStageFailure(f"{exc}; the last good state (t = {sim.time:.6g} s) is kept in {checkpoint}") from exc
-    except BaseException:
-        sim.save_checkpoint(checkpoint)
-        raise
     finally:
         progress.close()
     wall = time.perf_counter() - t_wall

@@ -38,6 +38,16 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
     particles = read_particles(ctx.path("handoff"))
     nbody = config.nbody
     progress = ctx.progress("nbody", nbody.stop.max_time)
+
+    def on_progress(t: float) -> None:
+        """After every chunk: progress, and a requested stop (the resume starts from the last archive
+        snapshot, which an uninterrupted run also passes through)."""
+        progress(t)
+        if ctx.stop_requested() is not None:
+            log.info("nbody: stopped by %s at t = %.6g s; resuming starts from the last archive snapshot",
+                     ctx.stop_requested(), t)
+            raise ctx.interrupted()
+
     settings = dict(
         bulk_density=values["target_reference_density"],
         collision_model=nbody.collision_model,
@@ -51,17 +61,18 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
         max_wall_seconds=nbody.stop.max_wall_seconds,
         archive_path=ctx.run_dir / ARCHIVE_FILE,
         seed=nbody.seed,
-        progress=progress,
+        progress=on_progress,
         steps_per_dynamical_time=nbody.steps_per_dynamical_time,
         collision_step_fraction=nbody.collision_step_fraction,
         box_factor=nbody.box_factor,
     )
     try:
-        try:
-            result = reaccumulate(particles, **settings)
-        except ArchiveMismatch as exc:
-            log.info("nbody: %s: starting over", exc)
-            result = reaccumulate(particles, resume=False, **settings)
+        with ctx.stop_at_safe_points():
+            try:
+                result = reaccumulate(particles, **settings)
+            except ArchiveMismatch as exc:
+                log.info("nbody: %s: starting over", exc)
+                result = reaccumulate(particles, resume=False, **settings)
     finally:
         progress.close()
     wall = time.perf_counter() - t0
