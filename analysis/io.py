@@ -62,7 +62,7 @@ def write_analysis(path: str | os.PathLike, content: Mapping[str, Any],
         content: nested mapping group name -> mapping, dataset name ->
             (value, units[, description]); units use yt-style strings ("kg", "m/s",
             "J/kg", "Pa", "dimensionless").
-        attrs: root attributes, e.g. ``runstore.provenance(...)``.
+        attrs: root attributes, e.g. ``impactpipe.storage.provenance(...)``.
     """
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as fh:

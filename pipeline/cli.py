@@ -1,21 +1,25 @@
 """The ``impactpipe`` command line.
 
-Exit status: 0 success, 1 a stage failed, 2 invalid config or arguments (nothing
-written), 130 interrupted (SIGINT/SIGTERM; finished stages and checkpoints are kept).
+Exit status: 0 success, 1 a stage failed, 2 invalid config or arguments, or a run
+directory that another process holds or that cannot be written (nothing written), 130
+interrupted (SIGINT/SIGTERM; finished stages and checkpoints are kept).
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import sys
+import time
 from pathlib import Path
 
 import click
 import yaml
 
-from . import derived, runstore
+from . import checks, derived, runstore
 from .config import STAGES, ConfigError, load_config
+from .lock import RunDirError, run_lock
 from .stages import StageInterrupted, resolved_dict, run
 
 log = logging.getLogger("impactpipe")
@@ -34,18 +38,13 @@ def _setup_logging(verbose: int, quiet: bool) -> None:
 def _load_or_exit(path: str):
     try:
         config = load_config(path)
-        values = derived.derive(config)
+        values = checks.check(config)
     except ConfigError as exc:
         for message in exc.messages:
             click.echo(message, err=True)
         sys.exit(2)
-    errors = derived.capability_errors(config, values)
-    if errors:
-        for message in errors:
-            click.echo(f"{path}: {message}", err=True)
-        sys.exit(2)
-    for message in derived.physics_warnings(values) + derived.resolution_warnings(config):
-        click.echo(f"{path}: warning: {message}", err=True)
+    for message in checks.warnings(config, values):
+        click.echo(message, err=True)
     return config, values
 
 
@@ -79,9 +78,12 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
     config, _ = _load_or_exit(config_path)
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     try:
-        with runstore.run_log(run_dir):
+        with run_lock(run_dir), runstore.run_log(run_dir):
             summary = run(config, run_dir, stages=stages or None, from_stage=from_stage, force=force,
                           show_progress=not quiet)
+    except RunDirError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(2)
     except StageInterrupted as exc:
         click.echo(f"interrupted ({exc}); finished stages and checkpoints are kept in {run_dir}; "
                    "rerun the same command to resume", err=True)
@@ -135,10 +137,14 @@ def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, schedul
     if workers:
         execution.workers = workers
     try:
-        result = run_sweep(sweep, show_progress=not quiet, reuse_runs=list(reuse_hydro))
+        result = run_sweep(sweep, show_progress=not quiet, reuse_runs=list(reuse_hydro),
+                           report=_point_lines(quiet))
     except SweepError as exc:
         for message in exc.messages:
             click.echo(message, err=True)
+        sys.exit(2)
+    except RunDirError as exc:
+        click.echo(f"error: {exc}", err=True)
         sys.exit(2)
     status = sweep_status(sweep.directory)
     click.echo(f"sweep {sweep.spec.name}: {status['total']} points, "
@@ -154,6 +160,15 @@ def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, schedul
     click.echo(f"tables in {sweep.directory}/: {', '.join(tables)}")
     if status["failed"]:
         sys.exit(1)
+
+
+def _point_lines(quiet: bool):
+    """Where a sweep's line per point start and end goes: standard output when that is not a
+    terminal (``impactpipe sweep ... > log``), else the log (:func:`impactpipe.pipeline.sweep.
+    open_runner` logs them when no bar is shown); nowhere with --quiet."""
+    if quiet or sys.stdout.isatty():
+        return None
+    return lambda line: click.echo(f"{time.strftime('%H:%M:%S')} {line}")
 
 
 @main.command("sweep-status")
@@ -186,14 +201,28 @@ def _load_run_config(run_dir: str):
 
 @main.command("analyze")
 @click.argument("run_dir", metavar="RUN_DIR", type=click.Path(file_okay=False, exists=True))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False),
+              help="Write the analysis to this directory instead (RUN_DIR's finished stages are linked there, "
+                   "copied where linking is impossible): a read-only run is analysed this way.")
 @click.option("-v", "--verbose", count=True, help="More log output.")
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only.")
-def analyze_cmd(run_dir: str, verbose: int, quiet: bool) -> None:
-    """Rerun the analysis of RUN_DIR: analysis.h5 and the figures in RUN_DIR/plots."""
+def analyze_cmd(run_dir: str, out_dir: str | None, verbose: int, quiet: bool) -> None:
+    """Rerun the analysis of RUN_DIR: analysis.h5 and the figures in RUN_DIR/plots (or --out)."""
+    from .stages import adopt_stages
+
     _setup_logging(verbose, quiet)
     config = _load_run_config(run_dir)
-    summary = run(config, run_dir, stages=["analysis"], from_stage="analysis", show_progress=not quiet)
-    click.echo(f"analysis written to {Path(run_dir) / 'analysis.h5'} and {Path(run_dir) / 'plots'}/")
+    target = Path(out_dir or run_dir)
+    try:
+        with run_lock(target):
+            if out_dir is not None and target.resolve() != Path(run_dir).resolve():
+                adopt_stages(target, Path(run_dir), config)
+            summary = run(config, target, stages=["analysis"], from_stage="analysis", show_progress=not quiet)
+    except RunDirError as exc:
+        hint = "" if out_dir else f"; `impactpipe analyze {run_dir} --out DIR` writes the analysis elsewhere"
+        click.echo(f"error: {exc}{hint}", err=True)
+        sys.exit(2)
+    click.echo(f"analysis written to {target / 'analysis.h5'} and {target / 'plots'}/")
     for key in ("Q", "M_lr_over_M_T", "M_slr_over_M_T", "N_lr"):
         if key in summary:
             click.echo(f"{key} = {summary[key]:.4g}")
@@ -306,7 +335,9 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
 @click.option("--time", "at_time", type=float, help="Snapshot time (s); the nearest snapshot is used (default: last).")
 @click.option("--tracers", "tracer_plot", is_flag=True, help="Peak pressure against distance along the tracer ray "
               "next to the axis, instead of a field slice.")
-@click.option("--out", "out_path", type=click.Path(dir_okay=False), help="Output PNG (default RUN_DIR/plots/...).")
+@click.option("--out", "out_path", type=click.Path(),
+              help="Output PNG, or a directory for the default file name (default RUN_DIR/plots/...); "
+                   "a read-only run is plotted this way.")
 def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool, out_path: str | None) -> None:
     """Write a PNG of a hydro snapshot field (with block outlines) or of the tracers' peak pressures."""
     import h5py
@@ -319,15 +350,15 @@ def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool,
     if not path.is_file():
         click.echo(f"{run_dir}: no hydro.h5 (has the hydro stage finished?)", err=True)
         sys.exit(2)
-    plots = Path(run_dir) / "plots"
     if tracer_plot:
         tracers = read_tracers(path)
         if tracers is None:
             click.echo(f"{path}: no tracers (hydro.tracers.enabled was off)", err=True)
             sys.exit(2)
         config = _load_run_config(run_dir)
-        target = Path(out_path or plots / "tracers_peak_pressure.png")
-        slope = plot_peak_pressure_along_axis_ray(target, tracers, impact_point=(0.0, config.scene.target.radius))
+        target = _figure_path(run_dir, out_path, "tracers_peak_pressure.png")
+        with _writable(target, out_path):
+            slope = plot_peak_pressure_along_axis_ray(target, tracers, impact_point=(0.0, config.scene.target.radius))
         click.echo(f"wrote {target}; peak pressure falls with distance as r^{slope:.2f}")
         return
     if field not in FIELDS:
@@ -337,9 +368,30 @@ def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool,
         times = np.array([f["snapshots"][name].attrs["time"] for name in sorted(f["snapshots"])])
     index = len(times) - 1 if at_time is None else int(np.argmin(np.abs(times - at_time)))
     snapshot = read_snapshot(path, index)
-    target = Path(out_path or plots / f"{field}_t{snapshot.time:.4g}s.png")
-    plot_snapshot(target, snapshot, field)
+    target = _figure_path(run_dir, out_path, f"{field}_t{snapshot.time:.4g}s.png")
+    with _writable(target, out_path):
+        plot_snapshot(target, snapshot, field)
     click.echo(f"wrote {target} (snapshot {index}, t = {snapshot.time:.6g} s)")
+
+
+def _figure_path(run_dir: str, out_path: str | None, name: str) -> Path:
+    """Where a figure goes: ``--out`` if it names a PNG, ``name`` in the ``--out`` directory, else
+    RUN_DIR/plots/``name``."""
+    if out_path is None:
+        return Path(run_dir) / "plots" / name
+    out = Path(out_path)
+    return out if out.suffix.lower() == ".png" else out / name
+
+
+@contextlib.contextmanager
+def _writable(target: Path, out_path: str | None):
+    """Around writing ``target``: a place that cannot be written exits 2 with one line, not a traceback."""
+    try:
+        yield
+    except OSError as exc:
+        hint = "" if out_path else "; give --out DIR or --out FILE.png to write it elsewhere"
+        click.echo(f"error: cannot write {target}: {exc.strerror or exc}{hint}", err=True)
+        sys.exit(2)
 
 
 @main.command("export")
@@ -403,7 +455,7 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
     try:
         result = handoff_scan(config_path, values, out, show_progress=not quiet,
                               execution={"workers": workers} if workers else None)
-    except (SweepError, ValueError) as exc:
+    except (SweepError, ValueError, RunDirError) as exc:
         click.echo(str(exc), err=True)
         sys.exit(2)
     for t, m in zip(result["times"], result["mlr_over_mt"]):
@@ -467,6 +519,9 @@ def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tole
     except LadderError as exc:
         for message in exc.messages:
             click.echo(message, err=True)
+        sys.exit(2)
+    except RunDirError as exc:
+        click.echo(f"error: {exc}", err=True)
         sys.exit(2)
     for line in format_table(result, depth_values, tolerance):
         click.echo(line)

@@ -454,6 +454,9 @@ class Config(Strict):
 
     #: Directory of the YAML file; table paths are resolved against it.
     _source_dir: Path = Path(".")
+    #: The YAML file and its text, so checks made after loading can name a key's line.
+    _source: Path = Path("<config>")
+    _source_text: str = ""
 
     def resolved_materials(self) -> dict[str, dict[str, Any]]:
         """Each material's complete EOS and strength parameters (presets applied)."""
@@ -500,12 +503,73 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         >>> config.scene.target.radius, config.scene.impact.velocity
         (1000.0, 300.0)
     """
+    return parse_config(read_yaml_text(path, "config"), source=path, overrides=overrides)
+
+
+def read_yaml_text(path: str | Path, what: str = "config") -> str:
+    """The text of a YAML file; unreadable or not UTF-8, raises ConfigError naming the line."""
     path = Path(path)
     try:
-        text = path.read_text()
+        data = path.read_bytes()
     except OSError as exc:
-        raise ConfigError([f"{path}: cannot read config: {exc.strerror}"]) from exc
-    return parse_config(text, source=path, overrides=overrides)
+        raise ConfigError([f"{path}: cannot read {what}: {exc.strerror}"]) from exc
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        text = data.decode("utf-8", errors="replace")
+        key = _key_at_line(text, line)
+        raise ConfigError([f"{path}:{line}: {key}: not UTF-8 text: byte 0x{data[exc.start]:02x} at column {column} "
+                           f"(save the file as UTF-8)"]) from None
+
+
+def _key_at_line(text: str, line: int) -> str:
+    """The dotted key whose entry starts at or last before ``line`` (1-based), or ``<root>``."""
+    try:
+        root = yaml.compose(text)
+    except yaml.YAMLError:
+        return "<root>"
+    best: tuple[int, str] = (-1, "<root>")
+
+    def walk(node: yaml.Node, prefix: str) -> None:
+        nonlocal best
+        if isinstance(node, yaml.MappingNode):
+            for key_node, value_node in node.value:
+                dotted = f"{prefix}{key_node.value}"
+                if best[0] < key_node.start_mark.line + 1 <= line:
+                    best = (key_node.start_mark.line + 1, dotted)
+                walk(value_node, dotted + ".")
+
+    if root is not None:
+        walk(root, "")
+    return best[1]
+
+
+def duplicate_keys(root: yaml.Node | None, source: str | Path) -> list[str]:
+    """One ``file:line: key: message`` line per key given twice in the same mapping (YAML keeps the
+    last silently)."""
+    found: list[str] = []
+
+    def walk(node: yaml.Node, prefix: str) -> None:
+        if isinstance(node, yaml.MappingNode):
+            first: dict[str, int] = {}
+            for key_node, value_node in node.value:
+                dotted = f"{prefix}{key_node.value}"
+                line = key_node.start_mark.line + 1
+                if key_node.value in first:
+                    found.append(f"{source}:{line}: {dotted}: duplicate key (first given at line "
+                                 f"{first[key_node.value]}); give it once")
+                else:
+                    first[key_node.value] = line
+                walk(value_node, dotted + ".")
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                walk(item, f"{prefix[:-1]}[{i}].")
+
+    if root is not None:
+        walk(root, "")
+    return found
 
 
 def parse_config(text: str, source: str | Path = "<config>", overrides: dict[str, Any] | None = None) -> Config:
@@ -523,6 +587,7 @@ def parse_config(text: str, source: str | Path = "<config>", overrides: dict[str
     for dotted, value in (overrides or {}).items():
         set_dotted(data, dotted, value)
     lines = _LineFinder(source, root)
+    duplicates = duplicate_keys(root, source)
     found = unknown_keys(data, Config) + semantic_errors(data, source.parent)
     try:
         config = Config.model_validate(data)
@@ -532,8 +597,9 @@ def parse_config(text: str, source: str | Path = "<config>", overrides: dict[str
                 found.append((_error_loc(err), _describe(err)))
     else:
         config._source_dir = source.parent.resolve()
-    if found:
-        messages: list[str] = []
+        config._source, config._source_text = source, text
+    if found or duplicates:
+        messages: list[str] = list(duplicates)
         for loc, msg in found:
             line = lines.format(loc, msg)
             if line not in messages:
@@ -581,14 +647,18 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
         allowed = ", ".join(defined) if defined else "none defined"
         errors.append((("scene", "material"), f"'{scene['material']}' is not defined under materials "
                                               f"(defined: {allowed}){_did_you_mean(scene['material'], defined)}"))
+    hydro = data.get("hydro") if isinstance(data.get("hydro"), dict) else {}
     if scene.get("problem") == "column_collapse":
-        hydro = data.get("hydro") if isinstance(data.get("hydro"), dict) else {}
         cfl = hydro.get("cfl", Hydro.model_fields["cfl"].default)
         if isinstance(cfl, (int, float)) and cfl > column_collapse.MAX_CFL:
             errors.append((("hydro", "cfl"), f"must be <= {column_collapse.MAX_CFL:g} for the column_collapse scene "
                                              f"(got {cfl:g}{'' if 'cfl' in hydro else ', the default'}): at larger "
                                              f"steps a deposit at rest under gravity does not stay at rest "
                                              f"(docs/validation.md, granular column collapse)"))
+    if scene.get("problem", "impact") != "impact" and hydro.get("end_time", "auto") != "auto":
+        errors.append((("hydro", "end_time"), f"applies to impact scenes only; the {scene.get('problem')} scene runs "
+                                              f"to scene.end_time, so this value would be ignored: remove it and "
+                                              f"set scene.end_time"))
     if scene.get("problem", "impact") == "impact":
         rt = (scene.get("target") or {}).get("radius") if isinstance(scene.get("target"), dict) else None
         rp = (scene.get("projectile") or {}).get("radius") if isinstance(scene.get("projectile"), dict) else None

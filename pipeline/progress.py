@@ -1,14 +1,18 @@
 """Progress reporting for long stages: a tqdm bar with ETA on a terminal, log lines otherwise.
 
 Numba kernels cannot call tqdm, so stages advance in chunks from a Python loop and call
-the reporter between chunks with the simulated time reached.
+the reporter between chunks with the simulated time reached.  Before the first chunk of a
+fresh install numba compiles the kernels for minutes; :func:`compile_notice` says so.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
+import threading
 import time
+from collections.abc import Iterator
 
 from tqdm import tqdm
 
@@ -70,3 +74,49 @@ class StageProgress:
         if self._bar is not None:
             self._bar.close()
             self._bar = None
+
+
+#: What the console shows when numba starts compiling a kernel that is not in its cache.
+COMPILE_MESSAGE = "compiling numerical kernels (first run only, about 2 minutes)"
+
+
+@contextlib.contextmanager
+def compile_notice() -> Iterator[None]:
+    """While the block runs, the first compilation numba starts in this thread logs
+    :data:`COMPILE_MESSAGE`, and the block's end logs the wall time the compilations took.
+
+    Numba signals a compilation (event ``numba:compile``) only for a kernel that its cache
+    cannot supply (a fresh install, changed source, new argument types), never for one
+    loaded from the cache, so a warm install shows nothing.
+    """
+    from numba.core import event
+
+    class Notice(event.Listener):
+        thread = threading.get_ident()
+        depth = 0
+        started = 0.0
+        seconds = 0.0
+        count = 0
+
+        def on_start(self, ev: event.Event) -> None:
+            if threading.get_ident() != self.thread:
+                return
+            if self.depth == 0:
+                if self.count == 0:
+                    log.info(COMPILE_MESSAGE)
+                self.started = time.perf_counter()
+            self.depth += 1
+            self.count += 1
+
+        def on_end(self, ev: event.Event) -> None:
+            if threading.get_ident() != self.thread:
+                return
+            self.depth -= 1
+            if self.depth == 0:
+                self.seconds += time.perf_counter() - self.started
+
+    notice = Notice()
+    with event.install_listener("numba:compile", notice):
+        yield
+    if notice.count:
+        log.info("numerical kernels compiled in %.0f s", notice.seconds)

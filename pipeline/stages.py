@@ -17,6 +17,7 @@ import logging
 import os
 import shutil
 import signal
+import socket
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -27,9 +28,10 @@ import yaml
 
 from impactpipe import storage
 
-from . import derived
+from . import checks, derived
 from .config import STAGES, Config
-from .progress import StageProgress
+from .lock import process_alive, run_lock
+from .progress import StageProgress, compile_notice
 
 log = logging.getLogger(__name__)
 
@@ -244,7 +246,7 @@ def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
         elif upstream_reran:
             reason = "run: an earlier stage reran"
         elif rec.get("status") != "complete" or not output.is_file():
-            reason = "run: not finished before" if not rec else f"run: previous attempt {rec.get('status', 'incomplete')}"
+            reason = "run: not finished before" if not rec else f"run: previous attempt {attempt_status(rec)}"
         elif rec.get("hash") != hashes[stage]:
             reason = "run: its config sections changed"
         else:
@@ -264,7 +266,10 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
     reruns from that stage on; ``force`` reruns everything.  Returns the summary.
     ``stage_functions`` replaces stage functions by others (``{"nbody": "pkg.mod:func"}``).
     Raises StageInterrupted on SIGINT/SIGTERM (outputs of the interrupted stage are not
-    written; its checkpoint, if it keeps one, remains for the next run).
+    written; its checkpoint, if it keeps one, remains for the next run).  Before anything is
+    written the config passes the checks of ``impactpipe validate`` (:func:`impactpipe.pipeline.
+    checks.check`, raises ConfigError) and the run takes the directory's lock
+    (:func:`impactpipe.pipeline.lock.run_lock`: raises RunLocked while another process writes it).
 
     Example: the quickstart impact through all four stages (the other examples read its
     files)::
@@ -277,10 +282,23 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
         True
     """
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
+    checks.check(config)
+    with run_lock(run_dir):
+        return _run_locked(config, run_dir, stages, from_stage, force, show_progress, stage_functions)
+
+
+def _run_locked(config: Config, run_dir: Path, stages: Iterable[str] | None, from_stage: str | None, force: bool,
+                show_progress: bool, stage_functions: dict[str, str] | None) -> dict[str, Any]:
+    """The body of :func:`run`, holding the run directory's lock."""
     run_dir.mkdir(parents=True, exist_ok=True)
     storage.write_text_atomic(run_dir / RESOLVED_CONFIG_FILE, resolved_yaml(config))
     hashes = stage_hashes(config)
     records = read_records(run_dir)
+    left_running = [rec for rec in records.values() if rec.get("status") == "running"]
+    for rec in left_running:  # its writer is gone, since this run holds the lock
+        rec["status"] = "interrupted"
+    if left_running:
+        storage.write_json_atomic(run_dir / RECORD_FILE, records)
     summary_path = run_dir / SUMMARY_FILE
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     summary.update({"name": config.name, "problem": config.scene.problem, "run_dir": str(run_dir.resolve()),
@@ -296,12 +314,14 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
                 continue
             log.info("%s: %s", stage, reason[5:])
             _invalidate_after(stage, records)
-            records[stage] = {"status": "running", "hash": hashes[stage], "started": storage.utc_now()}
+            records[stage] = {"status": "running", "hash": hashes[stage], "started": storage.utc_now(),
+                              "host": socket.gethostname(), "pid": os.getpid()}
             storage.write_json_atomic(run_dir / RECORD_FILE, records)
             ctx.stage_hash = hashes[stage]
             t0 = time.perf_counter()
             try:
-                result = load_stage_function(stage, stage_functions)(ctx)
+                with compile_notice():
+                    result = load_stage_function(stage, stage_functions)(ctx)
             except StageInterrupted:
                 records[stage]["status"] = "interrupted"
                 storage.write_json_atomic(run_dir / RECORD_FILE, records)
@@ -319,6 +339,15 @@ def run(config: Config, out_dir: str | Path | None = None, stages: Iterable[str]
             storage.write_json_atomic(summary_path, summary)
             log.info("%s: done in %.1f s -> %s", stage, wall, run_dir / STAGE_FILES[stage])
     return summary
+
+
+def attempt_status(record: dict[str, Any]) -> str:
+    """A stage record's status, ``interrupted`` for one still marked running whose process is gone
+    (killed, or the machine stopped: :func:`impactpipe.pipeline.lock.process_alive`)."""
+    status = record.get("status", "incomplete")
+    if status == "running" and not process_alive(record.get("host"), record.get("pid")):
+        return "interrupted"
+    return status
 
 
 def _invalidate_after(stage: str, records: dict[str, Any]) -> None:

@@ -11,6 +11,11 @@ Execution goes through a ``concurrent.futures`` executor: a process pool sized t
 cores (``backend: local``) or a Dask client (``backend: dask``, a scheduler address or a
 LocalCluster).  A failed point is recorded with its error and log and retried up to
 ``execution.retries`` times; it never stops the other points.
+
+A sweep holds the lock of its directory and each point that of its run directory
+(:mod:`impactpipe.pipeline.lock`), so a second sweep on the same directory stops at once
+and no point is ever run twice at the same time.  The local pool's workers watch the
+sweep process and stop when it is gone (``kill -9`` included).
 """
 
 from __future__ import annotations
@@ -25,10 +30,12 @@ import multiprocessing
 import os
 import re
 import signal
+import socket
 import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -40,8 +47,10 @@ from pydantic import Field, ValidationError, model_validator
 
 from impactpipe import storage
 
-from . import runstore
-from .config import Config, ConfigError, Strict, _LineFinder, key_paths, load_yaml, parse_config, unknown_keys
+from . import checks, runstore
+from .config import (Config, ConfigError, Strict, _LineFinder, duplicate_keys, key_paths, load_yaml, parse_config,
+                     read_yaml_text, unknown_keys)
+from .lock import process_alive, run_lock
 from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
 
 log = logging.getLogger(__name__)
@@ -181,16 +190,17 @@ def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
     """Read and validate a sweep file and the base config of every grid point (raises SweepError)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = read_yaml_text(path, "sweep file")
         data = load_yaml(text)
-    except OSError as exc:
-        raise SweepError([f"{path}: cannot read sweep file: {exc.strerror}"]) from exc
+    except ConfigError as exc:
+        raise SweepError(exc.messages) from None
     except yaml.YAMLError as exc:
         raise SweepError([f"{path}: not valid YAML: {exc}"]) from exc
     if not isinstance(data, dict):
         raise SweepError([f"{path}: a sweep file must be a mapping of keys"])
-    lines = _LineFinder(path, yaml.compose(text))
-    found = [lines.format(loc, msg) for loc, msg in unknown_keys(data, SweepSpec)]
+    root = yaml.compose(text)
+    lines = _LineFinder(path, root)
+    found = duplicate_keys(root, path) + [lines.format(loc, msg) for loc, msg in unknown_keys(data, SweepSpec)]
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as exc:
@@ -205,16 +215,18 @@ def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
             where = "axes" if key in spec.axes else "overrides"
             raise SweepError([lines.format((where, key), "not a config key (see docs/config.md)")])
     base_path = (path.parent / spec.base).resolve()
+    if not base_path.is_file():
+        raise SweepError([lines.format(("base",), f"cannot read base config {base_path}: no such file")])
     try:
-        base_text = base_path.read_text()
-    except OSError as exc:
-        raise SweepError([lines.format(("base",), f"cannot read base config {base_path}: {exc.strerror}")]) from exc
+        base_text = read_yaml_text(base_path, "base config")
+    except ConfigError as exc:
+        raise SweepError(exc.messages) from None
     directory = Path(output or spec.output or Path("sweeps") / spec.name)
     sweep = Sweep(spec=spec, base_text=base_text, base_path=base_path, directory=directory, source=path)
     messages = []
     for params in (p for point in grid_points(sweep) for p in with_replicates(point, spec.replicates)):
         try:
-            sweep.config_for(params)
+            checks.check(sweep.config_for(params))
         except ConfigError as exc:
             label = ", ".join(f"{k}={v}" for k, v in params.items())
             messages += [f"point {label}: {m}" for m in exc.messages]
@@ -296,12 +308,13 @@ class PointFailed(RuntimeError):
 
 def run_point(job: PointJob) -> PointResult:
     """Run one point in a worker: adopt shared stages, run the pipeline, log to run.log
-    (:func:`impactpipe.pipeline.runstore.run_log`)."""
+    (:func:`impactpipe.pipeline.runstore.run_log`).  The point holds its run directory's lock
+    throughout; a directory another process still holds (a worker of a sweep that was killed,
+    finishing its stage) is waited for, so no point ever runs twice at the same time."""
     _set_threads(job.threads)
     run_dir = Path(job.run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    with runstore.run_log(run_dir):
+    with run_lock(run_dir, wait=True, what=f"point {job.name}"), runstore.run_log(run_dir):
         summary = _run_logged(job, run_dir)
     return PointResult(job.name, "complete", summary, None, time.perf_counter() - t0)
 
@@ -334,8 +347,9 @@ def _set_threads(threads: int) -> None:
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
 
-def _init_worker(threads: int) -> None:
-    """Pool-worker initializer: give numba ``threads`` threads.
+def _init_worker(threads: int, sweep_pid: int) -> None:
+    """Pool-worker initializer: give numba ``threads`` threads and watch the sweep process
+    ``sweep_pid`` (:func:`_watch_sweep`).
 
     Unpickling this function imports numba (through this module), which reads
     NUMBA_NUM_THREADS (default: all cores) at import; the config is re-read here so the
@@ -347,6 +361,28 @@ def _init_worker(threads: int) -> None:
         from numba.core import config
 
         config.reload_config()
+    threading.Thread(target=_watch_sweep, args=(sweep_pid,), name="watch-sweep", daemon=True).start()
+
+
+#: Seconds between a pool worker's checks that the sweep process is alive.
+SWEEP_POLL = 0.5
+#: Seconds an orphaned worker's stage gets to stop cleanly before the worker exits regardless.
+ORPHAN_GRACE = 30.0
+
+
+def _watch_sweep(sweep_pid: int) -> None:
+    """Stop this pool worker once the sweep process ``sweep_pid`` is gone (killed, even with
+    SIGKILL, which leaves it no chance to stop its workers): the worker is re-parented, so
+    its parent pid changes.  The worker SIGTERMs itself, so a stage in flight stops as on
+    a polite stop (recorded interrupted, checkpoint kept; :func:`run_point` then exits), and
+    an idle worker ends; after ORPHAN_GRACE seconds it exits regardless.  Until it has exited
+    it holds its point's lock, which a restarted sweep waits for."""
+    while os.getppid() == sweep_pid:
+        time.sleep(SWEEP_POLL)
+    log.warning("the sweep process %d is gone; pool worker %d stops", sweep_pid, os.getpid())
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(ORPHAN_GRACE)
+    os._exit(1)
 
 
 # --------------------------------------------------------------------------- coordinator
@@ -355,13 +391,16 @@ def _init_worker(threads: int) -> None:
 class SweepRunner:
     """Runs the points of a sweep on an executor, with shared work, retries and resume."""
 
-    def __init__(self, sweep: Sweep, executor: cf.Executor, progress: Any = None, own_pool: bool = False):
+    def __init__(self, sweep: Sweep, executor: cf.Executor, progress: Any = None, own_pool: bool = False,
+                 report: Callable[[str], None] | None = None):
         """``own_pool``: ``executor`` is the local pool :func:`make_executor` sized from the
-        sweep's execution settings (it bounds :meth:`in_flight_limit`)."""
+        sweep's execution settings (it bounds :meth:`in_flight_limit`).  ``report`` gets one
+        line when a point starts and one when it ends (for a log where no bar is shown)."""
         self.sweep = sweep
         self.executor = executor
         self.own_pool = own_pool
         self.progress = progress
+        self.report = report or (lambda line: None)
         self.points: dict[str, dict[str, Any]] = {}
         self._configs: dict[str, Config] = {}
         self.runs_dir = sweep.directory / "runs"
@@ -372,6 +411,15 @@ class SweepRunner:
     def _record(self, name: str, **fields_: Any) -> None:
         self.points.setdefault(name, {}).update(fields_)
         storage.write_json_atomic(self.sweep.directory / POINTS_FILE, self.points)
+
+    def mark_interrupted(self) -> None:
+        """Points still marked running when the runner stops (an interrupt, an error) did not
+        finish: record them as interrupted, so ``points.json`` and ``sweep-status`` tell the truth."""
+        left = [name for name, p in self.points.items() if p.get("status") == "running"]
+        for name in left:
+            self.points[name]["status"] = "interrupted"
+        if left:
+            storage.write_json_atomic(self.sweep.directory / POINTS_FILE, self.points)
 
     def add_point(self, params: dict[str, Any], group: str = "", replicate_of: dict[str, Any] | None = None) -> str:
         """Register a point; returns its name.  ``replicate_of``: the parameters of the point
@@ -508,7 +556,9 @@ class SweepRunner:
             reuse_dir = reuse  # a donor run's directory, or None
         job = PointJob(name, point["params"], self._configs[name], point["run_dir"], reuse_dir,
                        self.sweep.spec.execution.threads_per_run, self.sweep.spec.stage_functions)
-        self._record(name, status="running", attempts=point["attempts"] + 1, error=None)
+        self._record(name, status="running", attempts=point["attempts"] + 1, error=None,
+                     host=socket.gethostname(), pid=os.getpid())
+        self.report(f"point {name}: started (attempt {point['attempts']})")
         return self.executor.submit(run_point, job)
 
     def _collect(self, name: str, future: cf.Future) -> PointResult | None:
@@ -521,12 +571,17 @@ class SweepRunner:
             if attempts <= self.sweep.spec.execution.retries:
                 log.warning("point %s failed (attempt %d), retrying: %s", name, attempts, message)
                 self._record(name, status="retrying", error=message)
+                self.report(f"point {name}: failed (attempt {attempts}), will retry")
                 return None
             log.error("point %s failed after %d attempts: %s", name, attempts, message)
             self._record(name, status="failed", error=message)
+            self.report(f"point {name}: failed after {attempts} attempts: {message}")
             return PointResult(name, "failed", {}, message)
         self._record(name, status="complete", error=None, wall_seconds=result.wall_seconds,
                      summary=_results_of(result.summary))
+        answer = result.summary.get("M_lr_over_M_T")
+        self.report(f"point {name}: complete in {result.wall_seconds:.1f} s"
+                    + (f", M_lr/M_T = {answer:.4g}" if isinstance(answer, (int, float)) else ""))
         return result
 
     # -- modes
@@ -788,7 +843,7 @@ def make_executor(execution: Execution) -> tuple[cf.Executor, Any]:
     workers = execution.workers or max(1, (os.cpu_count() or 1) // execution.threads_per_run)
     if execution.backend == "local":
         pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=_init_worker, initargs=(execution.threads_per_run,))
+                                      initializer=_init_worker, initargs=(execution.threads_per_run, os.getpid()))
         return pool, pool.shutdown
     from distributed import Client, LocalCluster
 
@@ -860,29 +915,39 @@ def pool_stopped_on_interrupt(executor: cf.Executor):
 
 
 @contextlib.contextmanager
-def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool, label: str):
+def open_runner(sweep: Sweep, executor: cf.Executor | None, show_progress: bool, label: str,
+                report: Callable[[str], None] | None = None):
     """A :class:`SweepRunner` on ``executor`` (or one made from the sweep's execution settings)
-    with a progress bar; on exit the bar closes, the result tables are written (also after an
-    error or an interrupt) and an executor made here shuts down.  Interrupted (Ctrl-C, or
-    SIGTERM to this process alone), a local process pool made here stops its workers first,
-    so no point keeps running after the sweep has gone."""
-    close = None
-    if executor is None:
-        executor, close = make_executor(sweep.spec.execution)
-    own_pool = close is not None and sweep.spec.execution.backend == "local"
-    from tqdm import tqdm
+    with a progress bar, holding the sweep directory's lock (raises
+    :class:`impactpipe.pipeline.lock.RunLocked` while another sweep uses it); on exit the bar
+    closes, points still running are recorded as interrupted, the result tables are written
+    (also after an error or an interrupt) and an executor made here shuts down.  Interrupted
+    (Ctrl-C, or SIGTERM to this process alone), a local process pool made here stops its
+    workers first, so no point keeps running after the sweep has gone.
 
-    bar = tqdm(total=0, desc=f"{label} {sweep.spec.name}", unit="run", disable=None if show_progress else True)
-    runner = SweepRunner(sweep, executor, bar, own_pool=own_pool)
-    runner.offer_earlier_runs()
-    try:
-        with pool_stopped_on_interrupt(executor) if own_pool else contextlib.nullcontext():
-            yield runner
-    finally:
-        bar.close()
-        write_results(sweep, runner.points)
-        if close is not None:
-            close()
+    ``report`` gets a line per point start and end; by default these are logged (INFO) when
+    the bar is not shown on a terminal and progress is wanted."""
+    with run_lock(sweep.directory):
+        close = None
+        if executor is None:
+            executor, close = make_executor(sweep.spec.execution)
+        own_pool = close is not None and sweep.spec.execution.backend == "local"
+        from tqdm import tqdm
+
+        bar = tqdm(total=0, desc=f"{label} {sweep.spec.name}", unit="run", disable=None if show_progress else True)
+        if report is None and show_progress and bar.disable:
+            report = log.info
+        runner = SweepRunner(sweep, executor, bar, own_pool=own_pool, report=report)
+        runner.offer_earlier_runs()
+        try:
+            with pool_stopped_on_interrupt(executor) if own_pool else contextlib.nullcontext():
+                yield runner
+        finally:
+            bar.close()
+            runner.mark_interrupted()
+            write_results(sweep, runner.points)
+            if close is not None:
+                close()
 
 
 def donor_problems(run_dirs: list[str | Path] | tuple, wanted: set[str] | None, what: str) -> list[str]:
@@ -900,8 +965,9 @@ def donor_problems(run_dirs: list[str | Path] | tuple, wanted: set[str] | None, 
 
 
 def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: bool = True,
-              reuse_runs: list[str | Path] | tuple = ()) -> dict[str, Any]:
+              reuse_runs: list[str | Path] | tuple = (), report: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run a sweep to the end; returns {"points": ..., "qstar": [...]}; writes the tables.
+    ``report``: see :func:`open_runner`.
 
     ``reuse_runs``: finished run directories whose hydro runs the points with the same hydro
     settings adopt instead of running their own (:meth:`SweepRunner.add_donor`).  They are
@@ -915,10 +981,9 @@ def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: 
     messages = donor_problems(reuse_runs, wanted, "point")
     if messages:
         raise SweepError(messages)
-    sweep.directory.mkdir(parents=True, exist_ok=True)
-    storage.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
     qstar = []
-    with open_runner(sweep, executor, show_progress, "sweep") as runner:
+    with open_runner(sweep, executor, show_progress, "sweep", report) as runner:
+        storage.write_text_atomic(sweep.directory / "sweep.yaml", sweep.source.read_text())
         for run_dir in reuse_runs:
             runner.add_donor(run_dir)
         if sweep.spec.mode == "grid":
@@ -936,13 +1001,18 @@ def finished_run_dirs(directory: str | Path) -> list[str]:
 
 
 def sweep_status(directory: str | Path) -> dict[str, Any]:
-    """Counts of points by status and the failed points' errors, from ``points.json``."""
+    """Counts of points by status and the failed points' errors, from ``points.json``.  A point
+    marked running whose sweep process is gone (killed before it could record the stop)
+    counts as interrupted."""
     path = Path(directory) / POINTS_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{directory}: no {POINTS_FILE}; is this a sweep directory?")
     points = json.loads(path.read_text())
     counts: dict[str, int] = {}
     for p in points.values():
-        counts[p["status"]] = counts.get(p["status"], 0) + 1
+        status = p["status"]
+        if status == "running" and not process_alive(p.get("host"), p.get("pid")):
+            status = "interrupted"
+        counts[status] = counts.get(status, 0) + 1
     failed = {name: p.get("error") for name, p in points.items() if p["status"] == "failed"}
     return {"total": len(points), "counts": counts, "failed": failed}

@@ -15,17 +15,7 @@ CONFIGS = Path(__file__).parent.parent / "configs"
 QUICKSTART = CONFIGS / "quickstart.yaml"
 CASE_9A = CONFIGS / "reference" / "case9a.yaml"  # hydro strength preset
 CASE_8C = CONFIGS / "reference" / "case8c.yaml"  # GEO weak
-SOD = """
-name: sod
-scene:
-  problem: shock_tube
-  cells: 64
-  left: {material: gas, density: 1.0, pressure: 1.0}
-  right: {material: gas, density: 0.125, pressure: 0.1}
-  end_time: 0.2
-materials:
-  gas: {eos: {model: ideal_gas, gamma: 1.4}}
-"""
+SOD = (Path(__file__).parent / "configs" / "sod.yaml").read_text()
 
 
 def test_geometry_follows_the_impact_angle():
