@@ -335,8 +335,10 @@ def _run_locked(config: Config, run_dir: Path, stages: Iterable[str] | None, fro
             records[stage].update({"status": "complete", "wall_seconds": wall, "finished": storage.utc_now()})
             summary["stages"][stage] = {"wall_seconds": wall, **result.pop("stage", {}), "summary_keys": sorted(result)}
             summary.update(result)
-            storage.write_json_atomic(run_dir / RECORD_FILE, records)
+            # The summary first: a stage recorded complete always has its entries in summary.json
+            # (a kill between the two writes reruns the stage, which writes the same entries).
             storage.write_json_atomic(summary_path, summary)
+            storage.write_json_atomic(run_dir / RECORD_FILE, records)
             log.info("%s: done in %.1f s -> %s", stage, wall, run_dir / STAGE_FILES[stage])
     return summary
 

@@ -34,8 +34,16 @@ NBODY_STOPS = 4
 VOLATILE = {"wall_seconds", "run_dir", "started", "finished"}
 
 
-def config():
-    return load_config(QUICKSTART, overrides=OVERRIDES)
+#: Variants of the mesh and the physics the stops are also taken in (a few stops each).
+VARIANTS = {
+    "uniform": {"hydro.max_levels": 1},
+    "strength": {"materials.basalt.strength": {"model": "geo", "preset": "weak"}},
+}
+VARIANT_STOPS = 3
+
+
+def config(variant: str | None = None):
+    return load_config(QUICKSTART, overrides={**OVERRIDES, **VARIANTS.get(variant, {})})
 
 
 def h5_datasets(path: Path) -> dict[str, np.ndarray]:
@@ -108,6 +116,28 @@ def test_a_hydro_stop_mid_step_resumes_to_the_same_answer(where, reference, tmp_
     run(config(), tmp_path, stages=["hydro"], show_progress=False)
     assert_same_files(tmp_path, ref, ("hydro.h5",))
     assert_same_summary(tmp_path, ref, ["hydro_budget", "tracers"])
+
+
+@pytest.fixture(scope="module", params=sorted(VARIANTS))
+def variant_reference(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp(request.param)
+    run(config(request.param), out, stages=["hydro"], show_progress=False)
+    with h5py.File(out / "hydro.h5", "r") as f:
+        steps = int(f.attrs["steps"])
+    return request.param, out, steps
+
+
+def test_hydro_stops_on_a_uniform_mesh_and_with_strength(variant_reference, tmp_path, monkeypatch):
+    variant, ref, steps = variant_reference
+    rng = np.random.default_rng(RNG_SEED + 2)
+    for k, where in enumerate(rng.random(VARIANT_STOPS)):
+        run_dir = tmp_path / f"stop{k}"
+        monkeypatch.setattr(solver, "sweep", sweeps_signalling([1 + int(where * (2 * steps - 1))]))
+        with pytest.raises(orchestrator.StageInterrupted):
+            run(config(variant), run_dir, stages=["hydro"], show_progress=False)
+        monkeypatch.undo()
+        run(config(variant), run_dir, stages=["hydro"], show_progress=False)
+        assert_same_files(run_dir, ref, ("hydro.h5",))
 
 
 def test_two_signals_stop_at_once_and_the_resume_is_still_exact(reference, tmp_path, monkeypatch):
