@@ -528,7 +528,7 @@ class _Run:
                                  collision_search=self.params["collision_search"],
                                  collision_model=self.params["collision_model"])
         if dt < self.sim.dt or dt > 2.0 * self.sim.dt:
-            log.info("time step %s from %.4g s to %.4g s at t = %.6g s",
+            log.debug("time step %s from %.4g s to %.4g s at t = %.6g s",
                      "reduced" if dt < self.sim.dt else "raised", self.sim.dt, dt, self.sim.t)
             self.sim.dt = dt
 
@@ -559,7 +559,7 @@ class _Run:
         }
         for k, val in row.items():
             self.diag.setdefault(k, []).append(val)
-        log.info("t = %.6g s (%.3g t_dyn), N = %d, M_lr = %.4g kg, orbiting = %.3g M_lr, merges %d, bounces %d",
+        log.debug("t = %.6g s (%.3g t_dyn), N = %d, M_lr = %.4g kg, orbiting = %.3g M_lr, merges %d, bounces %d",
                  t, t / self.t_dyn, len(m), m_lr, m_orb / m_lr if m_lr > 0 else 0.0, row["n_merge"],
                  row["n_bounce"])
 

@@ -141,3 +141,12 @@ def test_plot_field_slice_and_tracer_ray(quickstart):
     assert -4.0 < slope < -0.5, "peak pressure must fall with distance from the impact point"
     result = CliRunner().invoke(main, ["plot", str(out), "--field", "pressur"])
     assert result.exit_code == 2 and "unknown field" in result.output
+
+
+def test_the_nbody_stage_logs_a_handful_of_lines(quickstart):
+    """Per-output diagnostics go to DEBUG; the progress reporter and the stage's summary lines
+    are what run.log gets at INFO."""
+    out, _ = quickstart
+    lines = [line for line in (out / "run.log").read_text().splitlines() if "impactpipe.nbody" in line
+             or "adapters.nbody" in line]
+    assert 1 <= len(lines) <= 8, lines

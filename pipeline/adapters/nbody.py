@@ -37,7 +37,7 @@ def run_nbody_stage(ctx: StageContext) -> dict[str, Any]:
     values = ctx.values
     particles = read_particles(ctx.path("handoff"))
     nbody = config.nbody
-    progress = ctx.progress("nbody", nbody.stop.max_time)
+    progress = ctx.progress("nbody", values["nbody_time_cap"])
 
     def on_progress(t: float) -> None:
         """After every chunk: progress, and a requested stop (the resume starts from the last archive
