@@ -24,13 +24,17 @@ from .plots import (
 from .provenance import MassFractionCurve, cumulative_mass_fraction, provenance_owner, shock_history
 from .qstar import QStarFit, fit_qstar, write_qstar_table
 from .remnants import Remnant, RemnantResult, find_remnants, touching_groups
+from .resolution_error import ResolutionError, qstar_resolution_error, write_resolution_table
+from .richardson import Extrapolation, richardson
 
 __all__ = [
     "AnalysisData",
+    "Extrapolation",
     "MassFractionCurve",
     "QStarFit",
     "Remnant",
     "RemnantResult",
+    "ResolutionError",
     "SizeLawFit",
     "benz_asphaug_1999",
     "comparison_laws",
@@ -48,12 +52,15 @@ __all__ = [
     "plot_qstar",
     "plot_velocity_distribution",
     "provenance_owner",
+    "qstar_resolution_error",
     "read_analysis",
     "reduced_impact_energy",
+    "richardson",
     "scale_qstar_to_velocity",
     "shock_history",
     "sphere_mass",
     "touching_groups",
     "write_analysis",
     "write_qstar_table",
+    "write_resolution_table",
 ]

@@ -155,8 +155,11 @@ def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, schedul
         qstar = plus_minus(record.get("Qstar_D", float("nan")), record.get("Qstar_D_uncertainty", float("nan")), ".4g")
         group = ", ".join(f"{k}={record[k]}" for k in sweep.spec.axis_values() if k in record)
         click.echo(f"  Q*_D = {qstar} J/kg ({record['status']}{scatter})" + (f" for {group}" if group else ""))
+    for ladder in result["resolution"]:
+        group = ", ".join(f"{k}={ladder[k]}" for k in sweep.spec.axis_values() if k in ladder)
+        click.echo(f"  {ladder['summary'] or ladder['status']}" + (f" for {group}" if group else ""))
     tables = ["results.csv", "results.h5"] + (["replicates.csv"] if sweep.spec.replicates else []) \
-        + (["qstar.csv"] if result["qstar"] else [])
+        + (["qstar.csv"] if result["qstar"] else []) + (["qstar_resolution.csv"] if result["resolution"] else [])
     click.echo(f"tables in {sweep.directory}/: {', '.join(tables)}")
     if status["failed"]:
         sys.exit(1)
@@ -242,15 +245,16 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
 
     A sweep directory (one with points.json) stands for its finished points: the runs of
     the sweep as last run, not every directory in its runs/ (which may hold the points of
-    an earlier version of the sweep).  Runs are grouped by target radius; each group gets its fit, table and figure (with the
-    published laws for comparison); five or more target radii also get the fit of
-    Q*_D(R) = q_b R^alpha + rho q_g R^beta.
+    an earlier version of the sweep).  Runs are grouped by target radius; each group gets its
+    fit, table and figure (with the published laws for comparison).  Runs of one target at
+    several resolutions (hydro.cells_per_projectile_radius) are fitted per resolution, and
+    Q*_D gets its resolution error over that ladder (Richardson, refused where the observed
+    order says it cannot be trusted; :mod:`impactpipe.analysis.resolution_error`), beside
+    the fit's error from the runs' scatter.  Five or more target radii also get the fit of
+    Q*_D(R) = q_b R^alpha + rho q_g R^beta (at each radius's finest resolution).
     """
-    import numpy as np
-
-    from impactpipe.analysis.energies import comparison_laws, fit_qstar_size_law, scale_qstar_to_velocity
-    from impactpipe.analysis.plots import plot_qstar
-    from impactpipe.analysis.qstar import fit_qstar, plus_minus, write_qstar_table
+    from impactpipe.analysis.energies import fit_qstar_size_law
+    from impactpipe.analysis.resolution_error import qstar_resolution_error, write_resolution_table
 
     from .stages import read_summary
     from .sweep import POINTS_FILE, finished_run_dirs
@@ -282,43 +286,22 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     sizes = []
     for radius, group in sorted(groups.items()):
         suffix = "" if len(groups) == 1 else f"_R{radius:g}"
-        q = np.array([r["summary"]["Q"] for r in group])
-        mlr = np.array([r["summary"]["M_lr_over_M_T"] for r in group])
-        n_lr = np.array([r["summary"]["N_lr"] for r in group])
-        swept = np.array([r["config"].scene.impact.velocity if by == "velocity" else r["config"].scene.projectile.radius
-                          for r in group])
-        try:
-            fit = fit_qstar(q, mlr, n_lr, **{by: swept})
-        except ValueError as exc:
-            click.echo(f"R_T = {radius:g} m: error: {exc}", err=True)
-            sys.exit(1)
-        rho = group[0]["values"]["target_reference_density"]
-        gamma = group[0]["values"]["projectile_mass"] / group[0]["values"]["target_mass"]
-        grid = np.geomspace(min(radius / 10.0, 1.0e2), max(radius * 10.0, 1.0e5), 60)
-        laws = {label: (grid, values) for label, values in comparison_laws(grid, rho, gamma).items()}
-        write_qstar_table(out / f"qstar{suffix}.csv", q, mlr, n_lr, fit, labels=[r["dir"].name for r in group],
-                          **{by: swept})
-        plot_qstar(out / f"qstar{suffix}.png", q, mlr, n_lr, fit, target_radius=radius, comparisons=laws)
-        click.echo(f"R_T = {radius:g} m: Q*_D = {plus_minus(fit.qstar, fit.qstar_err, '.4g')} J/kg "
-                   f"from {int(np.sum(fit.used))} of {len(q)} runs")
-        critical = fit.critical_velocity if by == "velocity" else fit.critical_radius
-        critical_err = fit.critical_velocity_err if by == "velocity" else fit.critical_radius_err
-        unit = "m/s" if by == "velocity" else "m"
-        click.echo(f"critical {by.replace('_', ' ')} = {plus_minus(critical, critical_err, '.4g')} {unit}")
-        click.echo("slope of M_lr/M_T against Q/Q*_D = "
-                   f"{plus_minus(fit.normalized_slope, fit.normalized_slope_err, '.3f')}")
-        if fit.replicated_q:
-            where = ("included in the error" if np.isfinite(fit.qstar_err)
-                     else "no error bar: fewer than three distinct Q and not every Q repeated")
-            click.echo(f"replicates: {fit.replicated_q} Q values run more than once; standard deviation of "
-                       f"M_lr/M_T at the same Q = {fit.replicate_std:.3f} ({where})")
-        if common_velocity is not None:
-            v_from = critical if by == "velocity" else float(group[0]["config"].scene.impact.velocity)
-            moved = float(scale_qstar_to_velocity(fit.qstar, v_from, common_velocity, mu))
-            click.echo(f"Q*_D at {common_velocity:g} m/s (mu = {mu:g}) = {moved:.4g} J/kg")
-        if not fit.brackets:
-            click.echo("warning: the runs do not bracket M_lr/M_T = 0.5; Q*_D is an extrapolation", err=True)
-        sizes.append((radius, fit.qstar, rho))
+        ladder: dict[float, list[dict]] = {}
+        for run in group:
+            ladder.setdefault(float(run["config"].hydro.cells_per_projectile_radius), []).append(run)
+        fits = {}
+        for cells, rung in sorted(ladder.items()):
+            label = f"R_T = {radius:g} m" + (f", {cells:g} cells per R_P" if len(ladder) > 1 else "")
+            rung_suffix = suffix + (f"_n{cells:g}" if len(ladder) > 1 else "")
+            fits[cells] = _qstar_fit(rung, by, label, out, rung_suffix, radius, common_velocity, mu)
+        if len(ladder) > 1:
+            cells = sorted(fits)
+            resolution = qstar_resolution_error(cells, [fits[n].qstar for n in cells],
+                                                [fits[n].qstar_err for n in cells])
+            click.echo(f"R_T = {radius:g} m: {resolution.describe()}")
+            write_resolution_table(out / f"qstar_resolution{suffix}.csv", resolution)
+        finest = fits[max(fits)]
+        sizes.append((radius, finest.qstar, group[0]["values"]["target_reference_density"]))
     if len(sizes) >= 5:
         law = fit_qstar_size_law([s[0] for s in sizes], [s[1] for s in sizes], [s[2] for s in sizes])
         click.echo(f"Q*_D(R) = {law.q_b:.3g} R^{law.alpha:.3f} + rho {law.q_g:.3g} R^{law.beta:.3f} "
@@ -326,6 +309,54 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     elif len(sizes) > 1:
         click.echo(f"{len(sizes)} target radii: the size-law fit needs at least 5")
     click.echo(f"wrote tables and figures to {out}/")
+
+
+def _qstar_fit(group: list[dict], by: str, label: str, out: Path, suffix: str, radius: float,
+               common_velocity: float | None, mu: float):
+    """Fit Q*_D over one group of runs (one target radius and resolution); print, table and figure."""
+    import numpy as np
+
+    from impactpipe.analysis.energies import comparison_laws, scale_qstar_to_velocity
+    from impactpipe.analysis.plots import plot_qstar
+    from impactpipe.analysis.qstar import fit_qstar, plus_minus, write_qstar_table
+
+    q = np.array([r["summary"]["Q"] for r in group])
+    mlr = np.array([r["summary"]["M_lr_over_M_T"] for r in group])
+    n_lr = np.array([r["summary"]["N_lr"] for r in group])
+    swept = np.array([r["config"].scene.impact.velocity if by == "velocity" else r["config"].scene.projectile.radius
+                      for r in group])
+    try:
+        fit = fit_qstar(q, mlr, n_lr, **{by: swept})
+    except ValueError as exc:
+        click.echo(f"{label}: error: {exc}", err=True)
+        sys.exit(1)
+    rho = group[0]["values"]["target_reference_density"]
+    gamma = group[0]["values"]["projectile_mass"] / group[0]["values"]["target_mass"]
+    grid = np.geomspace(min(radius / 10.0, 1.0e2), max(radius * 10.0, 1.0e5), 60)
+    laws = {name: (grid, values) for name, values in comparison_laws(grid, rho, gamma).items()}
+    write_qstar_table(out / f"qstar{suffix}.csv", q, mlr, n_lr, fit, labels=[r["dir"].name for r in group],
+                      **{by: swept})
+    plot_qstar(out / f"qstar{suffix}.png", q, mlr, n_lr, fit, target_radius=radius, comparisons=laws)
+    click.echo(f"{label}: Q*_D = {plus_minus(fit.qstar, fit.qstar_err, '.4g')} J/kg "
+               f"from {int(np.sum(fit.used))} of {len(q)} runs")
+    critical = fit.critical_velocity if by == "velocity" else fit.critical_radius
+    critical_err = fit.critical_velocity_err if by == "velocity" else fit.critical_radius_err
+    unit = "m/s" if by == "velocity" else "m"
+    click.echo(f"critical {by.replace('_', ' ')} = {plus_minus(critical, critical_err, '.4g')} {unit}")
+    click.echo("slope of M_lr/M_T against Q/Q*_D = "
+               f"{plus_minus(fit.normalized_slope, fit.normalized_slope_err, '.3f')}")
+    if fit.replicated_q:
+        where = ("included in the error" if np.isfinite(fit.qstar_err)
+                 else "no error bar: fewer than three distinct Q and not every Q repeated")
+        click.echo(f"replicates: {fit.replicated_q} Q values run more than once; standard deviation of "
+                   f"M_lr/M_T at the same Q = {fit.replicate_std:.3f} ({where})")
+    if common_velocity is not None:
+        v_from = critical if by == "velocity" else float(group[0]["config"].scene.impact.velocity)
+        moved = float(scale_qstar_to_velocity(fit.qstar, v_from, common_velocity, mu))
+        click.echo(f"Q*_D at {common_velocity:g} m/s (mu = {mu:g}) = {moved:.4g} J/kg")
+    if not fit.brackets:
+        click.echo("warning: the runs do not bracket M_lr/M_T = 0.5; Q*_D is an extrapolation", err=True)
+    return fit
 
 
 @main.command("plot")

@@ -38,7 +38,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import h5py
 import numpy as np
@@ -56,6 +56,9 @@ from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stag
 log = logging.getLogger(__name__)
 
 POINTS_FILE = "points.json"
+#: The config key a sweep's ``resolution`` ladder varies.
+RESOLUTION_KEY = "hydro.cells_per_projectile_radius"
+QSTAR_RESOLUTION_CSV = "qstar_resolution.csv"
 RESULTS_CSV = "results.csv"
 RESULTS_H5 = "results.h5"
 QSTAR_CSV = "qstar.csv"
@@ -131,6 +134,9 @@ class SweepSpec(Strict):
     output: str | None = Field(None, description="sweep directory; default sweeps/<name>")
     overrides: dict[str, Any] = Field(default_factory=dict, description="config keys set for every point")
     axes: dict[str, list[Any] | Range] = Field(default_factory=dict)
+    resolution: list[Annotated[float, Field(gt=0)]] | None = Field(
+        None, description="a resolution ladder, hydro.cells_per_projectile_radius of each rung: every point runs at "
+                          "each, and Q*_D (qstar mode) gets a resolution error from it (qstar_resolution.csv)")
     mode: Literal["grid", "qstar"] = "grid"
     qstar: QStarSearch = Field(default_factory=QStarSearch)
     execution: Execution = Field(default_factory=Execution)
@@ -157,9 +163,24 @@ class SweepSpec(Strict):
                                  f"at each, so {' and '.join(clash)} cannot be set in axes or overrides")
         return self
 
+    @model_validator(mode="after")
+    def _resolution_valid(self) -> "SweepSpec":
+        if self.resolution is None:
+            return self
+        if len(set(self.resolution)) != len(self.resolution) or len(self.resolution) < 2:
+            raise ValueError(f"resolution: needs at least two distinct values (got {self.resolution})")
+        if RESOLUTION_KEY in self.axes or RESOLUTION_KEY in self.overrides:
+            raise ValueError(f"resolution: {RESOLUTION_KEY} is also in "
+                             f"{'axes' if RESOLUTION_KEY in self.axes else 'overrides'}")
+        return self
+
     def axis_values(self) -> dict[str, list[Any]]:
-        """Each axis as a list of values."""
-        return {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.axes.items()}
+        """Each axis as a list of values; a ``resolution`` ladder is the axis of
+        hydro.cells_per_projectile_radius."""
+        axes = {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.axes.items()}
+        if self.resolution is not None:
+            axes[RESOLUTION_KEY] = list(self.resolution)
+        return axes
 
 
 class SweepError(ValueError):
@@ -991,7 +1012,70 @@ def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: 
         else:
             qstar = runner.run_qstar()
             write_qstar_table(sweep, qstar)
-    return {"points": runner.points, "qstar": qstar}
+    ladders = resolution_ladders(sweep, qstar if sweep.spec.mode == "qstar" else rung_fits(sweep, runner.points))
+    return {"points": runner.points, "qstar": qstar, "resolution": ladders}
+
+
+#: The keys whose values a Q*_D fit spans (the runs of one fit differ in these).
+Q_KEYS = ("scene.impact.velocity", "scene.projectile.radius")
+
+
+def rung_fits(sweep: Sweep, points: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """A grid sweep with a ``resolution`` ladder: Q*_D fitted over the finished points of each rung
+    and group of the axes other than the impact speed and projectile radius (empty without one)."""
+    from impactpipe.analysis.qstar import fit_qstar
+
+    if sweep.spec.resolution is None:
+        return []
+    others = [k for k in sweep.spec.axis_values() if k not in Q_KEYS]
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for p in points.values():
+        if p["status"] == "complete":
+            groups.setdefault(tuple(p["params"].get(k) for k in others), []).append(p["summary"])
+    records = []
+    for key, summaries in groups.items():
+        record = dict(zip(others, key))
+        q, mlr, n_lr = (np.array([s.get(k, np.nan) for s in summaries], dtype=float)
+                        for k in ("Q", "M_lr_over_M_T", "N_lr"))
+        try:
+            fit = fit_qstar(q, mlr, n_lr)
+            record.update({"Qstar_D": fit.qstar, "Qstar_D_uncertainty": fit.qstar_err})
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            record.update({"Qstar_D": float("nan"), "fit_error": str(exc)})
+        records.append(record)
+    return records
+
+
+def resolution_ladders(sweep: Sweep, records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """With a ``resolution`` ladder in qstar mode: for each group of the other axes, Q*_D of its
+    rungs and their resolution error (:func:`impactpipe.analysis.resolution_error.qstar_resolution_error`),
+    written to ``qstar_resolution.csv``; one record per group (empty without a ladder)."""
+    from impactpipe.analysis.resolution_error import qstar_resolution_error
+
+    if sweep.spec.resolution is None or not records:
+        return []
+    others = [k for k in sweep.spec.axis_values() if k not in (RESOLUTION_KEY, sweep.spec.qstar.variable)]
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for record in records:
+        groups.setdefault(tuple(record.get(k) for k in others), []).append(record)
+    ladders = []
+    for key, rungs in groups.items():
+        fitted = [r for r in rungs if math.isfinite(r.get("Qstar_D", float("nan")))]
+        row = dict(zip(others, key))
+        row.update({f"Qstar_D_n{r[RESOLUTION_KEY]:g}": r.get("Qstar_D", float("nan")) for r in rungs})
+        if len(fitted) < 2:
+            row.update({"status": f"{len(fitted)} rung(s) with a fitted Q*_D", "summary": ""})
+        else:
+            ladder = qstar_resolution_error([r[RESOLUTION_KEY] for r in fitted], [r["Qstar_D"] for r in fitted],
+                                            [r.get("Qstar_D_uncertainty", float("nan")) for r in fitted])
+            row.update({"Qstar_D": ladder.qstar[0], "seed_error": ladder.seed_error[0],
+                        "resolution_error": ladder.error, "richardson": ladder.extrapolated,
+                        "observed_order": ladder.order, "last_change": ladder.last_change,
+                        "status": ladder.status, "summary": ladder.describe()})
+        ladders.append(row)
+    columns = sorted({k for r in ladders for k in r}, key=lambda k: (k in ("status", "summary"), k))
+    _write_csv(sweep.directory / QSTAR_RESOLUTION_CSV, columns, ladders)
+    return ladders
 
 
 def finished_run_dirs(directory: str | Path) -> list[str]:

@@ -58,6 +58,19 @@ def noisy_analysis(ctx):
     return result
 
 
+#: Q*_D of ``resolved_analysis`` at n cells per projectile radius: QSTAR (1 + RESOLUTION_C / n^2).
+RESOLUTION_C = 4.0
+
+
+def resolved_analysis(ctx):
+    """``analysis`` whose Q*_D converges at second order in the cell size:
+    QSTAR (1 + RESOLUTION_C / n^2) at n = hydro.cells_per_projectile_radius."""
+    result = analysis(ctx)
+    qstar = QSTAR * (1.0 + RESOLUTION_C / ctx.config.hydro.cells_per_projectile_radius ** 2)
+    result["M_lr_over_M_T"] = max(0.0, 1.0 - 0.5 * result["Q"] / qstar)
+    return result
+
+
 def slow_analysis(ctx):
     time.sleep(0.3)
     return analysis(ctx)
@@ -75,6 +88,8 @@ def hanging_hydro(ctx):
 STAGES = {s: f"sweep_stand_ins:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
 #: Stages whose M_lr/M_T depends on handoff.seed (``noisy_analysis``).
 NOISY_STAGES = {**STAGES, "analysis": "sweep_stand_ins:noisy_analysis"}
+#: Stages whose Q*_D depends on the resolution (``resolved_analysis``).
+RESOLVED_STAGES = {**STAGES, "analysis": "sweep_stand_ins:resolved_analysis"}
 #: Stages whose analysis takes 0.3 s, so a sweep can be killed while points are still running.
 SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
 #: Stages whose hydro takes a minute (``hanging_hydro``).

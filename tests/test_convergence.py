@@ -15,7 +15,8 @@ from sweep_stand_ins import _finish
 from impactpipe.pipeline import stages
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config, load_yaml
-from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary, richardson,
+from impactpipe.analysis.richardson import richardson
+from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary,
                                              richardson_uncertainty, run_ladders)
 
 HERE = Path(__file__).parent

@@ -24,6 +24,7 @@ EXAMPLES = [
     ("impactpipe.nbody.result", "read_result"),
     ("impactpipe.analysis.io", "read_analysis"),
     ("impactpipe.analysis.qstar", "fit_qstar"),
+    ("impactpipe.analysis.resolution_error", "qstar_resolution_error"),
 ]
 
 

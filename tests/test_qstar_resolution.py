@@ -1,0 +1,123 @@
+"""Q*_D with two errors: the runs' scatter and the resolution error of a ladder."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from impactpipe.analysis.resolution_error import qstar_resolution_error, write_resolution_table
+from impactpipe.pipeline.cli import main
+from impactpipe.pipeline.sweep import SweepError, load_sweep, run_sweep
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+import sweep_stand_ins  # noqa: E402
+
+BASE = HERE / "configs" / "sweep_base.yaml"
+LADDER = [10.0, 20.0, 40.0]
+
+
+def expected_qstar(n: float) -> float:
+    return sweep_stand_ins.QSTAR * (1.0 + sweep_stand_ins.RESOLUTION_C / n ** 2)
+
+
+def test_a_second_order_ladder_extrapolates_to_its_limit():
+    ladder = qstar_resolution_error(LADDER, [expected_qstar(n) for n in LADDER], [10.0, 11.0, 12.0])
+    assert ladder.ok
+    assert ladder.order == pytest.approx(2.0, abs=1e-9)
+    assert ladder.extrapolated == pytest.approx(sweep_stand_ins.QSTAR, rel=1e-12)
+    assert ladder.error == pytest.approx(expected_qstar(40.0) - sweep_stand_ins.QSTAR, rel=1e-9)
+    assert list(ladder.resolutions) == [40.0, 20.0, 10.0] and ladder.seed_error[0] == 12.0
+    assert "(seeds) +-" in ladder.describe() and "observed order 2.00" in ladder.describe()
+
+
+@pytest.mark.parametrize(("qstar", "why"), [
+    ([1395.0, 1239.0, 1120.0], "observed order 0.39 below 0.5"),  # case 8's measured ladder
+    ([1395.0, 1239.0, 1300.0], "non-monotone"),
+    ([1395.0, 1300.0, 1200.0], "not converging"),
+])
+def test_a_ladder_outside_the_asymptotic_range_gets_no_invented_error(qstar, why):
+    ladder = qstar_resolution_error(LADDER, qstar, [11.0, 14.0, 12.0])
+    assert not ladder.ok and why in ladder.status
+    assert math.isnan(ladder.error) and math.isnan(ladder.extrapolated)
+    assert ladder.last_change == pytest.approx(qstar[2] - qstar[1])
+    assert "resolution error not estimated" in ladder.describe()
+
+
+def test_two_rungs_give_the_last_change_only(tmp_path):
+    ladder = qstar_resolution_error([20.0, 40.0], [1239.0, 1120.0], [14.0, 12.0])
+    assert "needs 3" in ladder.status and ladder.last_change == pytest.approx(-119.0)
+    text = write_resolution_table(tmp_path / "r.csv", ladder).read_text().splitlines()
+    assert text[0].startswith("# Q*_D = 1120") and text[2] == "cells_per_projectile_radius,Qstar_D_J_per_kg,seed_error_J_per_kg"
+    assert text[3].startswith("40.0,1120.0,12.0")
+
+
+def test_bad_ladders_are_refused():
+    with pytest.raises(ValueError, match="distinct"):
+        qstar_resolution_error([10, 10, 20], [1.0, 2.0, 3.0], [0.1, 0.1, 0.1])
+    with pytest.raises(ValueError, match="same"):
+        qstar_resolution_error([10, 20], [1.0], [0.1])
+
+
+def write_sweep(tmp_path, **fields):
+    spec = {"name": "ladder", "base": str(BASE), "output": str(tmp_path / "sweep"),
+            "stage_functions": sweep_stand_ins.RESOLVED_STAGES, **fields}
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def test_a_sweep_with_a_resolution_ladder_reports_both_errors(tmp_path):
+    path = write_sweep(tmp_path, mode="qstar", resolution=LADDER,
+                       qstar={"variable": "scene.impact.velocity", "bracket": [1000.0, 8000.0], "tolerance": 0.05})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert sorted(r["hydro.cells_per_projectile_radius"] for r in result["qstar"]) == LADDER
+    (ladder,) = result["resolution"]
+    assert ladder["Qstar_D"] == pytest.approx(expected_qstar(40.0), rel=1e-6)
+    assert ladder["observed_order"] == pytest.approx(2.0, rel=1e-4)
+    assert ladder["richardson"] == pytest.approx(sweep_stand_ins.QSTAR, rel=1e-5)
+    assert ladder["resolution_error"] == pytest.approx(expected_qstar(40.0) - sweep_stand_ins.QSTAR, rel=1e-3)
+    assert (tmp_path / "sweep" / "qstar_resolution.csv").is_file()
+    # impactpipe qstar over the finished sweep groups its runs by resolution the same way
+    out = CliRunner().invoke(main, ["qstar", str(tmp_path / "sweep"), "--out", str(tmp_path / "fit")])
+    assert out.exit_code == 0, out.output
+    assert "(resolution: Richardson" in out.output and "observed order 2.00" in out.output
+    assert (tmp_path / "fit" / "qstar_resolution.csv").is_file()
+    assert sorted(p.name for p in (tmp_path / "fit").glob("qstar_n*.csv")) == \
+        ["qstar_n10.csv", "qstar_n20.csv", "qstar_n40.csv"]
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"resolution": [10.0]}, "at least two distinct"),
+    ({"resolution": [10.0, 20.0], "axes": {"hydro.cells_per_projectile_radius": [5, 10]}}, "also in axes"),
+])
+def test_a_bad_resolution_ladder_is_a_sweep_file_error(tmp_path, fields, message):
+    with pytest.raises(SweepError, match=message):
+        load_sweep(write_sweep(tmp_path, **fields))
+
+
+def test_case8_ladder_in_numbers():
+    """The documented case 8 statement (docs/validation.md) is what the function gives for the
+    measured Q*_D ladder (five seeds x four speeds per rung)."""
+    ladder = qstar_resolution_error([5, 10, 20, 40], [1643.0, 1395.0, 1239.0, 1120.0], [76.0, 11.0, 14.0, 12.0])
+    assert not ladder.ok and ladder.order == pytest.approx(0.39, abs=0.01)
+    assert np.isclose(ladder.last_change, -119.0)
+
+
+def test_a_grid_sweep_with_a_resolution_ladder_fits_each_rung(tmp_path):
+    velocities = [2000.0, 2400.0, 2800.0, 3200.0]
+    path = write_sweep(tmp_path, resolution=LADDER, axes={"scene.impact.velocity": velocities})
+    with cf.ThreadPoolExecutor(2) as pool:
+        result = run_sweep(load_sweep(path), executor=pool, show_progress=False)
+    assert len(result["points"]) == len(velocities) * len(LADDER)
+    (ladder,) = result["resolution"]
+    assert ladder["Qstar_D_n10"] == pytest.approx(expected_qstar(10.0), rel=1e-9)
+    assert ladder["richardson"] == pytest.approx(sweep_stand_ins.QSTAR, rel=1e-9)
