@@ -8,7 +8,7 @@ import pytest
 from amr_snapshots import LEAF_SETS, handmade_snapshot, sedov_run
 from click.testing import CliRunner
 
-from impactpipe.hydro import export
+from impactpipe.hydro.output import export
 from impactpipe.hydro.output.export import write_vtkhdf
 from impactpipe.pipeline.cli import main
 
