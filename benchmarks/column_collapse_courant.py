@@ -31,7 +31,7 @@ def run(config_path: Path, cfl: float, end: float, every: float) -> dict:
     """Run the scene at Courant number ``cfl`` to ``end`` tau, printing a row every ``every`` tau;
     returns the final deposit in units of L0 (run-out L_f - L0, height, centroid)."""
     config = load_config(config_path)
-    scene = {key: value for key, value in config.scene.model_dump().items() if key in column_collapse.DEFAULTS}
+    scene = config.scene.model_dump(exclude={"problem", "geometry"})
     sim = column_collapse.setup(scene, config.resolved_materials(), block_cells=config.hydro.block_cells,
                                 cfl=min(cfl, column_collapse.MAX_CFL))
     sim.cfl = cfl  # past the scene's limit on purpose: that limit is what this script measures

@@ -17,19 +17,11 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator, model_validator
 
 from impactpipe.hydro.amr.regrid import RefinementRule
-from impactpipe.hydro.problems import (
-    advection,
-    column_collapse,
-    impact,
-    interface_advection,
-    noh,
-    planar_impact,
-    sedov,
-    shock_tube,
-)
+from impactpipe.hydro.problems import PROBLEMS, column_collapse
+from impactpipe.hydro.problems.parameters import Parameter, Record
 
 from . import presets
 
@@ -153,160 +145,90 @@ class Material(Strict):
 
 
 # --------------------------------------------------------------------------- scene
-
-
-class Body(Strict):
-    material: str
-    radius: float = Field(gt=0, description="m")
-
-
-class Impact(Strict):
-    velocity: float = Field(gt=0, description="impact speed in the target frame (m/s)")
-    angle: float = Field(90.0, gt=0, le=90, description="degrees from the tangent plane; 90 = head-on")
-
-
-class FluidState(Strict):
-    material: str
-    density: float = Field(gt=0, description="kg/m^3")
-    velocity: float = Field(0.0, description="m/s")
-    pressure: float = Field(description="Pa")
-
-
-class AmbientState(Strict):
-    material: str
-    density: float = Field(gt=0, description="kg/m^3")
-    pressure: float = Field(ge=0, description="Pa")
-
-
-class Slab(Strict):
-    material: str
-    thickness: float = Field(gt=0, description="m")
-    velocity: float = Field(0.0, description="m/s")
-
-
-class Region(Strict):
-    material: str
-    density: float = Field(gt=0, description="kg/m^3")
+#
+# Each problem module of impactpipe.hydro.problems declares its scene's parameters
+# (``PARAMETERS``: default, type, bounds, units); the scene models below are built from
+# them, so the config and the library cannot disagree on a key, a default or a bound.
 
 
 Geometry = Literal["auto", "1d-planar", "2d-planar", "2d-cylindrical", "3d"]
 
-
-def _default(problem: Any, key: str) -> Any:
-    """A verification problem's default for ``key``, from its module's DEFAULTS (one source)."""
-    return problem.DEFAULTS[key]
+#: The problem a scene without ``problem`` is read as (by the unknown-key check).
+DEFAULT_PROBLEM = "impact"
 
 
-class ImpactScene(Strict):
-    problem: Literal["impact"] = "impact"
-    geometry: Geometry = "auto"
-    target: Body
-    projectile: Body
-    impact: Impact
-    temperature: float = Field(293.0, gt=0, description="initial temperature of both bodies (K)")
-    domain_margin: float = Field(_default(impact, "margin"), ge=0,
-                                 description="mesh extends this many target radii beyond the target")
-    full_domain: bool = Field(False, description="3d only: compute both halves instead of using the y = 0 symmetry plane")
+def _description(param: Parameter | Record) -> str | None:
+    """The schema's description of a declared parameter: its meaning and units."""
+    units = getattr(param, "units", "")
+    if param.description and units:
+        return f"{param.description} ({units})"
+    return param.description or units or None
 
 
-class ShockTubeScene(Strict):
-    problem: Literal["shock_tube"]
-    geometry: Geometry = "auto"
-    length: float = Field(_default(shock_tube, "length"), gt=0, description="m")
-    cells: int = Field(_default(shock_tube, "cells"), ge=8)
-    interface: float = Field(_default(shock_tube, "interface"), description="diaphragm position (m)")
-    left: FluidState
-    right: FluidState
-    end_time: float = Field(gt=0, description="s")
+def _field(param: Parameter | Record) -> tuple[Any, Any]:
+    """(annotation, Field) of a declared parameter."""
+    if isinstance(param, Record):
+        model = _record_model(param)
+        if param.required:
+            return model, Field(description=_description(param))
+        return model | None, Field(None, description=_description(param))
+    default = ... if param.required else param.default
+    return param.kind, Field(default, description=_description(param), **param.bounds())
 
-    @model_validator(mode="after")
-    def _interface_inside(self) -> "ShockTubeScene":
-        if not 0.0 < self.interface < self.length:
-            raise ValueError(f"interface must lie inside (0, length={self.length:g}) (got {self.interface:g})")
+
+#: (model, declared fields) by record name, so records of one kind (both sides of a shock
+#: tube) share a model.
+_RECORD_MODELS: dict[str, tuple[type[Strict], dict[str, Parameter]]] = {}
+
+
+def _record_model(record: Record) -> type[Strict]:
+    """The model of a record kind (e.g. ``FluidState``), built on first use."""
+    if record.name not in _RECORD_MODELS:
+        model = create_model(record.name, __base__=Strict, __module__=__name__,
+                             **{key: _field(p) for key, p in record.fields.items()})
+        _RECORD_MODELS[record.name] = (_register(model), record.fields)
+    model, fields = _RECORD_MODELS[record.name]
+    if fields != record.fields:
+        raise TypeError(f"record {record.name} is declared with two different sets of fields")
+    return model
+
+
+def _register(model: type[Strict]) -> type[Strict]:
+    """Make a built model a name of this module, so configs pickle (sweep workers receive them)."""
+    globals()[model.__name__] = model
+    return model
+
+
+def _cross_checks(check: Any) -> Any:
+    """A model validator raising the problem module's ``check_parameters`` messages."""
+
+    def validate(self: Strict) -> Strict:
+        messages = check(self.model_dump())
+        if messages:
+            raise ValueError("; ".join(messages))
         return self
 
-
-class SedovScene(Strict):
-    problem: Literal["sedov"]
-    geometry: Geometry = "auto"
-    energy: float = Field(gt=0, description="blast energy of the whole sphere (J)")
-    ambient: AmbientState
-    extent: float = Field(_default(sedov, "extent"), gt=0, description="domain extent from the origin (m)")
-    cells: int = Field(_default(sedov, "cells"), ge=8, description="cells along each axis")
-    deposit_cells: float = Field(_default(sedov, "deposit_cells"), gt=0,
-                                 description="radius of the energy deposit in cells")
-    end_time: float = Field(_default(sedov, "end_time"), gt=0, description="s")
+    return model_validator(mode="after")(validate)
 
 
-class PlanarImpactScene(Strict):
-    problem: Literal["planar_impact"]
-    geometry: Geometry = "auto"
-    flyer: Slab
-    target: Slab
-    margin: float = Field(_default(planar_impact, "margin"), ge=0,
-                          description="void on each side, as a fraction of the plates' total thickness")
-    cells: int = Field(_default(planar_impact, "cells"), ge=8)
-    end_time: float = Field(_default(planar_impact, "end_time"), gt=0, description="s")
+def scene_model(name: str, problem: Any) -> type[Strict]:
+    """The scene model of problem ``name`` from its module's ``PARAMETERS`` (e.g. ``ShockTubeScene``)."""
+    fields: dict[str, Any] = {
+        "problem": (Literal[name], name if name == DEFAULT_PROBLEM else ...),
+        "geometry": (Geometry, "auto"),
+    }
+    fields.update({key: _field(param) for key, param in problem.PARAMETERS.items()})
+    check = getattr(problem, "check_parameters", None)
+    validators = {"_cross_checks": _cross_checks(check)} if check is not None else None
+    title = "".join(part.capitalize() for part in name.split("_")) + "Scene"
+    return _register(create_model(title, __base__=Strict, __module__=__name__, __validators__=validators,
+                                  **fields))
 
 
-class AdvectionScene(Strict):
-    problem: Literal["advection"]
-    geometry: Geometry = "auto"
-    material: str
-    length: float = Field(_default(advection, "length"), gt=0, description="m")
-    cells: int = Field(_default(advection, "cells"), ge=8)
-    density: float = Field(_default(advection, "density"), gt=0, description="mean density (kg/m^3)")
-    amplitude: float = Field(_default(advection, "amplitude"), ge=0, lt=1,
-                             description="relative amplitude of the density wave")
-    velocity: float = Field(_default(advection, "velocity"), description="m/s")
-    pressure: float = Field(_default(advection, "pressure"), gt=0, description="Pa")
-    end_time: float = Field(_default(advection, "end_time"), gt=0, description="s")
+#: The scene model of each problem, by name.
+SCENES: dict[str, type[Strict]] = {name: scene_model(name, module) for name, module in PROBLEMS.items()}
 
-
-class NohScene(Strict):
-    problem: Literal["noh"]
-    geometry: Geometry = "auto"
-    material: str
-    density: float = Field(_default(noh, "density"), gt=0, description="kg/m^3")
-    velocity: float = Field(_default(noh, "velocity"), gt=0, description="inflow speed (m/s)")
-    pressure: float = Field(_default(noh, "pressure"), ge=0, description="Pa")
-    cells: int = Field(_default(noh, "cells"), ge=8)
-    extent: float = Field(_default(noh, "extent"), gt=0, description="m")
-    end_time: float = Field(_default(noh, "end_time"), gt=0, description="s")
-
-
-class InterfaceAdvectionScene(Strict):
-    problem: Literal["interface_advection"]
-    geometry: Geometry = "auto"
-    length: float = Field(_default(interface_advection, "length"), gt=0, description="m")
-    cells: int = Field(_default(interface_advection, "cells"), ge=8)
-    slab_lo: float = Field(_default(interface_advection, "slab_lo"), description="m")
-    slab_hi: float = Field(_default(interface_advection, "slab_hi"), description="m")
-    inner: Region
-    outer: Region | None = Field(None, description="material around the slab; none leaves void")
-    velocity: float = Field(_default(interface_advection, "velocity"), description="m/s")
-    pressure: float = Field(_default(interface_advection, "pressure"), ge=0, description="Pa")
-    end_time: float = Field(_default(interface_advection, "end_time"), gt=0, description="s")
-
-
-class ColumnCollapseScene(Strict):
-    problem: Literal["column_collapse"]
-    geometry: Geometry = "auto"
-    material: str
-    height: float = Field(_default(column_collapse, "height"), gt=0, description="initial column height H0 (m)")
-    width: float = Field(_default(column_collapse, "width"), gt=0,
-                         description="initial column width L0 from the wall x = 0 (m)")
-    gravity: float = Field(_default(column_collapse, "gravity"), gt=0, description="downward acceleration g (m/s^2)")
-    cells_per_height: int = Field(_default(column_collapse, "cells_per_height"), ge=column_collapse.MIN_CELLS_PER_HEIGHT,
-                                  description="cells across the initial height")
-    end_time: float = Field(_default(column_collapse, "end_time"), gt=0, description="s")
-
-
-Scene = Annotated[
-    Union[ImpactScene, ShockTubeScene, SedovScene, PlanarImpactScene, AdvectionScene, NohScene,
-          InterfaceAdvectionScene, ColumnCollapseScene],
-    Field(discriminator="problem"),
-]
+Scene = Annotated[Union[tuple(SCENES.values())], Field(discriminator="problem")]
 
 
 # --------------------------------------------------------------------------- stages

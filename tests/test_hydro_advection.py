@@ -40,7 +40,7 @@ def test_advection_exact_density_helper():
     [
         ({"material": "heavy", "density": 1000.0}, {"material": "light", "density": 1.0}, 1.0, 1.0),
         ({"material": "iron", "density": 7800.0}, {"material": "basalt", "density": 2700.0}, 0.0, 1000.0),
-        ({"material": "basalt", "density": 2700.0}, {"material": None, "density": 0.0}, 0.0, 1000.0),
+        ({"material": "basalt", "density": 2700.0}, None, 0.0, 1000.0),
     ],
     ids=["ideal-gas-ratio-1e3", "tillotson-iron-basalt", "tillotson-basalt-void"],
 )

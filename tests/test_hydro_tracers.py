@@ -137,7 +137,7 @@ def test_tracers_next_to_void_stay_in_their_material(speed):
     cells = 64
     dx = 1.0 / cells
     params = {"cells": cells, "slab_lo": 0.25 + 0.4 * dx, "slab_hi": 0.75 - 0.3 * dx, "velocity": speed,
-              "inner": {"material": "basalt", "density": 2700.0}, "outer": {"material": None},
+              "inner": {"material": "basalt", "density": 2700.0}, "outer": None,
               "pressure": 0.0}
     sim = PROBLEMS["interface_advection"].setup(params, BASALT, geometry="2d-planar")
     lo, hi = params["slab_lo"], params["slab_hi"]

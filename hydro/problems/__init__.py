@@ -1,7 +1,11 @@
-"""Problem setups: ``PROBLEMS[name]`` is a module with ``DEFAULTS`` and
+"""Problem setups: ``PROBLEMS[name]`` is a module with ``PARAMETERS``, ``DEFAULTS`` and
 ``setup(params, materials, **hydro_options) -> Simulation``.
 
-``materials`` maps a material name to its resolved spec ``{"eos": {...}}``;
+``PARAMETERS`` declares the parameters of the problem's scene (default, type, bounds, units;
+:mod:`impactpipe.hydro.problems.parameters`), from which the config schema is built;
+``DEFAULTS`` holds what ``setup`` takes for the parameters a call leaves out.  A module may
+define ``check_parameters(params) -> list[str]``, cross checks beyond each parameter's
+bounds.  ``materials`` maps a material name to its resolved spec ``{"eos": {...}}``;
 ``hydro_options`` are ``block_cells``, ``cfl`` and ``geometry`` where the problem allows a
 choice.  Unknown parameter keys raise ``KeyError``.
 """
@@ -17,14 +21,15 @@ from impactpipe.hydro.problems import (
     shock_tube,
 )
 
+#: The problems by name, the impact (a run's default scene) first.
 PROBLEMS = {
+    "impact": impact,
     "shock_tube": shock_tube,
     "sedov": sedov,
     "planar_impact": planar_impact,
     "advection": advection,
     "noh": noh,
     "interface_advection": interface_advection,
-    "impact": impact,
     "column_collapse": column_collapse,
 }
 

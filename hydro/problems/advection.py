@@ -12,21 +12,25 @@ import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.parameters import Parameter, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
 
-DEFAULTS = {
-    "material": "gas",
-    "length": 1.0,
-    "cells": 128,
-    "density": 1.0,
-    "amplitude": 0.2,
-    "velocity": 1.0,
-    "pressure": 1.0,
-    "end_time": 1.0,
+PARAMETERS = {
+    "material": Parameter(kind=str, description="material name", example="gas"),
+    "length": Parameter(1.0, gt=0, units="m"),
+    "cells": Parameter(128, kind=int, ge=8, description="cells along the box"),
+    "density": Parameter(1.0, gt=0, units="kg/m^3", description="mean density"),
+    "amplitude": Parameter(0.2, ge=0, lt=1, description="relative amplitude of the density wave"),
+    "velocity": Parameter(1.0, units="m/s"),
+    "pressure": Parameter(1.0, gt=0, units="Pa"),
+    "end_time": Parameter(1.0, gt=0, units="s", description="end of the run"),
 }
+
+#: What :func:`setup` takes for parameters a call leaves out.
+DEFAULTS = setup_defaults(PARAMETERS)
 
 
 def exact_density(p: dict, x: np.ndarray, t: float) -> np.ndarray:

@@ -42,6 +42,7 @@ from impactpipe.hydro.problems.common import (
     strength_specs,
     tensile_strengths,
 )
+from impactpipe.hydro.problems.parameters import Parameter, setup_defaults, violations
 from impactpipe.hydro.solver import Simulation
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -69,14 +70,18 @@ RESUMABLE = False
 #: The deposit ends where its thickness falls below this fraction of a cell (:func:`deposit`).
 FRONT_THICKNESS_CELLS = 0.5
 
-DEFAULTS = {
-    "material": "sand",
-    "height": 1000.0,
-    "width": 1000.0,
-    "gravity": 9.81,
-    "cells_per_height": 16,
-    "end_time": 120.0,
+PARAMETERS = {
+    "material": Parameter(kind=str, description="material name", example="sand"),
+    "height": Parameter(1000.0, gt=0, units="m", description="initial column height H0"),
+    "width": Parameter(1000.0, gt=0, units="m", description="initial column width L0 from the wall x = 0"),
+    "gravity": Parameter(9.81, gt=0, units="m/s^2", description="downward acceleration g"),
+    "cells_per_height": Parameter(16, kind=int, ge=MIN_CELLS_PER_HEIGHT,
+                                  description="cells across the initial height"),
+    "end_time": Parameter(120.0, gt=0, units="s", description="end of the run"),
 }
+
+#: What :func:`setup` takes for parameters a call leaves out.
+DEFAULTS = setup_defaults(PARAMETERS)
 
 
 def scaling_runout(aspect_ratio: float) -> float:
@@ -128,11 +133,9 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the column-collapse :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring)."""
     check_geometry("column_collapse", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
-    for key in ("height", "width", "gravity"):
-        if not p[key] > 0.0:
-            raise ValueError(f"{key}: must be > 0 (got {p[key]})")
-    if int(p["cells_per_height"]) < MIN_CELLS_PER_HEIGHT:
-        raise ValueError(f"cells_per_height: must be >= {MIN_CELLS_PER_HEIGHT} (got {p['cells_per_height']})")
+    errors = violations(PARAMETERS, p)
+    if errors:
+        raise ValueError("; ".join(errors))
     if cfl > MAX_CFL:
         raise ValueError(f"cfl: must be <= {MAX_CFL:g} for a column collapse (got {cfl:g}); see MAX_CFL")
     names, specs, eos = material_list(materials, [p["material"]])

@@ -50,6 +50,7 @@ from impactpipe.hydro.problems.common import (
     strength_specs,
     tensile_strengths,
 )
+from impactpipe.hydro.problems.parameters import Parameter, Record
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.tracers.placement import place_on_grid, place_on_rays
 
@@ -59,13 +60,39 @@ PROJECTILE_MATERIAL = 1
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
 
+#: A sphere of one material.
+BODY = {
+    "material": Parameter(kind=str, description="material name"),
+    "radius": Parameter(gt=0, units="m"),
+}
+
+#: The parameters of an impact scene, as a run configuration states them.  :func:`setup`
+#: takes them in another shape (the projectile's velocity with the projectile, the mesh's
+#: resolution, margin and levels resolved by the pipeline) with :data:`DEFAULTS`.
+PARAMETERS = {
+    "target": Record("Body", BODY, description="the target sphere, centred at the origin",
+                     example={"material": "basalt", "radius": 1000.0}),
+    "projectile": Record("Body", BODY, description="the projectile sphere, touching the target at (0, 0, R_T)",
+                         example={"material": "basalt", "radius": 100.0}),
+    "impact": Record("Impact", {
+        "velocity": Parameter(gt=0, units="m/s", description="impact speed in the target frame", example=3000.0),
+        "angle": Parameter(90.0, gt=0, le=90, description="degrees from the tangent plane; 90 = head-on"),
+    }, description="how the projectile moves"),
+    "temperature": Parameter(293.0, gt=0, units="K", description="initial temperature of both bodies"),
+    "domain_margin": Parameter(0.25, ge=0, description="mesh extends this many target radii beyond the target"),
+    "full_domain": Parameter(False, kind=bool,
+                             description="3d only: compute both halves instead of using the y = 0 symmetry plane"),
+}
+
+#: What :func:`setup` takes for parameters a call leaves out; ``angle``, ``full_domain`` and
+#: ``margin`` default as the scene's ``impact.angle``, ``full_domain`` and ``domain_margin``.
 DEFAULTS = {
-    "target": {"material": "basalt", "radius": 1000.0},
-    "projectile": {"material": "basalt", "radius": 100.0, "velocity": 3000.0},
-    "angle": 90.0,
-    "full_domain": False,
+    "target": dict(PARAMETERS["target"].example),
+    "projectile": {**PARAMETERS["projectile"].example, "velocity": PARAMETERS["impact"].fields["velocity"].example},
+    "angle": PARAMETERS["impact"].fields["angle"].default,
+    "full_domain": PARAMETERS["full_domain"].default,
     "cells_per_projectile_radius": 10,
-    "margin": 0.25,
+    "margin": PARAMETERS["domain_margin"].default,
     "subsamples": 4,
     "end_time": 1.0,
     "levels": 1,

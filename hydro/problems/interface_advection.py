@@ -1,7 +1,7 @@
 """A slab of one material carried at uniform velocity and pressure through a periodic box.
 
 The slab [slab_lo, slab_hi) (m) holds ``inner`` ({material, density}); the rest holds
-``outer`` ({material, density}) or void when ``outer["material"]`` is None.  Everything
+``outer`` ({material, density}) or void when ``outer`` is None.  Everything
 moves at ``velocity`` (m/s) at ``pressure`` (Pa) (0 with void: a material next to void is in
 equilibrium only at zero pressure, e.g. Tillotson at its reference state).  The exact
 solution keeps velocity and pressure uniform and shifts the slab; after ``end_time`` =
@@ -14,22 +14,34 @@ import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
 
-DEFAULTS = {
-    "length": 1.0,
-    "cells": 128,
-    "slab_lo": 0.25,
-    "slab_hi": 0.75,
-    "inner": {"material": "heavy", "density": 1000.0},
-    "outer": {"material": "light", "density": 1.0},
-    "velocity": 1.0,
-    "pressure": 1.0,
-    "end_time": 1.0,
+#: A region of one material.
+REGION = {
+    "material": Parameter(kind=str, description="material name"),
+    "density": Parameter(gt=0, units="kg/m^3"),
 }
+
+PARAMETERS = {
+    "length": Parameter(1.0, gt=0, units="m"),
+    "cells": Parameter(128, kind=int, ge=8, description="cells along the box"),
+    "slab_lo": Parameter(0.25, units="m", description="lower edge of the slab"),
+    "slab_hi": Parameter(0.75, units="m", description="upper edge of the slab"),
+    "inner": Record("Region", REGION, description="material of the slab",
+                    example={"material": "heavy", "density": 1000.0}),
+    "outer": Record("Region", REGION, default=None, description="material around the slab; none leaves void",
+                    example={"material": "light", "density": 1.0}),
+    "velocity": Parameter(1.0, units="m/s"),
+    "pressure": Parameter(1.0, ge=0, units="Pa"),
+    "end_time": Parameter(1.0, gt=0, units="s", description="end of the run"),
+}
+
+#: What :func:`setup` takes for parameters a call leaves out.
+DEFAULTS = setup_defaults(PARAMETERS)
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
@@ -37,7 +49,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the interface-advection :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
     check_geometry("interface_advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
-    used = [p["inner"]["material"]] + ([p["outer"]["material"]] if p["outer"]["material"] else [])
+    used = [p["inner"]["material"]] + ([p["outer"]["material"]] if p["outer"] is not None else [])
     names, specs, eos = material_list(materials, used)
     ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
     bc = block_cells or {1: 8, 2: 16, 3: 8}[ndim]
@@ -50,7 +62,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     velocity = np.array([p["velocity"], 0.0, 0.0])
     state.set_material(mesh, inside.astype(float), names.index(p["inner"]["material"]), eos,
                        p["inner"]["density"], velocity, pressure=p["pressure"])
-    if p["outer"]["material"]:
+    if p["outer"] is not None:
         state.set_material(mesh, (~inside).astype(float), names.index(p["outer"]["material"]), eos,
                            p["outer"]["density"], velocity, pressure=p["pressure"])
     return new_simulation(mesh, names, specs, state, cfl)

@@ -15,20 +15,24 @@ import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.parameters import Parameter, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-cylindrical')
 
-DEFAULTS = {
-    "material": "gas",
-    "density": 1.0,
-    "velocity": 1.0,
-    "pressure": 1.0e-6,
-    "cells": 128,
-    "extent": 1.0,
-    "end_time": 0.6,
+PARAMETERS = {
+    "material": Parameter(kind=str, description="material name", example="gas"),
+    "density": Parameter(1.0, gt=0, units="kg/m^3"),
+    "velocity": Parameter(1.0, gt=0, units="m/s", description="inflow speed"),
+    "pressure": Parameter(1.0e-6, ge=0, units="Pa"),
+    "cells": Parameter(128, kind=int, ge=8, description="cells along each axis"),
+    "extent": Parameter(1.0, gt=0, units="m"),
+    "end_time": Parameter(0.6, gt=0, units="s", description="end of the run"),
 }
+
+#: What :func:`setup` takes for parameters a call leaves out.
+DEFAULTS = setup_defaults(PARAMETERS)
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,

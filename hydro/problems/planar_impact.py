@@ -22,18 +22,31 @@ from impactpipe.hydro.problems.common import (
     strength_specs,
     tensile_strengths,
 )
+from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar',)
 
-DEFAULTS = {
-    "flyer": {"material": "basalt", "thickness": 1.0, "velocity": 2000.0},
-    "target": {"material": "basalt", "thickness": 1.0},
-    "margin": 0.25,
-    "cells": 400,
-    "end_time": 1.0e-4,
+#: A plate.
+SLAB = {
+    "material": Parameter(kind=str, description="material name"),
+    "thickness": Parameter(gt=0, units="m"),
+    "velocity": Parameter(0.0, units="m/s"),
 }
+
+PARAMETERS = {
+    "flyer": Record("Slab", SLAB, description="the moving plate",
+                    example={"material": "basalt", "thickness": 1.0, "velocity": 2000.0}),
+    "target": Record("Slab", SLAB, description="the plate at rest (its velocity is not used)",
+                     example={"material": "basalt", "thickness": 1.0}),
+    "margin": Parameter(0.25, ge=0, description="void on each side, as a fraction of the thicker plate's thickness"),
+    "cells": Parameter(400, kind=int, ge=8, description="cells across the domain"),
+    "end_time": Parameter(1.0e-4, gt=0, units="s", description="end of the run"),
+}
+
+#: What :func:`setup` takes for parameters a call leaves out.
+DEFAULTS = setup_defaults(PARAMETERS)
 
 
 def domain(p: dict) -> tuple[float, float]:

@@ -21,21 +21,28 @@ from impactpipe.hydro.eos import energy_from_pressure
 from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
 
-DEFAULTS = {
-    "energy": 1.0,
-    "ambient": {"material": "gas", "density": 1.0, "pressure": 1.0e-6},
-    "cells": 128,
-    "extent": 1.0,
-    "deposit_cells": 3.5,
-    "end_time": 0.3,
-    "max_level": 0,
-    "refinement": None,
+PARAMETERS = {
+    "energy": Parameter(gt=0, units="J", description="blast energy of the whole sphere", example=1.0),
+    "ambient": Record("AmbientState", {
+        "material": Parameter(kind=str, description="material name"),
+        "density": Parameter(gt=0, units="kg/m^3"),
+        "pressure": Parameter(ge=0, units="Pa"),
+    }, description="the medium at rest", example={"material": "gas", "density": 1.0, "pressure": 1.0e-6}),
+    "extent": Parameter(1.0, gt=0, units="m", description="domain extent from the origin"),
+    "cells": Parameter(128, kind=int, ge=8, description="cells along each axis"),
+    "deposit_cells": Parameter(3.5, gt=0, description="radius of the energy deposit in cells"),
+    "end_time": Parameter(0.3, gt=0, units="s", description="end of the run"),
 }
+
+#: What :func:`setup` takes for parameters a call leaves out; ``max_level`` and ``refinement``
+#: (the adaptive mesh of the module docstring) are parameters of ``setup`` only, not of a scene.
+DEFAULTS = {**setup_defaults(PARAMETERS), "max_level": 0, "refinement": None}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,

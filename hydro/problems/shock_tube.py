@@ -13,18 +13,40 @@ import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
 
-DEFAULTS = {
-    "length": 1.0,
-    "cells": 400,
-    "interface": 0.5,
-    "left": {"material": "gas", "density": 1.0, "velocity": 0.0, "pressure": 1.0},
-    "right": {"material": "gas", "density": 0.125, "velocity": 0.0, "pressure": 0.1},
+#: A uniform state on one side of the diaphragm.
+FLUID_STATE = {
+    "material": Parameter(kind=str, description="material name"),
+    "density": Parameter(gt=0, units="kg/m^3"),
+    "velocity": Parameter(0.0, units="m/s"),
+    "pressure": Parameter(units="Pa"),
 }
+
+PARAMETERS = {
+    "length": Parameter(1.0, gt=0, units="m"),
+    "cells": Parameter(400, kind=int, ge=8, description="cells along the tube"),
+    "interface": Parameter(0.5, units="m", description="diaphragm position"),
+    "left": Record("FluidState", FLUID_STATE, description="state left of the diaphragm",
+                   example={"material": "gas", "density": 1.0, "velocity": 0.0, "pressure": 1.0}),
+    "right": Record("FluidState", FLUID_STATE, description="state right of the diaphragm",
+                    example={"material": "gas", "density": 0.125, "velocity": 0.0, "pressure": 0.1}),
+    "end_time": Parameter(gt=0, units="s", description="end of the run", example=0.2),
+}
+
+#: What :func:`setup` takes for parameters a call leaves out: Sod's shock tube.
+DEFAULTS = setup_defaults(PARAMETERS)
+
+
+def check_parameters(p: dict) -> list[str]:
+    """Cross checks of the parameters ``p`` beyond each one's bounds, one message per problem."""
+    if not 0.0 < p["interface"] < p["length"]:
+        return [f"interface must lie inside (0, length={p['length']:g}) (got {p['interface']:g})"]
+    return []
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
@@ -32,6 +54,9 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the shock-tube :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
     check_geometry("shock_tube", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
+    errors = check_parameters(p)
+    if errors:
+        raise ValueError("; ".join(errors))
     names, specs, eos = material_list(materials, [p["left"]["material"], p["right"]["material"]])
     ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
     if ndim == 1:

@@ -55,7 +55,11 @@ def output_times(config, end_time: float) -> list[float]:
 
 
 def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
-    """The scene as the keyword parameters of its problem module's ``setup``."""
+    """The scene as the parameters of its problem module's ``setup``.
+
+    A verification problem's scene keys are its ``setup``'s (both are the module's
+    ``PARAMETERS``); the impact scene's are translated, with the resolved mesh values.
+    """
     scene = config.scene
     if scene.problem == "impact":
         return {
@@ -70,11 +74,7 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
             "levels": values["levels"],
             "refinement": config.hydro.refinement.model_dump(),
         }
-    params = scene.model_dump(exclude={"problem", "geometry"})
-    if scene.problem == "interface_advection" and params["outer"] is None:
-        params["outer"] = {"material": "", "density": 0.0}
-    known = PROBLEMS[scene.problem].DEFAULTS
-    return {key: value for key, value in params.items() if key in known}
+    return scene.model_dump(exclude={"problem", "geometry"})
 
 
 def build_simulation(config, values: dict[str, Any]) -> Simulation:
