@@ -23,7 +23,7 @@ import pytest
 
 from test_stop_resume import OVERRIDES, QUICKSTART, assert_same_files, assert_same_summary
 
-KILLS = 8
+KILLS = 6
 RNG_SEED = 424242
 #: Checkpoint after every step, so the kills land between checkpoint writes too.
 KILL_OVERRIDES = {**OVERRIDES, "hydro.checkpoint_wall_seconds": 1.0e-9}

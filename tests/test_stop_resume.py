@@ -28,7 +28,7 @@ QUICKSTART = Path(__file__).resolve().parent.parent / "configs" / "quickstart.ya
 #: The quickstart cut short so that tens of stops stay cheap; checkpoints only when stopped.
 OVERRIDES = {"hydro.end_time": 0.12, "hydro.checkpoint_wall_seconds": 1.0e6, "nbody.stop.min_dynamical_times": 5}
 RNG_SEED = 20261124
-HYDRO_STOPS = 12
+HYDRO_STOPS = 10
 NBODY_STOPS = 4
 #: summary.json entries that legitimately differ between two runs of the same config.
 VOLATILE = {"wall_seconds", "run_dir", "started", "finished"}
@@ -39,7 +39,7 @@ VARIANTS = {
     "uniform": {"hydro.max_levels": 1},
     "strength": {"materials.basalt.strength": {"model": "geo", "preset": "weak"}},
 }
-VARIANT_STOPS = 3
+VARIANT_STOPS = 2
 
 
 def config(variant: str | None = None):
