@@ -147,6 +147,11 @@ class Simulation:
         self.plain_pencils = True
         self.dt_first: float | None = None
         self.last_dt = 0.0
+        #: Called as ``observer(event, axis)`` between the operations of a step, for diagnostics
+        #: (benchmarks/energy_budget.py): "regrid" after the regrid (or its check), "ghosts" after
+        #: a sweep's ghosts are filled, "sweep" and "reflux" after them, "sources" after the
+        #: strength and gravity sources (axis -1 where none applies).  None: no calls.
+        self.observer: Callable[[str, int], None] | None = None
         nb = mesh.nblocks
         self.boundary = np.zeros((nb, BND_MATERIAL + state.nmat))
         self.floors = np.zeros((nb, NFLOOR), dtype=np.int64)
@@ -192,6 +197,7 @@ class Simulation:
         """Advance one step of at most ``dt_max`` (s); returns the step taken (s)."""
         if self.mesh.adaptive and self.step_count % self.refinement.interval == 0:
             self.regrid()
+        self._observe("regrid", -1)
         dt = self.stable_dt()
         if self.dt_first is None:
             self.dt_first = dt
@@ -208,18 +214,22 @@ class Simulation:
         st = self.state
         for axis in axes:
             fill_state_ghosts(st, self.mesh, axis)
+            self._observe("ghosts", axis)
             sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
                   self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.mesh.neighbor_level,
                   self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary, self.floors, self.amounts, self._failure,
                   self._face_flux, self.plain_pencils)
             if self._failure[:, 0].any():
                 self._raise_sweep_failure()
+            self._observe("sweep", axis)
             if self.mesh.adaptive:
                 plans = axis_plans(self.mesh, axis)
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self._face_flux, st.alpha, st.arho, st.arhoe,
                        st.arhoq, st.momentum, st.energy, self.floors, self.amounts)
+                self._observe("reflux", axis)
         if self.strength is not None or self.gravity is not None:
             self._momentum_sources(dt)
+            self._observe("sources", -1)
         self.time += dt
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
@@ -227,6 +237,10 @@ class Simulation:
         if self.tracers is not None:
             self.tracers.after_step(self, dt)
         return dt
+
+    def _observe(self, event: str, axis: int) -> None:
+        if self.observer is not None:
+            self.observer(event, axis)
 
     def _momentum_sources(self, dt: float) -> None:
         """Stress divergence and gravity over ``dt`` (s), kick - stress update - kick.

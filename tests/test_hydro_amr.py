@@ -181,6 +181,27 @@ def test_adaptive_checkpoint_continues_bit_for_bit(tmp_path):
     assert np.array_equal(again.snapshot().pressure, sim.snapshot().pressure)
 
 
+def test_observer_sees_each_operation_of_a_step_in_order_and_changes_nothing():
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [32, 32], [("periodic", "periodic")] * 2, 8, max_level=2)
+    runs = []
+    for watched in (False, True):
+        sim = Simulation(mesh, ["a", "b"], [GAS, HEAVY], _disc_and_pulse(mesh, pack_eos([GAS, HEAVY]), 2),
+                         refinement=RefinementRule(interval=3))
+        events = []
+        if watched:
+            sim.observer = lambda event, axis: events.append((sim.step_count, event, axis, sim.state.energy.sum()))
+        sim.run(100.0, max_steps=4)
+        runs.append((sim, events))
+    (plain, _), (watched, events) = runs
+    assert np.array_equal(plain.snapshot().pressure, watched.snapshot().pressure)
+    per_step = [[(event, axis) for step, event, axis, _ in events if step == n] for n in range(4)]
+    assert per_step[0] == [("regrid", -1), ("ghosts", 0), ("sweep", 0), ("reflux", 0), ("ghosts", 1), ("sweep", 1),
+                           ("reflux", 1)]
+    assert per_step[1] == [("regrid", -1), ("ghosts", 1), ("sweep", 1), ("reflux", 1), ("ghosts", 0), ("sweep", 0),
+                           ("reflux", 0)]
+    assert any(a[3] != b[3] for a, b in zip(events, events[1:]) if b[1] == "sweep")
+
+
 def test_refinement_pressure_is_limited_by_the_damaged_tensile_strength():
     """The criteria's mixture pressure holds a material in tension at -Y_T (1 - D), as the sweeps do.
 
