@@ -183,8 +183,9 @@ class Simulation:
     def stable_dt(self) -> float:
         """CFL time step of the current state (s)."""
         st = self.state
-        max_signal_rate(st.alpha, st.arho, st.arhoe, st.momentum, self.mesh.block_dx, self.eos.kind,
-                        self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim, self._rate)
+        max_signal_rate(st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, self.mesh.block_dx, self.eos.kind,
+                        self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, self.mesh.ndim,
+                        self._rate)
         rate = float(self._rate.max())
         if not np.isfinite(rate):
             raise HydroFailure("non-finite signal speed", self.time, int(np.argmax(~np.isfinite(self._rate))),

@@ -34,8 +34,8 @@ import numpy as np
 from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.scheme.mixture import mixture_state
 from impactpipe.hydro.scheme.pencil_layout import PHI_SECOND_ORDER
-from impactpipe.hydro.scheme.timestep import damaged_tensile_strength, material_state
 
 #: A volume fraction changing by more than this across a cell marks an interface or free
 #: surface (not the percent-level void that tensile failure opens inside a body).
@@ -51,25 +51,17 @@ def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table,
                      out):
     """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``.
 
-    p_k is limited by the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps
-    (:func:`impactpipe.hydro.scheme.timestep.damaged_tensile_strength`).
+    The mixture pressure of :func:`impactpipe.hydro.scheme.mixture.mixture_state`: p_k is limited by
+    the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps.
     """
     nb, nmat, nx, ny, nz = alpha.shape
-    nq = arhoq.shape[1] // nmat
     for b in prange(nb):
         for ix in range(nx):
             for iy in range(ny):
                 for iz in range(nz):
-                    p = 0.0
-                    for k in range(nmat):
-                        a = alpha[b, k, ix, iy, iz]
-                        ar = arho[b, k, ix, iy, iz]
-                        ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
-                        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
-                            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k],
-                            ytk)
-                        if present:
-                            p += a * pk
+                    rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
+                        alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
+                        tensile_strength, False, None, 0, 0)
                     out[b, ix, iy, iz] = p
 
 

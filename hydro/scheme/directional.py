@@ -17,11 +17,11 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
       i-2 | i-1 | i | i+1 | i+2
             slopes of i-1, i, i+1 -> face states at i-1/2 and i+1/2 -> fluxes
 
-1. Gather: mixture density rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k
-   (equal-strain mixture; void counts as a zero-pressure component), bulk modulus
-   K = sum alpha_k rho_k c_k^2 (c_k the longitudinal signal speed,
-   ``timestep.signal_speed_squared``), signal speed c = sqrt(K / rho), the sound speed of the
-   equal-strain mixture.  A partly filled cell keeps the wave speed of its material
+1. Gather (:func:`impactpipe.hydro.scheme.mixture.mixture_state`): mixture density
+   rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k (equal-strain mixture;
+   void counts as a zero-pressure component), bulk modulus K = sum alpha_k rho_k c_k^2
+   (c_k the longitudinal signal speed), signal speed c = sqrt(K / rho), the sound speed of
+   the equal-strain mixture.  A partly filled cell keeps the wave speed of its material
    (K / rho = c_k^2), and a trace of a material (a volume fraction of 1e-10 holding a
    round-off share of the energy, hence an enormous c_k) does not set the time step.
 2. MUSCL-Hancock: MC-limited slopes of (u_n, u_t1, u_t2, p) and per material
@@ -60,7 +60,7 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
 
 A pencil that one material fills alone takes the plain path of
 :mod:`impactpipe.hydro.scheme.plain_pencils` (the same arithmetic without the multi-material
-machinery); the predictor and flux pieces both paths use are in
+machinery) after the same gather; the predictor and flux pieces both paths use are in
 :mod:`impactpipe.hydro.scheme.pencil_steps`, the thresholds, counter slots and scratch rows in
 :mod:`impactpipe.hydro.scheme.pencil_layout`.
 """
@@ -72,6 +72,7 @@ from numba import get_thread_id, njit, prange
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state
 from impactpipe.hydro.scheme.riemann import UPWIND_LEFT, UPWIND_NONE
 from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_ENERGY_CAP,
@@ -132,7 +133,6 @@ from impactpipe.hydro.scheme.pencil_layout import (
 from impactpipe.hydro.scheme.plain_pencils import (
     EMPTY_PENCIL,
     face_flux_plain,
-    gather_plain,
     plain_material,
     reconstruct_plain,
     update_plain,
@@ -145,7 +145,7 @@ from impactpipe.hydro.scheme.pencil_steps import (
     predict_material,
     upwind_face,
 )
-from impactpipe.hydro.scheme.timestep import ALPHA_MIN, PHI_VOID, damaged_tensile_strength, material_state
+from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 
 @njit(cache=True, parallel=True)
@@ -232,9 +232,10 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         for r in range(f_row, fq_row + nmat * nq):
                             sc[r, f] = 0.0
                 elif m >= 0:
-                    gather_plain(sc, m, b, axis, j1, j2, t1, t2, ncell, g, n, alpha, arho, arhoe, arhoq, mom,
-                                 eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, nq, wq_row,
-                                 floors)
+                    for i in range(ncell):
+                        _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
+                                     arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
+                                     nq, wq_row, floors)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
@@ -242,56 +243,9 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                 else:
                     # 1. gather cell values
                     for i in range(ncell):
-                        ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
-                        rho = 0.0
-                        p = 0.0
-                        kmod = 0.0
-                        phi = 0.0
-                        for k in range(nmat):
-                            a = alpha[b, k, ix, iy, iz]
-                            ar = arho[b, k, ix, iy, iz]
-                            phi += a
-                            rho += ar
-                            row = W_MAT + W_STRIDE * k
-                            ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
-                            present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
-                                a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table,
-                                shear_modulus[k], ytk)
-                            if present and i >= g and i < g + n:
-                                if flag != 0:
-                                    floors[b, FLOOR_EOS_CLAMP] += 1
-                                if limited:
-                                    floors[b, FLOOR_TENSILE_LIMIT] += 1
-                            sc[row + 4, i] = rk * c2b
-                            sc[row + 5, i] = ytk
-                            if present:
-                                p += a * pk
-                                kmod += ar * c2k
-                            sc[row, i] = a
-                            sc[row + 1, i] = rk
-                            sc[row + 2, i] = ek
-                            sc[row + 3, i] = pk
-                            if nq > 0:
-                                inv_ar = 1.0 / ar if ar > 0.0 else 0.0
-                                for j in range(nq):
-                                    sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
-                        sc[W_PHI, i] = phi
-                        sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
-                        if rho > 0.0 and phi >= PHI_VOID:
-                            sc[W_RHO, i] = rho
-                            sc[W_P, i] = p
-                            sc[W_K, i] = kmod
-                            inv = 1.0 / rho
-                            sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
-                            sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
-                            sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
-                        else:
-                            sc[W_RHO, i] = 0.0
-                            sc[W_P, i] = 0.0
-                            sc[W_K, i] = 0.0
-                            sc[W_UN, i] = 0.0
-                            sc[W_UT1, i] = 0.0
-                            sc[W_UT2, i] = 0.0
+                        _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
+                                     arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
+                                     nq, wq_row, floors)
                     # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                     for i in range(1, ncell - 1):
                         _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
@@ -337,6 +291,49 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
                                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
+
+
+@njit(cache=True, inline="always")
+def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, arhoq, mom, eos_kind, eos_params,
+                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors):
+    """Step 1 for cell i of the pencil: the cell values of the W rows.
+
+    The mixture and per-material states from :func:`impactpipe.hydro.scheme.mixture.mixture_state`
+    (its EOS clamps and tensile limits counted for interior cells), the velocity m / rho and
+    the specific transported scalars q_k,j = (alpha_k rho_k q_k,j) / (alpha_k rho_k); a void
+    cell (rho <= 0 or phi < PHI_VOID) has zero density, velocity, pressure and bulk modulus.
+    """
+    ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
+    rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
+        alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
+        False, sc, W_MAT, i)
+    if interior and clamps > 0:
+        floors[b, FLOOR_EOS_CLAMP] += clamps
+    if interior and limits > 0:
+        floors[b, FLOOR_TENSILE_LIMIT] += limits
+    if nq > 0:
+        for k in range(alpha.shape[1]):
+            ar = arho[b, k, ix, iy, iz]
+            inv_ar = 1.0 / ar if ar > 0.0 else 0.0
+            for j in range(nq):
+                sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
+    sc[W_PHI, i] = phi
+    sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
+    if rho > 0.0 and phi >= PHI_VOID:
+        sc[W_RHO, i] = rho
+        sc[W_P, i] = p
+        sc[W_K, i] = kmod
+        inv = 1.0 / rho
+        sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
+        sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
+        sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
+    else:
+        sc[W_RHO, i] = 0.0
+        sc[W_P, i] = 0.0
+        sc[W_K, i] = 0.0
+        sc[W_UN, i] = 0.0
+        sc[W_UT1, i] = 0.0
+        sc[W_UT2, i] = 0.0
 
 
 @njit(cache=True, inline="always")

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from impactpipe.hydro.scheme.mixture import MATERIAL_ROWS
+
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
 TENSION_TOLERANCE = 1.0e-3
@@ -87,7 +89,7 @@ FAIL_NEGATIVE_DENSITY = 2
 # Rows of the per-thread scratch: cell values W, face states FM/FP, face fluxes F.
 W_RHO, W_UN, W_UT1, W_UT2, W_P, W_C, W_K, W_PHI, W_VOL, W_IVL, W_IVR = range(11)
 W_MAT = 11          # + W_STRIDE k: alpha_k, rho_k, e_k, p_k, K_k = rho_k c_K,k^2, Y_T,k (1 - D_k)
-W_STRIDE = 6
+W_STRIDE = MATERIAL_ROWS    # the per-material rows of hydro.mixture.mixture_state
 Q_UN, Q_UT1, Q_UT2, Q_P = range(4)
 Q_MAT = 4           # + 3 k: alpha_k, rho_k, e_k
 F_MN, F_MT1, F_MT2, F_E, F_S = range(5)

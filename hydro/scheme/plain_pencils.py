@@ -10,9 +10,10 @@ same arithmetic for material m alone:
   alpha_m > 1 - FULL_TOLERANCE and alpha_m rho_m > 0, and every other material has
   alpha_k = alpha_k rho_k = alpha_k rho_k e_k = 0; EMPTY_PENCIL if no cell holds anything
   (the general path would compute zero fluxes and leave every cell as it is); else -1;
-- :func:`gather_plain`, :func:`reconstruct_plain`, :func:`face_flux_plain`: the cell values,
-  the MUSCL-Hancock face states and the HLLC fluxes of steps 1-3 of the sweep with
-  one material, written to the same scratch rows (absent materials get zeros);
+- :func:`reconstruct_plain`, :func:`face_flux_plain`: the MUSCL-Hancock face states and
+  the HLLC fluxes of steps 2-3 of the sweep with one material, from the cell values of the
+  sweep's gather (step 1, the same for both paths), written to the same scratch rows
+  (absent materials get zero fluxes);
 - :func:`update_plain`: the flux-form update of step 4 with the equal-strain closure
   alpha_m += alpha_m dV of a full cell (none at the tensile limit, which opens void) and
   rho e = E - |m|^2 / (2 rho).  A cell whose new state needs a rule of the general update
@@ -28,7 +29,6 @@ path's order of operations.  A step costs 1.3-1.8x less with the plain path
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from impactpipe.hydro.scheme.pencil_layout import (
@@ -40,27 +40,18 @@ from impactpipe.hydro.scheme.pencil_layout import (
     F_MT1,
     F_MT2,
     F_S,
-    FLOOR_EOS_CLAMP,
     FLOOR_FIRST_ORDER,
     FLOOR_INTERNAL_ENERGY,
-    FLOOR_TENSILE_LIMIT,
     FULL_TOLERANCE,
     PHI_SMALL,
     Q_MAT,
     Q_P,
     TENSION_TOLERANCE,
-    W_C,
     W_IVL,
     W_IVR,
     W_K,
     W_MAT,
-    W_P,
-    W_PHI,
-    W_RHO,
     W_STRIDE,
-    W_UN,
-    W_UT1,
-    W_UT2,
     W_VOL,
     pencil_cell_index,
 )
@@ -72,7 +63,7 @@ from impactpipe.hydro.scheme.pencil_steps import (
     predict_material,
     upwind_face,
 )
-from impactpipe.hydro.scheme.timestep import PHI_VOID, damaged_tensile_strength, material_state
+from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 
 #: :func:`plain_material` of a pencil with no material, momentum or energy in any cell.
@@ -116,55 +107,6 @@ def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncel
                            or arhoe[b, k, ix, iy, iz] != 0.0):
                 return -1
     return m
-
-
-@njit(cache=True, inline="always")
-def gather_plain(sc, m, b, axis, j1, j2, t1, t2, ncell, g, n, alpha, arho, arhoe, arhoq, mom, eos_kind,
-                 eos_params, eos_table, shear_modulus, tensile_strength, nq, wq_row, floors):
-    """Step 1 of the sweep for a plain pencil of material m: cell values into the W rows.
-
-    The mixture is material m: rho = alpha_m rho_m, p = alpha_m p_m, K = alpha_m rho_m c_m^2,
-    c = sqrt(K / rho) = c_m (the longitudinal speed, in the general path's arithmetic); the
-    specific transported scalars q_m,j = (alpha_m rho_m q_m,j) / (alpha_m rho_m).  Absent
-    materials get zero rows.
-    """
-    nmat = alpha.shape[1]
-    row = W_MAT + W_STRIDE * m
-    for i in range(ncell):
-        ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
-        a = alpha[b, m, ix, iy, iz]
-        ar = arho[b, m, ix, iy, iz]
-        ytk = damaged_tensile_strength(tensile_strength[m], arhoq, nq, b, m, ix, iy, iz, ar)
-        present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
-            a, ar, arhoe[b, m, ix, iy, iz], eos_kind[m], eos_params[m], eos_table, shear_modulus[m], ytk)
-        if i >= g and i < g + n:
-            if flag != 0:
-                floors[b, FLOOR_EOS_CLAMP] += 1
-            if limited:
-                floors[b, FLOOR_TENSILE_LIMIT] += 1
-        for k in range(nmat):
-            if k != m:
-                krow = W_MAT + W_STRIDE * k
-                for c in range(W_STRIDE - 1):
-                    sc[krow + c, i] = 0.0
-                sc[krow + W_STRIDE - 1, i] = tensile_strength[k]
-        sc[row, i] = a
-        sc[row + 1, i] = rk
-        sc[row + 2, i] = ek
-        sc[row + 3, i] = pk
-        sc[row + 4, i] = rk * c2b
-        sc[row + 5, i] = ytk
-        inv = 1.0 / ar
-        for j in range(nq):
-            sc[wq_row + nq * m + j, i] = arhoq[b, nq * m + j, ix, iy, iz] * inv
-        sc[W_PHI, i] = a
-        sc[W_C, i] = np.sqrt(ar * c2k / ar)
-        sc[W_RHO, i] = ar
-        sc[W_P, i] = a * pk
-        sc[W_K, i] = ar * c2k
-        sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
-        sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
-        sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
 
 
 @njit(cache=True, inline="always")

@@ -17,7 +17,7 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    (the tensile taper of :mod:`impactpipe.hydro.strength.yield_strength` with Y_T (1 - D)).
    The sweeps limit its mean stress to -Y_T (1 - D), zero once failed, and open void
    instead of stretching it (docs/hydro.md, "Tensile limit";
-   :func:`impactpipe.hydro.scheme.timestep.damaged_tensile_strength`);
+   :func:`impactpipe.hydro.scheme.mixture.damaged_tensile_strength`);
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
 4. Y = yield_strength(p_held, T_k, D) at the pressure the material bears,
    p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed
@@ -42,11 +42,12 @@ from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.scheme.mixture import ALPHA_MIN
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
 from impactpipe.hydro.strength.parameters import NONE, P_BD, P_BP, ROCK
 from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
-from impactpipe.hydro.scheme.timestep import ALPHA_MIN, PHI_VOID
+from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 # work array slots (``work[NB, NWORK, NX, NY, NZ]``)
 WK_V = 0            # + axis: cell velocity (m/s)

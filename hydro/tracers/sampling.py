@@ -9,7 +9,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed, temperature
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING
-from impactpipe.hydro.scheme.timestep import ALPHA_MIN
+from impactpipe.hydro.scheme.mixture import ALPHA_MIN
 from impactpipe.hydro.tracers.locate import PERIODIC
 
 @njit(cache=True, inline="always")

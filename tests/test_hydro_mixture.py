@@ -1,0 +1,69 @@
+"""The cell mixture gather (hydro.mixture.mixture_state) against the sums it stands for."""
+
+import numpy as np
+
+from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, temperature
+from impactpipe.hydro.scheme.mixture import MATERIAL_ROWS, mixture_state
+from impactpipe.hydro.problems.common import preset_material
+
+BASALT = preset_material("basalt")["eos"]
+GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
+
+
+def _cell(alpha, rho, e, damage):
+    """One cell of two materials (basalt, gas) with one transported scalar each (the damage)."""
+    shape = (1, 2, 1, 1, 1)
+    a = np.array(alpha).reshape(shape)
+    ar = (np.array(alpha) * np.array(rho)).reshape(shape)
+    are = ar * np.array(e).reshape(shape)
+    arhoq = ar * np.array(damage).reshape(shape)
+    return a, ar, are, arhoq
+
+
+def test_a_mixed_cell_is_the_equal_strain_mixture_of_its_materials():
+    """Basalt stretched to 0.9 rho0 beside a hot gas and 10 % void: rho, phi, p, K, rho e and
+    rho T are the volume- and mass-weighted sums of the module docstring, the basalt pressure
+    held at -Y_T (1 - D) (counted as a tension limit), the per-material rows written."""
+    eos = pack_eos([BASALT, GAS])
+    y_t = np.array([1.0e7, 0.0])
+    shear = np.zeros((2, 2))
+    alpha, rho, e, damage = [0.6, 0.3], [0.9 * BASALT["rho0"], 2.0], [0.0, 3.0e5], [0.5, 0.0]
+    a, ar, are, arhoq = _cell(alpha, rho, e, damage)
+    rows = np.full((3 + 2 * MATERIAL_ROWS, 4), np.nan)
+    state = mixture_state(a, ar, are, arhoq, 0, 0, 0, 0, eos.kind, eos.params, eos.table, shear, y_t, True, rows,
+                          3, 1)
+    m_rho, m_phi, m_p, m_k, m_eint, m_tmass, clamps, limits = state
+    p_basalt_eos, c2_basalt, _ = pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, rho[0], e[0])
+    p_gas, c2_gas, _ = pressure_sound_speed(eos.kind[1], eos.params[1], eos.table, rho[1], e[1])
+    p_basalt = -y_t[0] * (1.0 - damage[0])
+    assert p_basalt_eos < p_basalt
+    assert m_rho == ar.sum() and m_phi == a.sum()
+    np.testing.assert_allclose(m_p, alpha[0] * p_basalt + alpha[1] * p_gas, rtol=1e-14)
+    np.testing.assert_allclose(m_k, alpha[0] * rho[0] * c2_basalt + alpha[1] * rho[1] * c2_gas, rtol=1e-14)
+    np.testing.assert_allclose(m_eint, alpha[1] * rho[1] * e[1], rtol=1e-14)
+    t = [temperature(eos.kind[k], eos.params[k], eos.table, rho[k], e[k]) for k in range(2)]
+    np.testing.assert_allclose(m_tmass, alpha[0] * rho[0] * t[0] + alpha[1] * rho[1] * t[1], rtol=1e-14)
+    assert (clamps, limits) == (0, 1)
+    expected = [alpha[0], rho[0], e[0], p_basalt, rho[0] * c2_basalt, y_t[0] * (1.0 - damage[0]),
+                alpha[1], rho[1], e[1], p_gas, rho[1] * c2_gas, 0.0]
+    np.testing.assert_allclose(rows[3:, 1], expected, rtol=1e-14)
+    assert np.isnan(rows[:3]).all() and np.isnan(rows[:, [0, 2, 3]]).all()
+    without = mixture_state(a, ar, are, arhoq, 0, 0, 0, 0, eos.kind, eos.params, eos.table, shear, y_t, False, None,
+                            0, 0)
+    assert without[:5] == state[:5] and without[5] == 0.0
+
+
+def test_a_trace_is_absent_from_the_sums_but_keeps_its_tension_row():
+    """Gas below ALPHA_MIN adds its partial density and volume to rho and phi only; its
+    material rows hold alpha_k, zeros and its tensile strength."""
+    eos = pack_eos([BASALT, GAS])
+    y_t = np.array([1.0e7, 3.0])
+    shear = np.zeros((2, 2))
+    a, ar, are, arhoq = _cell([1.0 - 1e-11, 1e-11], [BASALT["rho0"], 2.0], [0.0, 3.0e14], [0.0, 0.0])
+    rows = np.zeros((2 * MATERIAL_ROWS, 1))
+    m_rho, m_phi, m_p, m_k, *_ = mixture_state(a, ar, are, arhoq, 0, 0, 0, 0, eos.kind, eos.params, eos.table, shear,
+                                               y_t, False, rows, 0, 0)
+    p_basalt, c2_basalt, _ = pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, BASALT["rho0"], 0.0)
+    assert m_rho == ar.sum() and m_phi == a.sum()
+    assert m_p == a[0, 0, 0, 0, 0] * p_basalt and m_k == ar[0, 0, 0, 0, 0] * c2_basalt
+    assert list(rows[MATERIAL_ROWS:, 0]) == [1e-11, 0.0, 0.0, 0.0, 0.0, 3.0]
