@@ -140,6 +140,16 @@ def _acquire(fh, run_dir: Path, wait: bool, what: str) -> None:
         time.sleep(WAIT_POLL)
 
 
+def recorded_holder(run_dir: str | os.PathLike) -> dict:
+    """The holder recorded in ``RUN_DIR/.lock``: the process that holds the lock, or the last one
+    that died holding it ({} when the lock was released cleanly or never taken)."""
+    try:
+        with open(Path(run_dir) / LOCK_FILE) as fh:
+            return _read(fh)
+    except FileNotFoundError:
+        return {}
+
+
 def process_alive(host: str | None, pid: int | None) -> bool:
     """Whether process ``pid`` on ``host`` may still run: False only when it is known to be gone
     (this host, no such process); another host's process cannot be checked and counts as alive."""

@@ -15,7 +15,8 @@ LocalCluster).  A failed point is recorded with its error and log and retried up
 A sweep holds the lock of its directory and each point that of its run directory
 (:mod:`impactpipe.pipeline.lock`), so a second sweep on the same directory stops at once
 and no point is ever run twice at the same time.  The local pool's workers watch the
-sweep process and stop when it is gone (``kill -9`` included).
+sweep process and stop when it is gone (``kill -9`` included); a worker that dies breaks the
+pool, which is replaced (:class:`LocalPool`) and the points in flight run again.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -50,7 +52,7 @@ from impactpipe import storage
 from . import checks, runstore
 from .config import (Config, ConfigError, Strict, _LineFinder, duplicate_keys, key_paths, load_yaml, parse_config,
                      read_yaml_text, unknown_keys)
-from .lock import process_alive, run_lock
+from .lock import process_alive, recorded_holder, run_lock
 from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
 
 log = logging.getLogger(__name__)
@@ -69,6 +71,8 @@ RESULT_KEYS = ("Q", "Q_R", "gamma", "M_lr_over_M_T", "M_slr_over_M_T", "N_lr", "
 REPLICATE_KEYS = ("handoff.seed", "handoff.time", "nbody.seed")
 #: Keys a ``handoff.time`` replicate sets (:func:`handoff_time_params`).
 HANDOFF_TIME_KEYS = ("hydro.end_time", "hydro.output_times")
+#: Deaths of its pool worker after which a point fails instead of running again (:meth:`SweepRunner._after_worker_death`).
+MAX_WORKER_DEATHS = 3
 
 
 # --------------------------------------------------------------------------- sweep file
@@ -503,35 +507,100 @@ class SweepRunner:
         # at most in_flight_limit() jobs are handed to the executor at a time, and points whose
         # shared run just finished go first: their (cheap) downstream stages do not queue behind
         # every other hydro run, so a point's replicates finish together
-        fresh = [(name, source_of.get(name)) for name in todo if name not in waiting]
-        released: list[tuple[str, str | None]] = []
-        running: dict[cf.Future, str] = {}
+        fresh = [(name, source_of.get(name), True) for name in todo if name not in waiting]
+        released: list[tuple[str, str | None, bool]] = []  # (name, point it reuses, a new attempt)
+        running: dict[cf.Future, tuple[str, str | None]] = {}
         limit = self.in_flight_limit()
+
+        def finish(name: str, result: PointResult) -> None:
+            results[name] = result
+            if self.progress is not None:
+                self.progress.update(1)
+            for other in sorted(waiting):
+                if source_of[other] == name:
+                    waiting.discard(other)
+                    reuse = name if result.status == "complete" or self._has_shared(name) else None
+                    released.append((other, reuse, True))
+
+        def collect(future: cf.Future) -> None:
+            name, reuse = running.pop(future)
+            result = self._collect(name, future)
+            if result is None:
+                released.insert(0, (name, reuse, True))
+            else:
+                finish(name, result)
+
+        def replace_pool() -> None:
+            exits = self.executor.replace()  # every future of the broken pool is settled now
+            broken = [f for f in running if isinstance(f.exception(), BrokenProcessPool)]
+            for future in [f for f in running if f not in broken]:
+                collect(future)  # finished before its pool broke
+            again, failed = self._after_worker_death(exits, [running.pop(f) for f in broken])
+            released[:0] = [(name, reuse, False) for name, reuse in again]
+            for result in failed:
+                finish(result.name, result)
 
         def fill() -> None:
             while len(running) < limit and (released or fresh):
-                name, reuse = released.pop(0) if released else fresh.pop(0)
-                running[self._submit(name, reuse)] = name
+                item = released.pop(0) if released else fresh.pop(0)
+                try:
+                    running[self._submit(*item)] = item[:2]
+                except BrokenProcessPool:  # a worker died since the last wait: this point did not start
+                    released.insert(0, item)
+                    replace_pool()
 
         fill()
         while running:
             done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
             for future in done:
-                name = running.pop(future)
-                result = self._collect(name, future)
-                if result is None:
-                    released.insert(0, (name, source_of.get(name)))
-                    continue
-                results[name] = result
-                if self.progress is not None:
-                    self.progress.update(1)
-                for other in sorted(waiting):
-                    if source_of[other] == name:
-                        waiting.discard(other)
-                        reuse = name if result.status == "complete" or self._has_shared(name) else None
-                        released.append((other, reuse))
+                if future not in running:
+                    continue  # failed with its broken pool, already run again
+                if isinstance(self.executor, LocalPool) and isinstance(future.exception(), BrokenProcessPool):
+                    replace_pool()
+                else:
+                    collect(future)
             fill()
         return results
+
+    def _after_worker_death(self, exits: dict[int, int | None], in_flight: list[tuple[str, str | None]]) -> tuple[
+            list[tuple[str, str | None]], list[PointResult]]:
+        """A worker of the local pool died and the pool was replaced (:meth:`LocalPool.replace`, which
+        gave the old workers' ``exits``): sort the points that were in flight, (name, point it
+        reuses), into (to run again, failed), and log and report the death.
+
+        A point is not at fault for the pool breaking, so running it again spends none of its
+        ``execution.retries``; it resumes from its checkpoints.  The death is counted against
+        the point whose worker died, found by the process id in its run directory's lock
+        (:func:`impactpipe.pipeline.lock.recorded_holder`), or against every point in flight
+        when the dead worker held none (it died starting); a point counted MAX_WORKER_DEATHS
+        times (one that kills its worker: a crash in compiled code, out of memory) fails."""
+        deaths = {pid: code for pid, code in exits.items() if code not in POOL_STOP_EXITS}
+        holders = {name: recorded_holder(self.points[name]["run_dir"]).get("pid") for name, _ in in_flight}
+        culprits = {name for name, pid in holders.items() if pid in deaths}
+        blamed = culprits or ({name for name, _ in in_flight} if deaths else set())
+        stopped = deaths or exits
+        died = ", ".join(f"{pid} ({exit_text(code)})" for pid, code in stopped.items())
+        where = f"running point {', '.join(sorted(culprits))}" if culprits else "holding no point"
+        log.warning("a worker of the local pool %s (process %s, %s); a new pool (replacement %d) runs the "
+                    "point(s) in flight again (%d)", "died" if deaths else "stopped", died, where,
+                    self.executor.replacements, len(in_flight))
+        self.report(f"pool worker {'died' if deaths else 'stopped'} (process {died}, {where}): new pool started")
+        again, failed = [], []
+        for name, reuse in in_flight:
+            count = self.points[name].get("worker_deaths", 0) + (name in blamed)
+            if count < MAX_WORKER_DEATHS:
+                self._record(name, status="retrying", worker_deaths=count)
+                self.report(f"point {name}: running again on the new pool (deaths of its worker: {count})")
+                again.append((name, reuse))
+                continue
+            last = exit_text(deaths[holders[name]]) if name in culprits else f"process {died}"
+            message = (f"{name}: its pool worker died {count} times while running it (the last: {last}); "
+                       "a point that kills its worker (a crash in compiled code, out of memory) is not run again")
+            log.error("point %s failed: %s", name, message)
+            self._record(name, status="failed", worker_deaths=count, error=message)
+            self.report(f"point {name}: failed: {message}")
+            failed.append(PointResult(name, "failed", {}, message))
+        return again, failed
 
     def in_flight_limit(self) -> int:
         """Jobs handed to the executor at a time: ``execution.workers`` when set, else the workers
@@ -569,7 +638,9 @@ class SweepRunner:
         records = json.loads(records_path.read_text())
         return records.get("hydro", {}).get("status") == "complete"
 
-    def _submit(self, name: str, reuse: str | None) -> cf.Future:
+    def _submit(self, name: str, reuse: str | None, new_attempt: bool = True) -> cf.Future:
+        """Hand the point to the executor; ``new_attempt`` False: it runs again after its worker
+        died (:meth:`_after_worker_death`), which counts no attempt."""
         point = self.points[name]
         if reuse in self.points:
             reuse_dir = self.points[reuse]["run_dir"] if reuse != name else None
@@ -577,10 +648,11 @@ class SweepRunner:
             reuse_dir = reuse  # a donor run's directory, or None
         job = PointJob(name, point["params"], self._configs[name], point["run_dir"], reuse_dir,
                        self.sweep.spec.execution.threads_per_run, self.sweep.spec.stage_functions)
-        self._record(name, status="running", attempts=point["attempts"] + 1, error=None,
+        future = self.executor.submit(run_point, job)
+        self._record(name, status="running", attempts=point["attempts"] + new_attempt, error=None,
                      host=socket.gethostname(), pid=os.getpid())
-        self.report(f"point {name}: started (attempt {point['attempts']})")
-        return self.executor.submit(run_point, job)
+        self.report(f"point {name}: {'started' if new_attempt else 'started again'} (attempt {point['attempts']})")
+        return future
 
     def _collect(self, name: str, future: cf.Future) -> PointResult | None:
         """The point's result, or None when it failed and will be retried."""
@@ -859,12 +931,70 @@ def _write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> No
 # --------------------------------------------------------------------------- entry points
 
 
+#: Exit codes of pool workers stopped by their own pool: when one worker dies, the pool sends the
+#: others SIGTERM, and a worker whose stage stopped cleanly exits with 1 (:func:`_run_logged`).
+POOL_STOP_EXITS = (1, -signal.SIGTERM)
+
+
+class LocalPool(cf.Executor):
+    """The local backend: a spawn process pool of ``workers`` processes with ``threads`` numba
+    threads each, watching the sweep process (:func:`_init_worker`), that can be replaced.
+
+    A worker that dies (``kill -9``, a crash in compiled code, the out-of-memory killer) breaks
+    a ``ProcessPoolExecutor`` for good: the futures in flight raise BrokenProcessPool, and so
+    does every later submit.  :meth:`replace` shuts the broken pool down, waiting until its
+    other workers have stopped, and starts a new one with the same settings; the
+    :class:`SweepRunner` then runs the points that were in flight again.
+    """
+
+    def __init__(self, workers: int, threads: int):
+        self.workers = workers
+        self.threads = threads
+        self.replacements = 0
+        self._start()
+
+    def _start(self) -> None:
+        self._others = {p.pid for p in multiprocessing.active_children()}
+        self._processes: dict[int, multiprocessing.process.BaseProcess] = {}
+        self._pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                            initializer=_init_worker, initargs=(self.threads, os.getpid()))
+
+    def submit(self, fn, /, *args, **kwargs) -> cf.Future:
+        future = self._pool.submit(fn, *args, **kwargs)
+        # the pool starts its workers as jobs arrive: keep them, for their exit codes in replace()
+        self._processes.update((p.pid, p) for p in multiprocessing.active_children() if p.pid not in self._others)
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+    def replace(self) -> dict[int, int | None]:
+        """Shut the current (broken) pool down, waiting for its workers to exit, and start a new one;
+        returns the old workers' exit codes by process id (negative: killed by that signal)."""
+        self._pool.shutdown(wait=True)
+        exits = {pid: p.exitcode for pid, p in self._processes.items()}
+        self._start()
+        self.replacements += 1
+        return exits
+
+
+def exit_text(code: int | None) -> str:
+    """A process exit code in words: ``killed by SIGKILL``, ``exit status 1``."""
+    if code is None:
+        return "still running"
+    if code >= 0:
+        return f"exit status {code}"
+    try:
+        return f"killed by {signal.Signals(-code).name}"
+    except ValueError:
+        return f"killed by signal {-code}"
+
+
 def make_executor(execution: Execution) -> tuple[cf.Executor, Any]:
-    """(executor, closer): a spawn process pool, or a Dask client's executor."""
+    """(executor, closer): a :class:`LocalPool`, or a Dask client's executor."""
     workers = execution.workers or max(1, (os.cpu_count() or 1) // execution.threads_per_run)
     if execution.backend == "local":
-        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=_init_worker, initargs=(execution.threads_per_run, os.getpid()))
+        pool = LocalPool(workers, execution.threads_per_run)
         return pool, pool.shutdown
     from distributed import Client, LocalCluster
 

@@ -6,6 +6,7 @@ Each stage writes its output file and then appends "<run name> <stage>" to
 
 import math
 import os
+import signal
 import time
 
 from impactpipe.storage import atomic_path
@@ -16,6 +17,8 @@ QSTAR = 1790.0
 REPLICATE_NOISE = 0.03
 #: A hydro stand-in fails for this impact speed (m/s), to test failure isolation.
 FAILING_VELOCITY = 666.0
+#: ``fatal_hydro`` kills its own process (SIGKILL) at this impact speed (m/s), as a crash would.
+FATAL_VELOCITY = 999.0
 
 
 def _finish(ctx, stage):
@@ -85,6 +88,25 @@ def hanging_hydro(ctx):
     return hydro(ctx)
 
 
+def held_hydro(ctx):
+    """A hydro stage that writes its process id to ``<runs dir>/<run name>.pid`` and then waits
+    until ``<runs dir>/release`` exists (a minute at most), so a test can kill the pool workers
+    while they run it."""
+    (ctx.run_dir.parent / f"{ctx.run_dir.name}.pid").write_text(str(os.getpid()))
+    for _ in range(1200):
+        if (ctx.run_dir.parent / "release").exists():
+            break
+        time.sleep(0.05)
+    return hydro(ctx)
+
+
+def fatal_hydro(ctx):
+    """``hydro``, except that at FATAL_VELOCITY it kills its own process, as a segfault would."""
+    if ctx.config.scene.impact.velocity == FATAL_VELOCITY:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return hydro(ctx)
+
+
 STAGES = {s: f"sweep_stand_ins:{s}" for s in ("hydro", "handoff", "nbody", "analysis")}
 #: Stages whose M_lr/M_T depends on handoff.seed (``noisy_analysis``).
 NOISY_STAGES = {**STAGES, "analysis": "sweep_stand_ins:noisy_analysis"}
@@ -94,6 +116,10 @@ RESOLVED_STAGES = {**STAGES, "analysis": "sweep_stand_ins:resolved_analysis"}
 SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
 #: Stages whose hydro takes a minute (``hanging_hydro``).
 HANGING_STAGES = {**STAGES, "hydro": "sweep_stand_ins:hanging_hydro"}
+#: Stages whose hydro waits for a release file (``held_hydro``).
+HELD_STAGES = {**STAGES, "hydro": "sweep_stand_ins:held_hydro"}
+#: Stages whose hydro kills its process at FATAL_VELOCITY (``fatal_hydro``).
+FATAL_STAGES = {**STAGES, "hydro": "sweep_stand_ins:fatal_hydro"}
 
 
 def critical_velocity(target_radius, projectile_radius):

@@ -1,5 +1,6 @@
-"""Sweeps that survive their stops: pool workers die with the sweep, a point is never run twice at
-once, points.json and sweep-status stay true after a stop, and a log gets a line per point.
+"""Sweeps that survive their stops: pool workers die with the sweep, a killed pool worker is replaced,
+a point is never run twice at once, points.json and sweep-status stay true after a stop, and a log
+gets a line per point.
 
 The stages are the stand-ins of tests/sweep_stand_ins.py.
 """
@@ -14,6 +15,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -151,3 +153,52 @@ def test_sweep_to_a_file_logs_a_line_per_point_start_and_end(tmp_path):
     for name in names:
         assert len([line for line in lines if f"point {name}: started (attempt 1)" in line]) == 1, lines
         assert len([line for line in lines if f"point {name}: complete in" in line]) == 1, lines
+
+
+def test_a_killed_pool_worker_is_replaced_and_every_point_runs_once(tmp_path, caplog):
+    """``kill -9`` of a pool worker inside a point's hydro stage: the pool is replaced, the two points
+    in flight run again on the new one (spending no retry), and every stage of every point
+    finishes exactly once.  The killed point alone is counted a death of its worker."""
+    path = write_sweep(tmp_path, sweep_stand_ins.HELD_STAGES, [1000.0, 1100.0, 1200.0, 1300.0])
+    runs = tmp_path / "sweep" / "runs"
+    killed = {}
+
+    def kill_one_worker():
+        deadline = time.time() + 120
+        while time.time() < deadline and len(list(runs.glob("*.pid"))) < 2:
+            time.sleep(0.05)
+        first, second = sorted(runs.glob("*.pid"))  # both workers wait inside their hydro stages
+        killed[first.stem] = int(first.read_text())
+        os.kill(killed[first.stem], signal.SIGKILL)
+        while time.time() < deadline and alive(int(second.read_text())):
+            time.sleep(0.05)  # until the broken pool has stopped the other worker
+        (runs / "release").touch()
+
+    killer = threading.Thread(target=kill_one_worker)
+    killer.start()
+    caplog.set_level(logging.WARNING, logger="impactpipe")
+    try:
+        result = run_sweep(load_sweep(path), show_progress=False)
+    finally:
+        killer.join()
+    [(name, pid)] = killed.items()
+    points = result["points"]
+    assert [p["status"] for p in points.values()] == ["complete"] * 4, points
+    assert [p["attempts"] for p in points.values()] == [1] * 4, "a worker's death spends no retry"
+    assert {n: p.get("worker_deaths", 0) for n, p in points.items()} == {n: int(n == name) for n in points}
+    log = (runs / "calls.log").read_text().split()
+    assert collections.Counter(zip(log[::2], log[1::2])) == {(n, s): 1 for n in points for s in stages.STAGES}
+    assert any(f"process {pid} (killed by SIGKILL), running point {name}" in r.getMessage() for r in caplog.records)
+
+
+def test_a_point_that_kills_its_worker_fails_after_three_deaths(tmp_path):
+    """A point whose stage kills its own process (a crash) fails once its worker has died three times,
+    with a message saying so; the points beside it finish and are not counted deaths."""
+    velocities = [1000.0, sweep_stand_ins.FATAL_VELOCITY, 1200.0]
+    result = run_sweep(load_sweep(write_sweep(tmp_path, sweep_stand_ins.FATAL_STAGES, velocities)),
+                       show_progress=False)
+    by_speed = {p["params"]["scene.impact.velocity"]: p for p in result["points"].values()}
+    fatal = by_speed.pop(sweep_stand_ins.FATAL_VELOCITY)
+    assert fatal["status"] == "failed" and fatal["worker_deaths"] == 3 and fatal["attempts"] == 1, fatal
+    assert "its pool worker died 3 times while running it (the last: killed by SIGKILL)" in fatal["error"]
+    assert [(p["status"], p.get("worker_deaths", 0)) for p in by_speed.values()] == [("complete", 0)] * 2
