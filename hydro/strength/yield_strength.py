@@ -93,9 +93,9 @@ def equivalent_yield_stress(model, strength):
     """The von Mises equivalent stress sqrt(3 J2) (Pa) at which material of ``model`` yields.
 
     von Mises: Y itself (uniaxial yield stress).  GEO and ROCK: sqrt(3) Y, since their Y bounds
-    sqrt(J2) (method.md section 2.2; the reference study's convention).  A case 8c run with
-    the presets read as sqrt(3 J2) <= Y instead gave M_lr/M_T = 0.50 against the published
-    0.76; with sqrt(J2) <= Y, 0.68 (docs/validation.md).
+    sqrt(J2) (the reference study's convention; docs/strength.md).  Reading the presets as
+    sqrt(3 J2) <= Y instead lowers case 8c's M_lr/M_T well below the published value
+    (docs/validation.md, "The yield convention").
     """
     if model == GEO or model == ROCK:
         return SQRT3 * strength
