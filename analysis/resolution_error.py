@@ -44,6 +44,8 @@ class ResolutionError:
         extrapolated: Q*_D at h -> 0 (J/kg, NaN unless extrapolated).
         error: |Q*_D(finest) - extrapolated| (J/kg, NaN unless extrapolated).
         last_change: Q*_D(finest) - Q*_D(next finest) (J/kg, NaN with one rung).
+        unbracketed: the rungs whose runs do not bracket M_lr/M_T = 0.5 (their Q*_D
+            extrapolates the fitted line beyond the runs), finest first.
     """
 
     resolutions: np.ndarray
@@ -54,6 +56,7 @@ class ResolutionError:
     extrapolated: float
     error: float
     last_change: float
+    unbracketed: tuple[float, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -63,21 +66,29 @@ class ResolutionError:
         """One line: the finest rung's Q*_D with its seed error and resolution error (or why none)."""
         rungs = "/".join(f"{n:g}" for n in self.resolutions[:3][::-1])
         head = f"Q*_D = {plus_minus(self.qstar[0], self.seed_error[0], fmt)} J/kg (seeds)"
+        caution = ""
+        if self.unbracketed:
+            which = ", ".join(f"{n:g}" for n in self.unbracketed)
+            caution = (f"; caution: the runs at {which} cells per projectile radius do not bracket "
+                       f"M_lr/M_T = 0.5, so that Q*_D extrapolates its fitted line")
         if self.ok:
             return (f"{head} +- {self.error:{fmt}} J/kg (resolution: Richardson {self.extrapolated:{fmt}} J/kg at "
-                    f"observed order {self.order:.2f} over {rungs} cells per projectile radius)")
+                    f"observed order {self.order:.2f} over {rungs} cells per projectile radius){caution}")
         change = f"; the last refinement moved it by {self.last_change:+{fmt}} J/kg" \
             if math.isfinite(self.last_change) else ""
-        return f"{head}; resolution error not estimated over {rungs} cells per projectile radius: {self.status}{change}"
+        return (f"{head}; resolution error not estimated over {rungs} cells per projectile radius: "
+                f"{self.status}{change}{caution}")
 
 
-def qstar_resolution_error(resolutions, qstar, seed_error) -> ResolutionError:
+def qstar_resolution_error(resolutions, qstar, seed_error, brackets=None) -> ResolutionError:
     """Resolution error of Q*_D from its values at several resolutions (module docstring).
 
     Args:
         resolutions: (k,) cells per projectile radius of each rung (any order, distinct).
         qstar: (k,) Q*_D of each rung (J/kg).
         seed_error: (k,) the fit's error of each rung (J/kg).
+        brackets: (k,) whether each rung's runs bracket M_lr/M_T = 0.5 (``QStarFit.brackets``);
+            the rungs that do not are named in the description.  None: not known.
 
     Example: Q*_D converging at second order towards 1000 J/kg::
 
@@ -95,11 +106,13 @@ def qstar_resolution_error(resolutions, qstar, seed_error) -> ResolutionError:
         raise ValueError(f"resolutions must be distinct and positive (got {n.tolist()})")
     order = np.argsort(-n)
     n, q, e = n[order], q[order], e[order]
+    unbracketed = () if brackets is None else tuple(float(n_i) for n_i, ok in
+                                                    zip(n, np.asarray(brackets, dtype=bool)[order]) if not ok)
     ext = richardson(1.0 / n, q)
     last = float(q[0] - q[1]) if n.size >= 2 else float("nan")
     error = abs(float(q[0]) - ext.value) if ext.ok else float("nan")
     return ResolutionError(resolutions=n, qstar=q, seed_error=e, status=ext.status, order=ext.order,
-                           extrapolated=ext.value, error=error, last_change=last)
+                           extrapolated=ext.value, error=error, last_change=last, unbracketed=unbracketed)
 
 
 def write_resolution_table(path: str | os.PathLike, ladder: ResolutionError) -> Path:

@@ -297,7 +297,8 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
         if len(ladder) > 1:
             cells = sorted(fits)
             resolution = qstar_resolution_error(cells, [fits[n].qstar for n in cells],
-                                                [fits[n].qstar_err for n in cells])
+                                                [fits[n].qstar_err for n in cells],
+                                                brackets=[fits[n].brackets for n in cells])
             click.echo(f"R_T = {radius:g} m: {resolution.describe()}")
             write_resolution_table(out / f"qstar_resolution{suffix}.csv", resolution)
         finest = fits[max(fits)]

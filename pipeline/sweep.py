@@ -1169,7 +1169,7 @@ def rung_fits(sweep: Sweep, points: dict[str, dict[str, Any]]) -> list[dict[str,
                         for k in ("Q", "M_lr_over_M_T", "N_lr"))
         try:
             fit = fit_qstar(q, mlr, n_lr)
-            record.update({"Qstar_D": fit.qstar, "Qstar_D_uncertainty": fit.qstar_err})
+            record.update({"Qstar_D": fit.qstar, "Qstar_D_uncertainty": fit.qstar_err, "brackets": fit.brackets})
         except (ValueError, np.linalg.LinAlgError) as exc:
             record.update({"Qstar_D": float("nan"), "fit_error": str(exc)})
         records.append(record)
@@ -1197,7 +1197,8 @@ def resolution_ladders(sweep: Sweep, records: list[dict[str, Any]]) -> list[dict
             row.update({"status": f"{len(fitted)} rung(s) with a fitted Q*_D", "summary": ""})
         else:
             ladder = qstar_resolution_error([r[RESOLUTION_KEY] for r in fitted], [r["Qstar_D"] for r in fitted],
-                                            [r.get("Qstar_D_uncertainty", float("nan")) for r in fitted])
+                                            [r.get("Qstar_D_uncertainty", float("nan")) for r in fitted],
+                                            brackets=[r.get("brackets", True) for r in fitted])
             row.update({"Qstar_D": ladder.qstar[0], "seed_error": ladder.seed_error[0],
                         "resolution_error": ladder.error, "richardson": ladder.extrapolated,
                         "observed_order": ladder.order, "last_change": ladder.last_change,

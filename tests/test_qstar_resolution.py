@@ -121,3 +121,10 @@ def test_a_grid_sweep_with_a_resolution_ladder_fits_each_rung(tmp_path):
     (ladder,) = result["resolution"]
     assert ladder["Qstar_D_n10"] == pytest.approx(expected_qstar(10.0), rel=1e-9)
     assert ladder["richardson"] == pytest.approx(sweep_stand_ins.QSTAR, rel=1e-9)
+
+
+def test_a_rung_whose_runs_do_not_bracket_half_is_named():
+    ladder = qstar_resolution_error(LADDER, [expected_qstar(n) for n in LADDER], [10.0, 11.0, 12.0],
+                                    brackets=[False, True, True])
+    assert ladder.ok and ladder.unbracketed == (10.0,)
+    assert "caution: the runs at 10 cells per projectile radius do not bracket" in ladder.describe()
