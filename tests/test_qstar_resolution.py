@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from click.testing import CliRunner
 
 from impactpipe.analysis.resolution_error import qstar_resolution_error, write_resolution_table
@@ -19,8 +18,8 @@ from impactpipe.pipeline.sweep import SweepError, load_sweep, run_sweep
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 import sweep_stand_ins  # noqa: E402
+from test_sweep import write_sweep as sweep_file  # noqa: E402
 
-BASE = HERE / "configs" / "sweep_base.yaml"
 LADDER = [10.0, 20.0, 40.0]
 
 
@@ -67,11 +66,8 @@ def test_bad_ladders_are_refused():
 
 
 def write_sweep(tmp_path, **fields):
-    spec = {"name": "ladder", "base": str(BASE), "output": str(tmp_path / "sweep"),
-            "stage_functions": sweep_stand_ins.RESOLVED_STAGES, **fields}
-    path = tmp_path / "sweep.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    """test_sweep's sweep file, with stages whose Q*_D depends on the resolution."""
+    return sweep_file(tmp_path, stage_functions=sweep_stand_ins.RESOLVED_STAGES, **fields)
 
 
 def test_a_sweep_with_a_resolution_ladder_reports_both_errors(tmp_path):
