@@ -28,9 +28,14 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    (alpha_k, rho_k, e_k); half-step predictor with the primitive equations
    u_t = -u u_x - p_x / rho, p_t = -u p_x - K u_x, alpha_t = -u alpha_x,
    rho_k,t = -u rho_k,x - rho_k u_x, e_k,t = -u e_k,x - (p_k / rho_k) u_x.
-   A cell next to void, or whose face state loses positivity (density <= 0, or a pressure
-   drop from p > 0 to below -TENSION_TOLERANCE K), uses its cell values; face e_k of a cell
-   with e_k >= 0 are clipped at 0.
+   The flow (u, p) is reconstructed where the cell and its neighbours are filled to
+   PHI_FLOW_SECOND_ORDER (0.9) and hold materials of like density (rho_k within a factor
+   DENSITY_RATIO_SECOND_ORDER of each other); the materials (alpha_k, rho_k, e_k) only where
+   they are moreover full (fill >= PHI_SECOND_ORDER), elsewhere they keep their cell values,
+   so a partly void cell's face density is its own.  A cell next to void, thinner or mixed
+   with a much lighter material, or whose face state loses positivity (density <= 0, or a
+   pressure drop from p > 0 to below -TENSION_TOLERANCE K), uses its cell values; face e_k
+   of a cell with e_k >= 0 are clipped at 0.
 3. Faces: :func:`impactpipe.hydro.scheme.riemann.hllc_face` (free surface next to void) gives the
    face velocity s, pressure p* and upwind star factors.  Material k's volume flux is
    alpha_k,face s with the compressive ultrabee face value of alpha_k (capped so no more than
@@ -109,6 +114,8 @@ from impactpipe.hydro.scheme.pencil_layout import (
     FLOOR_VELOCITY_LIMIT,
     FLOOR_VOID_CLEANUP,
     FULL_TOLERANCE,
+    DENSITY_RATIO_SECOND_ORDER,
+    PHI_FLOW_SECOND_ORDER,
     PHI_SECOND_ORDER,
     PHI_SMALL,
     Q_MAT,
@@ -340,36 +347,54 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
 def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
     """MUSCL-Hancock states at the low (row block ``qm_row``) and high (``qp_row``) faces of cell i.
 
+    Second order for the flow (u, p) where the cell and both neighbours are filled to
+    PHI_FLOW_SECOND_ORDER with materials whose densities rho_k differ by at most a factor
+    DENSITY_RATIO_SECOND_ORDER, and for the materials (alpha_k, rho_k, e_k) where they are
+    moreover filled to PHI_SECOND_ORDER (the contact of two solids); otherwise cell values.
     The face pressures must stay admissible: not below the most tension the cell's materials
     hold, p_min = -sum_k alpha_k Y_T,k (1 - D_k) (Pa), and not from p > 0 to below -TENSION_TOLERANCE K.
     A predictor that leaves that range (the Hancock term K du/dx of a cell at its tensile
     limit can predict tens of MPa of tension, which would pull a light neighbour to many
     km/s) falls back to the cell values (first order, counted).
     """
-    first_order = sc[W_RHO, i] <= 0.0
+    flow_second = sc[W_RHO, i] > 0.0
+    material_second = flow_second
     for j in range(i - 1, i + 2):
-        pure = False
+        fill = 0.0
+        rho_min = 1.0e300
+        rho_max = 0.0
         for k in range(nmat):
-            if sc[W_MAT + W_STRIDE * k, j] >= PHI_SECOND_ORDER:
-                pure = True
-        if not pure:
-            first_order = True
-    if not first_order:
+            a = sc[W_MAT + W_STRIDE * k, j]
+            fill += a
+            if a > ALPHA_MIN:
+                r = sc[W_MAT + W_STRIDE * k + 1, j]
+                rho_min = min(rho_min, r)
+                rho_max = max(rho_max, r)
+        alike = rho_max <= DENSITY_RATIO_SECOND_ORDER * rho_min
+        if not (fill >= PHI_SECOND_ORDER and alike):
+            material_second = False
+        if not (sc[W_RHO, j] > 0.0 and fill >= PHI_FLOW_SECOND_ORDER and alike):
+            flow_second = False
+    if flow_second:
         un, dun, p, p_face = predict_flow(sc, i, half, qm_row, qp_row)
-        if p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i]:
-            first_order = True
+        fallback = p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i]
         p_min = 0.0
         for k in range(nmat):
             p_min -= sc[W_MAT + W_STRIDE * k, i] * sc[W_MAT + W_STRIDE * k + 5, i]
         if p_face < p_min and p_face < p:
-            first_order = True
-        for k in range(nmat):
-            if predict_material(sc, i, W_MAT + W_STRIDE * k, Q_MAT + 3 * k, half, un, dun, qm_row, qp_row):
-                first_order = True
-        if first_order and interior:
-            floors[b, FLOOR_FIRST_ORDER] += 1
-    if first_order:
+            fallback = True
+        if material_second and not fallback:
+            for k in range(nmat):
+                if predict_material(sc, i, W_MAT + W_STRIDE * k, Q_MAT + 3 * k, half, un, dun, qm_row, qp_row):
+                    fallback = True
+        if fallback:
+            flow_second = False
+            if interior:
+                floors[b, FLOOR_FIRST_ORDER] += 1
+    if not flow_second:
         cell_value_faces(sc, i, qm_row, qp_row, (W_MAT, W_STRIDE, nmat), (Q_MAT, 3, nmat))
+    elif not material_second:
+        cell_value_faces(sc, i, qm_row, qp_row, (W_MAT, W_STRIDE, nmat), (Q_MAT, 3, nmat), flow=False)
 
 
 @njit(cache=True, inline="always")
@@ -404,11 +429,13 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
             for j in range(nq):
                 sc[fq_row + nq * k + j, f] = 0.0
             continue
-        # a donor cell holding void whose flow diverges loses material through both faces:
-        # each face may take at most half of its content, so together they never overdraw
-        # it (the test uses the donor's own face states, the same in both blocks of a face)
+        # a donor cell holding void in a diverging flow (its velocity or its left neighbour's
+        # negative, its own or its right neighbour's positive) may lose material through both
+        # faces: each face takes at most half of its content, so together they never overdraw
+        # it (the test uses cell values, the same in both blocks of a face)
         share = 1.0
-        if sc[W_PHI, donor] <= 1.0 - FULL_TOLERANCE and sc[qm_row + Q_UN, donor] < 0.0 < sc[qp_row + Q_UN, donor]:
+        if (sc[W_PHI, donor] <= 1.0 - FULL_TOLERANCE
+                and min(sc[W_UN, donor - 1], sc[W_UN, donor]) < 0.0 < max(sc[W_UN, donor], sc[W_UN, donor + 1])):
             share = 0.5
         mk, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, share, s, chi, dt,
                                     iv_donor)

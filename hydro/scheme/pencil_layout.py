@@ -16,14 +16,22 @@ from impactpipe.hydro.scheme.mixture import MATERIAL_ROWS
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
 #: positive pressure is non-physical: the cell falls back to first order.
 TENSION_TOLERANCE = 1.0e-3
-#: Only cells that one material fills to PHI_SECOND_ORDER or more, and whose neighbours are such
-#: cells, reconstruct at second order; mixed and partly void cells (interfaces, free surfaces)
-#: and their neighbours use their cell values.  The limited slope of a volume fraction takes
-#: the face density towards the lighter side (void, or a vapour at 1e-6 of the other's
-#: density) while the face pressure keeps the mixture's, and that face state (p > 0 on a
-#: vanishing density) gives an unbounded face velocity p / (rho c): 1.3e5 m/s in case 8c
-#: next to void, 2.2e5 m/s for ice vapour beside compressed iron in an ice-on-iron impact.
+#: The reconstruction of a cell's materials (alpha_k, rho_k, e_k) is second order only where
+#: the cell and its neighbours along the sweep are filled to PHI_SECOND_ORDER or more and the
+#: densities rho_k of the materials present in each differ by at most a factor
+#: DENSITY_RATIO_SECOND_ORDER: the contact of two solids (the projectile and the target).
+#: Elsewhere the limited slope of a volume fraction takes the face density towards the
+#: lighter side (void, or a vapour at 1e-6 of the other's density) while the face pressure
+#: keeps the mixture's, and that face state (p > 0 on a vanishing density) gives an
+#: unbounded face velocity p / (rho c): 1.3e5 m/s in case 8c next to void, 2.2e5 m/s for
+#: ice vapour beside compressed iron in an ice-on-iron impact.
 PHI_SECOND_ORDER = 1.0 - 1.0e-3
+DENSITY_RATIO_SECOND_ORDER = 2.0
+#: The flow (u_n, u_t1, u_t2, p) of a cell is reconstructed at second order where the cell and
+#: its neighbours along the sweep are filled to PHI_FLOW_SECOND_ORDER or more (partly void
+#: cells at free surfaces and in opened cracks included); the materials of such a cell keep
+#: their cell values unless the rule above holds, so its face density is its own.
+PHI_FLOW_SECOND_ORDER = 0.9
 #: A cell whose materials fill more than 1 - FULL_TOLERANCE of it has no void.
 FULL_TOLERANCE = 1.0e-8
 #: A mixture density below -FAIL_NEGATIVE_FRACTION * (previous density) is a failure.

@@ -107,16 +107,18 @@ def predict_material(sc, i, row, qrow, half, un, dun, qm_row, qp_row):
 
 
 @njit(cache=True, inline="always")
-def cell_value_faces(sc, i, qm_row, qp_row, rows, qrows):
-    """First order: both face states of cell i are its cell values (flow and the given materials).
+def cell_value_faces(sc, i, qm_row, qp_row, rows, qrows, flow=True):
+    """First order: both face states of cell i are its cell values (the given materials, and
+    the flow (u_n, u_t1, u_t2, p) unless ``flow`` is False).
 
     ``rows``/``qrows``: the W and Q row offsets of the materials, as (first, stride, count).
     """
-    for c in range(3):
-        sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
-        sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
-    sc[qm_row + Q_P, i] = sc[W_P, i]
-    sc[qp_row + Q_P, i] = sc[W_P, i]
+    if flow:
+        for c in range(3):
+            sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
+            sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
+        sc[qm_row + Q_P, i] = sc[W_P, i]
+        sc[qp_row + Q_P, i] = sc[W_P, i]
     for k in range(rows[2]):
         row = rows[0] + rows[1] * k
         qrow = qrows[0] + qrows[1] * k
