@@ -1,7 +1,9 @@
 """The cell mixture gather (hydro.mixture.mixture_state) against the sums it stands for."""
 
 import numpy as np
+import pytest
 
+from impactpipe.hydro import PROBLEMS
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, temperature
 from impactpipe.hydro.scheme.mixture import MATERIAL_ROWS, mixture_state
 from impactpipe.hydro.problems.common import preset_material
@@ -67,3 +69,38 @@ def test_a_trace_is_absent_from_the_sums_but_keeps_its_tension_row():
     assert m_rho == ar.sum() and m_phi == a.sum()
     assert m_p == a[0, 0, 0, 0, 0] * p_basalt and m_k == ar[0, 0, 0, 0, 0] * c2_basalt
     assert list(rows[MATERIAL_ROWS:, 0]) == [1e-11, 0.0, 0.0, 0.0, 0.0, 3.0]
+
+
+def _sod_in_two_labels(cells, split):
+    """Sod's shock tube in one ideal gas, or in a 50/50 mixture of two labels of that gas (every
+    cell mixed at equal densities); the L1 density error against the exact solution at 0.2 s,
+    relative to the density jump."""
+    from impactpipe.hydro.exact.riemann import exact_riemann
+
+    gas = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
+    materials = {"gas": {"eos": gas}, "twin": {"eos": gas}}
+    sim = PROBLEMS["shock_tube"].setup(
+        {"cells": cells, "right": {"material": "twin", "density": 0.125, "pressure": 0.1}}, materials)
+    x = sim.mesh.cell_centers()[:, 0].reshape((sim.mesh.nblocks,) + sim.mesh.interior_shape)
+    rho = np.where(x < 0.5, 1.0, 0.125)
+    p = np.where(x < 0.5, 1.0, 0.1)
+    sim.state.set_material(sim.mesh, 1.0, 0, sim.eos, rho, np.zeros(3), pressure=p)
+    if split:
+        sim.state.set_material(sim.mesh, 0.5, 1, sim.eos, rho, np.zeros(3), pressure=p)
+    sim.run(0.2)
+    snap = sim.snapshot()
+    exact, _, _ = exact_riemann(snap.centers[:, 0], 0.2, 0.5, (1.0, 0.0, 1.0), (0.125, 0.0, 0.1), 1.4)
+    return np.abs(snap.density.reshape(-1) - exact).mean() / 0.875
+
+
+def test_mixed_cells_of_like_density_reconstruct_at_second_order():
+    """Every cell mixed 50/50: the materials' reconstruction of like-density mixtures (docs/hydro.md,
+    "Scheme", step 2) keeps the L1 error at 384 cells at 0.0055 (0.0094 when mixed cells ran at
+    first order; one gas alone: 0.0017)."""
+    assert _sod_in_two_labels(384, True) < 0.0065
+
+
+@pytest.mark.xfail(strict=True, reason="two labels of one gas, mixed 50/50, do not yet reproduce the one-gas "
+                                       "solution: 3x its L1 error at 384 cells (a known gap, docs/hydro.md)")
+def test_two_labels_of_one_gas_match_one_gas():
+    assert _sod_in_two_labels(384, True) < 1.2 * _sod_in_two_labels(384, False)
