@@ -1,0 +1,46 @@
+"""benchmarks/remnant_capture.py: the fates of hand-off particles on a hand-made run."""
+
+import importlib.util
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("remnant_capture", ROOT / "benchmarks" / "remnant_capture.py")
+rc = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(rc)
+
+G = 6.674e-11
+
+
+def _write_run(run: Path):
+    """A 1e15 kg body at rest (id 1), a 1e12 kg particle at rest 10 km away (id 2, bound), a
+    1e12 kg particle at 5 m/s 10 km away on the other side (id 3, unbound: v_esc = 3.65 m/s)
+    and a 1e12 kg particle at rest 20 km away (id 4, bound).  The N-body result keeps 1 and 2,
+    and 3 escaped merged with 4."""
+    run.mkdir()
+    mass = np.array([1e15, 1e12, 1e12, 1e12])
+    position = np.array([[0, 0, 0], [1e4, 0, 0], [-1e4, 0, 0], [0, 2e4, 0]], float)
+    velocity = np.array([[0, 0, 0], [0, 0, 0], [-5.0, 0, 0], [0, 0, 0]], float)
+    with h5py.File(run / "handoff.h5", "w") as f:
+        p = f.create_group("particles")
+        p["id"], p["mass"], p["position"], p["velocity"] = np.arange(1, 5), mass, position, velocity
+    with h5py.File(run / "nbody.h5", "w") as f:
+        f["members"] = np.array([1, 2])
+        f["escaped_members"] = np.array([3, 4])
+        f["escaped_members_offset"] = np.array([0, 2])
+    return mass
+
+
+def test_bound_mass_carried_off_by_an_unbound_fragment_is_counted_as_such(tmp_path):
+    runs = tmp_path / "ladder" / "runs"
+    runs.mkdir(parents=True)
+    mass = _write_run(runs / "cells_per_projectile_radius=10_seed=1-abc")
+    m, ratio, kept, carried, alone = rc.particle_fates(runs / "cells_per_projectile_radius=10_seed=1-abc")
+    assert np.array_equal(kept, [True, True, False, False])
+    assert ratio[2] > 1.0 > ratio[3] and ratio[1] < 1.0
+    np.testing.assert_allclose(ratio[2], 5.0 / np.sqrt(2 * G * (1e15 + 2e12) / 1e4), rtol=2e-3)
+    assert carried == mass[3] and alone == 0.0
+    table = rc.rung_table(tmp_path / "ladder").splitlines()
+    assert len(table) == 2 and table[1].split()[:3] == ["10", "1", f"{(mass.sum() - mass[2]) / mass.sum():.3f}"]
