@@ -60,7 +60,7 @@ import yaml
 from impactpipe import storage
 from impactpipe.analysis.richardson import Extrapolation, richardson
 
-from . import derived
+from . import checks
 from .config import ConfigError, key_paths
 from .stages import STAGES, read_records, stage_hashes
 from .sweep import Sweep, SweepSpec, donor_problems, handoff_time_params, open_runner, with_replicates
@@ -428,13 +428,11 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
             bad = False
             for point in points:
                 try:
-                    config = sweep.config_for(point)
+                    checks.check(sweep.config_for(point))
                 except ConfigError as exc:
                     messages += [f"--vary {key}={value}: {m}" for m in exc.messages]
                     bad = True
                     break
-                errors = derived.capability_errors(config, derived.derive(config))
-                messages += [f"--vary {key}={value}: {m}" for m in errors]
             if bad:
                 continue
             step = float(STEP_SIZE[key][1](value)) if key in STEP_SIZE else float("nan")

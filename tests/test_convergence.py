@@ -5,6 +5,7 @@ import collections
 import concurrent.futures as cf
 import csv
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -167,6 +168,12 @@ def test_cli_rejects_bad_ladders_before_any_work(tmp_path):
     result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
                                   "--vary", "hydro.cfl=0.2,0.4", "--depths", "1,x"])
     assert result.exit_code == 2 and "--depths: expected comma-separated numbers (got '1,x')" in result.output
+    result = runner.invoke(main, ["convergence", str(QUICKSTART), "--out", str(out),
+                                  "--vary", "hydro.block_cells=6,8"])
+    assert result.exit_code == 2
+    assert re.search(r"--vary hydro\.block_cells=6: \S*quickstart\.yaml:\d+: hydro\.block_cells: 6 cells per block",
+                     result.output), "a rung's capability error is located like any config error"
+    assert "block_cells=8" not in result.output
     assert not out.exists(), "nothing may be written for bad arguments"
 
 
