@@ -295,7 +295,7 @@ class _Run:
                                  steps_per_dynamical_time=self.params["steps_per_dynamical_time"],
                                  collision_step_fraction=self.params["collision_step_fraction"],
                                  collision_search=self.params["collision_search"],
-                                 collision_model=self.params["collision_model"])
+                                 collision_model=self.params["collision_model"], position=x)
         self.sim = build_simulation(x - x_com, v - v_com, m, r, dt=dt,
                                     opening_angle=self.params["opening_angle"],
                                     collision_search=self.params["collision_search"],
@@ -521,12 +521,12 @@ class _Run:
             view[c] -= s
 
     def _check_time_step(self) -> None:
-        _, m, r, _, v = self._arrays()
+        _, m, r, x, v = self._arrays()
         dt = collision_time_step(m, r, v, bulk_density=self.params["bulk_density"],
                                  steps_per_dynamical_time=self.params["steps_per_dynamical_time"],
                                  collision_step_fraction=self.params["collision_step_fraction"],
                                  collision_search=self.params["collision_search"],
-                                 collision_model=self.params["collision_model"])
+                                 collision_model=self.params["collision_model"], position=x)
         if dt < self.sim.dt or dt > 2.0 * self.sim.dt:
             log.debug("time step %s from %.4g s to %.4g s at t = %.6g s",
                      "reduced" if dt < self.sim.dt else "raised", self.sim.dt, dt, self.sim.t)

@@ -285,6 +285,39 @@ def test_tree_search_tunnels_with_too_large_step():
     assert sim.N == 2
 
 
+def test_linetree_bounce_step_is_set_by_contacts_not_by_far_ejecta():
+    """Linetree with a bouncing model: a fast particle far from every other sets the path term
+    f R_packed / v_rel_max only; the contact term is f r_min / v_c, v_c the fastest pair within
+    r_min of contact or 2 min(v_max, v_esc) + v_esc (the tree rule of a bound cloud), and a fast
+    pair near contact sets it."""
+    m = np.array([1e9, 1e9, 1e9, 1e15])  # three small bodies at rest and a large, fast one far off
+    r = sphere_radius(m)
+    rest = np.array([[0.0, 0.0, 0.0], [2.0 * r[0], 0.0, 0.0], [0.0, 2.5 * r[0], 0.0]])
+    pos = np.vstack([rest, [[4.0 * r[3], 0.0, 0.0]]])
+    vel = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, -0.02, 0.0], [100.0, 0.0, 0.0]])
+    kwargs = dict(bulk_density=RHO, collision_search="linetree", position=pos)
+    t_dyn = 1.0 / math.sqrt(G * RHO)
+    r_packed = (3.0 * m.sum() / (4.0 * math.pi * RHO)) ** (1.0 / 3.0)
+    v_esc = math.sqrt(2.0 * G * m.sum() / r_packed)
+    v_rel = 2.0 * np.linalg.norm(vel - (m[:, None] * vel).sum(0) / m.sum(), axis=1).max() + v_esc
+    expected = min(t_dyn / 100.0, 0.5 * r_packed / v_rel, 0.5 * r[0] / (3.0 * v_esc))
+    for model in ("bounce", "conditional_merge"):
+        dt = collision_time_step(m, r, vel, collision_model=model, **kwargs)
+        assert dt == pytest.approx(expected, rel=1e-12)
+        assert dt == pytest.approx(0.5 * r[0] / (3.0 * v_esc), rel=1e-12), "the contact term binds"
+        assert dt > 10.0 * collision_time_step(m, r, vel, bulk_density=RHO, collision_model=model)
+    fast = vel.copy()
+    fast[2] = [0.0, -40.0, 0.0]  # the third particle, 0.5 r from contact, closes at 40 m/s
+    v_c = np.linalg.norm(fast[2] - fast[0])
+    assert v_c > 3.0 * v_esc
+    assert collision_time_step(m, r, fast, collision_model="bounce", **kwargs) == pytest.approx(
+        min(t_dyn / 100.0, 0.5 * r_packed / v_rel, 0.5 * r[0] / v_c), rel=1e-12)
+    assert collision_time_step(m, r, vel, bulk_density=RHO, collision_search="linetree",
+                               collision_model="merge") == pytest.approx(min(t_dyn / 100.0, 0.5 * r_packed / v_rel))
+    with pytest.raises(ValueError, match="needs the particle positions"):
+        collision_time_step(m, r, vel, bulk_density=RHO, collision_search="linetree", collision_model="bounce")
+
+
 # --- cloud collapse -----------------------------------------------------------------
 
 def cold_cloud(n, seed=3, mass=1e11, filling=0.1, separated=False):
