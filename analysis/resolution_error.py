@@ -5,15 +5,24 @@ bootstrap error of :func:`impactpipe.analysis.qstar.fit_qstar`, which holds the 
 seeds' scatter when the runs have replicates) and the discretisation error of the hydro
 stage.  Given Q*_D at three or more resolutions n (cells per projectile radius, step size
 h = 1/n), :func:`qstar_resolution_error` extrapolates Q*_D to h -> 0 with
-:func:`impactpipe.analysis.richardson.richardson` and reports
+:func:`impactpipe.analysis.richardson.richardson` and reports the observed order p and the
+Richardson value Q*_D(inf) of the rungs' Q*_D.
 
-    resolution error = |Q*_D(finest) - Q*_D(extrapolated)|,
+The rungs' own errors enter the extrapolation: each of ``DRAWS`` draws (fixed seed) replaces
+every rung's Q*_D by Q*_D + seed_error x N(0, 1) and extrapolates again.  Then
 
-with the observed order p.  Where Richardson refuses (fewer than three rungs, answers that
-do not change monotonically, changes that do not shrink, or p below
-:data:`~impactpipe.analysis.richardson.MIN_ORDER`) no error is invented: the error is NaN,
-``status`` says why, and ``last_change`` (Q*_D of the finest rung minus the next) is the
-only measured bound it leaves, a lower one.
+    resolution error = the 68th percentile over the draws of |Q*_D(finest) - Q*_D(inf, draw)|,
+
+at least |Q*_D(finest) - Q*_D(inf)|, and the 16th-84th percentiles of Q*_D(inf, draw) are
+reported beside it with the share of draws that could not be extrapolated.  A coarse rung
+whose Q*_D is uncertain (its runs do not bracket M_lr/M_T = 0.5) widens the error instead of
+fixing the order by accident.
+
+No error is invented where Richardson refuses (fewer than three rungs, answers that do not
+change monotonically, changes that do not shrink, or p below
+:data:`~impactpipe.analysis.richardson.MIN_ORDER`), nor where more than ``MAX_REFUSED`` of
+the draws refuse: the error is NaN, ``status`` says why, and ``last_change`` (Q*_D of the
+finest rung minus the next) is the only measured bound it leaves, a lower one.
 """
 
 from __future__ import annotations
@@ -30,6 +39,11 @@ from impactpipe.analysis.qstar import plus_minus
 from impactpipe.analysis.richardson import richardson
 from impactpipe.storage import atomic_path
 
+#: Resamplings of the rungs within their seed errors.
+DRAWS = 4000
+#: Largest share of resamplings that may refuse Richardson for an error to be given.
+MAX_REFUSED = 0.5
+
 
 @dataclass
 class ResolutionError:
@@ -42,8 +56,11 @@ class ResolutionError:
         status: "extrapolated", or why Richardson refused.
         order: observed order p (NaN unless extrapolated).
         extrapolated: Q*_D at h -> 0 (J/kg, NaN unless extrapolated).
-        error: |Q*_D(finest) - extrapolated| (J/kg, NaN unless extrapolated).
+        error: the resolution error (J/kg, module docstring; NaN unless extrapolated).
         last_change: Q*_D(finest) - Q*_D(next finest) (J/kg, NaN with one rung).
+        extrapolated_range: 16th and 84th percentiles of the extrapolated Q*_D over the
+            resamplings of the rungs within their seed errors (J/kg; NaN if none extrapolates).
+        refused: share of those resamplings that Richardson refused.
         unbracketed: the rungs whose runs do not bracket M_lr/M_T = 0.5 (their Q*_D
             extrapolates the fitted line beyond the runs), finest first.
     """
@@ -56,6 +73,8 @@ class ResolutionError:
     extrapolated: float
     error: float
     last_change: float
+    extrapolated_range: tuple[float, float] = (float("nan"), float("nan"))
+    refused: float = float("nan")
     unbracketed: tuple[float, ...] = ()
 
     @property
@@ -71,13 +90,16 @@ class ResolutionError:
             which = ", ".join(f"{n:g}" for n in self.unbracketed)
             caution = (f"; caution: the runs at {which} cells per projectile radius do not bracket "
                        f"M_lr/M_T = 0.5, so that Q*_D extrapolates its fitted line")
+        low, high = self.extrapolated_range
+        spread = (f"; under the seed errors 68 % of the extrapolations in {low:{fmt}}-{high:{fmt}} J/kg, "
+                  f"{self.refused:.0%} refused" if math.isfinite(low) else "")
         if self.ok:
             return (f"{head} +- {self.error:{fmt}} J/kg (resolution: Richardson {self.extrapolated:{fmt}} J/kg at "
-                    f"observed order {self.order:.2f} over {rungs} cells per projectile radius){caution}")
+                    f"observed order {self.order:.2f} over {rungs} cells per projectile radius{spread}){caution}")
         change = f"; the last refinement moved it by {self.last_change:+{fmt}} J/kg" \
             if math.isfinite(self.last_change) else ""
         return (f"{head}; resolution error not estimated over {rungs} cells per projectile radius: "
-                f"{self.status}{change}{caution}")
+                f"{self.status}{change}{spread}{caution}")
 
 
 def qstar_resolution_error(resolutions, qstar, seed_error, brackets=None) -> ResolutionError:
@@ -90,12 +112,15 @@ def qstar_resolution_error(resolutions, qstar, seed_error, brackets=None) -> Res
         brackets: (k,) whether each rung's runs bracket M_lr/M_T = 0.5 (``QStarFit.brackets``);
             the rungs that do not are named in the description.  None: not known.
 
-    Example: Q*_D converging at second order towards 1000 J/kg::
+    Example: Q*_D converging at second order towards 1000 J/kg; with seed errors of about 1 %
+    the extrapolation's own uncertainty more than doubles the distance to the limit::
 
         >>> from impactpipe.analysis.resolution_error import qstar_resolution_error
         >>> ladder = qstar_resolution_error([10, 20, 40], [1160.0, 1040.0, 1010.0], [12.0, 10.0, 11.0])
-        >>> round(ladder.extrapolated, 6), round(ladder.order, 6), round(ladder.error, 6)
-        (1000.0, 2.0, 10.0)
+        >>> round(ladder.extrapolated, 6), round(ladder.order, 6), round(ladder.error, 1)
+        (1000.0, 2.0, 23.9)
+        >>> [round(v, 1) for v in ladder.extrapolated_range], round(ladder.refused, 3)
+        ([970.6, 1016.3], 0.029)
     """
     n = np.asarray(resolutions, dtype=float)
     q = np.asarray(qstar, dtype=float)
@@ -110,9 +135,30 @@ def qstar_resolution_error(resolutions, qstar, seed_error, brackets=None) -> Res
                                                     zip(n, np.asarray(brackets, dtype=bool)[order]) if not ok)
     ext = richardson(1.0 / n, q)
     last = float(q[0] - q[1]) if n.size >= 2 else float("nan")
-    error = abs(float(q[0]) - ext.value) if ext.ok else float("nan")
+    if not ext.ok:
+        return ResolutionError(resolutions=n, qstar=q, seed_error=e, status=ext.status, order=ext.order,
+                               extrapolated=ext.value, error=float("nan"), last_change=last,
+                               unbracketed=unbracketed)
+    rng = np.random.default_rng(0)
+    spread = np.where(np.isfinite(e), np.abs(e), 0.0)
+    values = []
+    for _ in range(DRAWS):
+        draw = richardson(1.0 / n, q + spread * rng.standard_normal(n.size))
+        if draw.ok:
+            values.append(draw.value)
+    refused = 1.0 - len(values) / DRAWS
+    values = np.asarray(values)
+    low, high = (float(v) for v in np.percentile(values, (16, 84))) if values.size else (float("nan"),) * 2
+    if refused > MAX_REFUSED:
+        status = (f"{refused:.0%} of {DRAWS} resamplings of the rungs within their seed errors cannot be "
+                  f"extrapolated (more than {MAX_REFUSED:.0%})")
+        return ResolutionError(resolutions=n, qstar=q, seed_error=e, status=status, order=float("nan"),
+                               extrapolated=float("nan"), error=float("nan"), last_change=last,
+                               extrapolated_range=(low, high), refused=refused, unbracketed=unbracketed)
+    error = max(abs(float(q[0]) - ext.value), float(np.percentile(np.abs(q[0] - values), 68)))
     return ResolutionError(resolutions=n, qstar=q, seed_error=e, status=ext.status, order=ext.order,
-                           extrapolated=ext.value, error=error, last_change=last, unbracketed=unbracketed)
+                           extrapolated=ext.value, error=error, last_change=last,
+                           extrapolated_range=(low, high), refused=refused, unbracketed=unbracketed)
 
 
 def write_resolution_table(path: str | os.PathLike, ladder: ResolutionError) -> Path:
@@ -123,7 +169,8 @@ def write_resolution_table(path: str | os.PathLike, ladder: ResolutionError) -> 
         f"# {ladder.describe()}",
         f"# richardson: status = {ladder.status}; order = {ladder.order:.6g}; extrapolated = "
         f"{ladder.extrapolated:.6g} J/kg; resolution error = {ladder.error:.6g} J/kg; last change = "
-        f"{ladder.last_change:.6g} J/kg",
+        f"{ladder.last_change:.6g} J/kg; 16th-84th percentiles of the resampled extrapolations = "
+        f"{ladder.extrapolated_range[0]:.6g}-{ladder.extrapolated_range[1]:.6g} J/kg ({ladder.refused:.3g} refused)",
     ]
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:

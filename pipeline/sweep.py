@@ -1202,6 +1202,8 @@ def resolution_ladders(sweep: Sweep, records: list[dict[str, Any]]) -> list[dict
             row.update({"Qstar_D": ladder.qstar[0], "seed_error": ladder.seed_error[0],
                         "resolution_error": ladder.error, "richardson": ladder.extrapolated,
                         "observed_order": ladder.order, "last_change": ladder.last_change,
+                        "richardson_low": ladder.extrapolated_range[0], "richardson_high": ladder.extrapolated_range[1],
+                        "refused_draws": ladder.refused,
                         "status": ladder.status, "summary": ladder.describe()})
         ladders.append(row)
     columns = sorted({k for r in ladders for k in r}, key=lambda k: (k in ("status", "summary"), k))

@@ -28,13 +28,47 @@ def expected_qstar(n: float) -> float:
 
 
 def test_a_second_order_ladder_extrapolates_to_its_limit():
-    ladder = qstar_resolution_error(LADDER, [expected_qstar(n) for n in LADDER], [10.0, 11.0, 12.0])
-    assert ladder.ok
-    assert ladder.order == pytest.approx(2.0, abs=1e-9)
-    assert ladder.extrapolated == pytest.approx(sweep_stand_ins.QSTAR, rel=1e-12)
-    assert ladder.error == pytest.approx(expected_qstar(40.0) - sweep_stand_ins.QSTAR, rel=1e-9)
+    exact = [expected_qstar(n) for n in LADDER]
+    distance = expected_qstar(40.0) - sweep_stand_ins.QSTAR
+    sharp = qstar_resolution_error(LADDER, exact, [1e-6, 1e-6, 1e-6])
+    assert sharp.ok and sharp.refused == 0.0
+    assert sharp.order == pytest.approx(2.0, abs=1e-9)
+    assert sharp.extrapolated == pytest.approx(sweep_stand_ins.QSTAR, rel=1e-12)
+    assert sharp.error == pytest.approx(distance, rel=1e-5)
+    assert sharp.extrapolated_range == pytest.approx((sweep_stand_ins.QSTAR,) * 2, rel=1e-6)
+    ladder = qstar_resolution_error(LADDER, exact, [10.0, 11.0, 12.0])
+    assert ladder.ok and ladder.extrapolated == sharp.extrapolated and ladder.order == sharp.order
+    low, high = ladder.extrapolated_range
+    assert low < sweep_stand_ins.QSTAR < high and 0.0 < ladder.refused < 0.5  # seed errors near the last change
+    assert ladder.error > distance, "the rungs' seed errors widen the resolution error"
     assert list(ladder.resolutions) == [40.0, 20.0, 10.0] and ladder.seed_error[0] == 12.0
-    assert "(seeds) +-" in ladder.describe() and "observed order 2.00" in ladder.describe()
+    text = ladder.describe()
+    assert "(seeds) +-" in text and "observed order 2.00" in text and "68 % of the extrapolations in" in text
+
+
+def test_case9_ladder_in_numbers():
+    """The documented case 9 statement (docs/validation.md): the 5-cell rung's Q*_D is a line
+    extrapolated beyond its runs (+-640 J/kg), so the extrapolation's uncertainty, not the
+    means' Richardson distance (17 J/kg), sets the resolution error."""
+    ladder = qstar_resolution_error([5, 10, 20], [1382.3, 831.5, 741.8], [640.0, 88.0, 27.0])
+    assert ladder.ok and ladder.order == pytest.approx(2.62, abs=0.01)
+    assert abs(ladder.qstar[0] - ladder.extrapolated) == pytest.approx(17.4, abs=0.1)
+    assert ladder.error == pytest.approx(49.8, abs=0.1)
+    assert ladder.refused == pytest.approx(0.39, abs=0.01)
+    assert ladder.extrapolated_range == pytest.approx((656.6, 755.5), abs=0.1)
+
+
+def test_a_ladder_whose_draws_mostly_refuse_gets_no_error():
+    ladder = qstar_resolution_error([5, 10, 20], [1382.3, 831.5, 741.8], [640.0, 300.0, 27.0])
+    assert richardson_ok([5, 10, 20], [1382.3, 831.5, 741.8])
+    assert not ladder.ok and "resamplings of the rungs within their seed errors cannot be extrapolated" in ladder.status
+    assert ladder.refused > 0.5 and math.isnan(ladder.error) and math.isnan(ladder.extrapolated)
+    assert "resolution error not estimated" in ladder.describe()
+
+
+def richardson_ok(resolutions, qstar):
+    from impactpipe.analysis.richardson import richardson
+    return richardson(1.0 / np.asarray(resolutions, dtype=float), np.asarray(qstar, dtype=float)).ok
 
 
 @pytest.mark.parametrize(("qstar", "why"), [
