@@ -219,6 +219,9 @@ def _adopted_summary(source: dict[str, Any], adopted: list[str]) -> dict[str, An
     return summary
 
 
+#: What a stage record without a ``version`` field was written by (the field came with 0.2.1).
+UNRECORDED_VERSION = "0.2.0 or earlier"
+
 def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
          from_stage: str | None = None, force: bool = False) -> list[tuple[str, str]]:
     """(stage, reason) for every applicable stage: reason is 'run: ...' or 'skip: ...'."""
@@ -232,12 +235,14 @@ def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
         raise ValueError(f"--from {from_stage}: not a stage of this run (stages: {', '.join(wanted)})")
     records = read_records(run_dir)
     hashes = stage_hashes(config)
+    version = storage.package_versions()["impactpipe"]
     out: list[tuple[str, str]] = []
     upstream_reran = False
     for stage in wanted:
         if stage not in selected:
             continue
         rec = records.get(stage, {})
+        written = rec.get("version", UNRECORDED_VERSION)
         output = run_dir / STAGE_FILES[stage]
         if force:
             reason = "run: --force"
@@ -249,8 +254,14 @@ def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
             reason = "run: not finished before" if not rec else f"run: previous attempt {attempt_status(rec)}"
         elif rec.get("hash") != hashes[stage]:
             reason = "run: its config sections changed"
+        elif written != version:
+            reason = (f"skip: up to date, but written by impactpipe {written} (this is {version}); "
+                      f"`--from {stage}` reruns it with this version")
         else:
             reason = "skip: up to date"
+        if reason.startswith("run: previous attempt") and written != version:
+            reason += (f"; its checkpoint was written by impactpipe {written} (this is {version}), so the "
+                       f"resumed stage mixes two versions: `--from {stage}` starts it over")
         if reason.startswith("run"):
             upstream_reran = True
         out.append((stage, reason))
@@ -309,13 +320,15 @@ def _run_locked(config: Config, run_dir: Path, stages: Iterable[str] | None, fro
                        summary=summary, signals=signals)
     with signals:
         for stage, reason in plan(config, run_dir, stages, from_stage, force):
+            mixed = "written by impactpipe" in reason
             if reason.startswith("skip"):
-                log.info("%s: %s", stage, reason[6:])
+                log.log(logging.WARNING if mixed else logging.INFO, "%s: %s", stage, reason[6:])
                 continue
-            log.info("%s: %s", stage, reason[5:])
+            log.log(logging.WARNING if mixed else logging.INFO, "%s: %s", stage, reason[5:])
             _invalidate_after(stage, records)
             records[stage] = {"status": "running", "hash": hashes[stage], "started": storage.utc_now(),
-                              "host": socket.gethostname(), "pid": os.getpid()}
+                              "host": socket.gethostname(), "pid": os.getpid(),
+                              "version": summary["versions"]["impactpipe"]}
             storage.write_json_atomic(run_dir / RECORD_FILE, records)
             ctx.stage_hash = hashes[stage]
             t0 = time.perf_counter()

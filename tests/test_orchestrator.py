@@ -125,6 +125,37 @@ def test_interrupted_stage_is_rerun(tmp_path, calls):
     assert log == ["nbody", "analysis"]
 
 
+def test_stages_of_another_version_are_kept_but_named(tmp_path, calls, caplog):
+    """A finished stage written by another impactpipe version is not rerun silently or
+    unasked: it is kept, and the plan and a warning name the version and the way to refresh it;
+    an interrupted stage's checkpoint from another version is named the same way."""
+    log, behaviour = calls
+    behaviour["nbody"] = "interrupt"
+    with pytest.raises(stages.StageInterrupted):
+        stages.run(config(), tmp_path, show_progress=False)
+    records = stages.read_records(tmp_path)
+    version = stages.storage.package_versions()["impactpipe"]
+    assert {rec["version"] for rec in records.values()} == {version}
+    del records["hydro"]["version"]
+    records["nbody"]["version"] = "0.0.1"
+    (tmp_path / stages.RECORD_FILE).write_text(json.dumps(records))
+    reasons = dict(stages.plan(config(), tmp_path))
+    assert reasons["hydro"] == (f"skip: up to date, but written by impactpipe {stages.UNRECORDED_VERSION} "
+                                f"(this is {version}); `--from hydro` reruns it with this version")
+    assert reasons["handoff"] == "skip: up to date"
+    assert reasons["nbody"].startswith("run: previous attempt interrupted; its checkpoint was written by "
+                                       f"impactpipe 0.0.1 (this is {version})")
+    behaviour.clear()
+    log.clear()
+    with caplog.at_level("INFO", logger="impactpipe.pipeline.stages"):
+        stages.run(config(), tmp_path, show_progress=False)
+    assert log == ["nbody", "analysis"]
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warned) == 2 and warned[0].startswith("hydro: up to date, but written by") and \
+        warned[1].startswith("nbody: previous attempt interrupted; its checkpoint")
+    assert stages.read_records(tmp_path)["nbody"]["version"] == version
+
+
 def test_failed_stage_is_recorded_and_rerun(tmp_path, calls):
     log, behaviour = calls
     behaviour["handoff"] = "fail"
