@@ -135,8 +135,8 @@ def test_a_bad_resolution_ladder_is_a_sweep_file_error(tmp_path, fields, message
 
 
 def test_case8_ladder_in_numbers():
-    """The documented case 8 statement (docs/validation.md) is what the function gives for the
-    measured Q*_D ladder (five seeds x four speeds per rung)."""
+    """The documented case 8 statement (docs/accuracy.md, "Q*_D against resolution", measured on
+    0.1.0) is what the function gives for that Q*_D ladder (five seeds x four speeds per rung)."""
     ladder = qstar_resolution_error([5, 10, 20, 40], [1643.0, 1395.0, 1239.0, 1120.0], [76.0, 11.0, 14.0, 12.0])
     assert not ladder.ok and ladder.order == pytest.approx(0.39, abs=0.01)
     assert np.isclose(ladder.last_change, -119.0)
