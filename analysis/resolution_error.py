@@ -8,8 +8,9 @@ h = 1/n), :func:`qstar_resolution_error` extrapolates Q*_D to h -> 0 with
 :func:`impactpipe.analysis.richardson.richardson` and reports the observed order p and the
 Richardson value Q*_D(inf) of the rungs' Q*_D.
 
-The rungs' own errors enter the extrapolation: each of ``DRAWS`` draws (fixed seed) replaces
-every rung's Q*_D by Q*_D + seed_error x N(0, 1) and extrapolates again.  Then
+The rungs' own errors enter the extrapolation: each of 4000 draws (fixed seed,
+:func:`~impactpipe.analysis.richardson.resampled_richardson`) replaces every rung's Q*_D by
+Q*_D + seed_error x N(0, 1) and extrapolates again.  Then
 
     resolution error = the 68th percentile over the draws of |Q*_D(finest) - Q*_D(inf, draw)|,
 
@@ -36,11 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from impactpipe.analysis.qstar import plus_minus
-from impactpipe.analysis.richardson import richardson
+from impactpipe.analysis.richardson import RESAMPLING_DRAWS, resampled_richardson, richardson
 from impactpipe.storage import atomic_path
 
-#: Resamplings of the rungs within their seed errors.
-DRAWS = 4000
 #: Largest share of resamplings that may refuse Richardson for an error to be given.
 MAX_REFUSED = 0.5
 
@@ -139,18 +138,11 @@ def qstar_resolution_error(resolutions, qstar, seed_error, brackets=None) -> Res
         return ResolutionError(resolutions=n, qstar=q, seed_error=e, status=ext.status, order=ext.order,
                                extrapolated=ext.value, error=float("nan"), last_change=last,
                                unbracketed=unbracketed)
-    rng = np.random.default_rng(0)
-    spread = np.where(np.isfinite(e), np.abs(e), 0.0)
-    values = []
-    for _ in range(DRAWS):
-        draw = richardson(1.0 / n, q + spread * rng.standard_normal(n.size))
-        if draw.ok:
-            values.append(draw.value)
-    refused = 1.0 - len(values) / DRAWS
-    values = np.asarray(values)
+    values = np.array([draw.value for _, draw in resampled_richardson(1.0 / n, q, e) if draw.ok])
+    refused = 1.0 - values.size / RESAMPLING_DRAWS
     low, high = (float(v) for v in np.percentile(values, (16, 84))) if values.size else (float("nan"),) * 2
     if refused > MAX_REFUSED:
-        status = (f"{refused:.0%} of {DRAWS} resamplings of the rungs within their seed errors cannot be "
+        status = (f"{refused:.0%} of {RESAMPLING_DRAWS} resamplings of the rungs within their seed errors cannot be "
                   f"extrapolated (more than {MAX_REFUSED:.0%})")
         return ResolutionError(resolutions=n, qstar=q, seed_error=e, status=status, order=float("nan"),
                                extrapolated=float("nan"), error=float("nan"), last_change=last,

@@ -14,6 +14,7 @@ answers do not change monotonically, their changes do not shrink, or p is below
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -98,3 +99,24 @@ def richardson(h: np.ndarray, f: np.ndarray, max_order: float = 20.0, min_order:
                              order=p, ratios=(r21, r32), errors=nan_errors)
     value = float(f1 + (f1 - f2) / (r21 ** p - 1.0))
     return Extrapolation("extrapolated", order=p, ratios=(r21, r32), value=value, errors=f - value)
+
+
+#: Resamplings of a ladder within its rungs' errors (:func:`resampled_richardson`).
+RESAMPLING_DRAWS = 4000
+
+
+def resampled_richardson(h: np.ndarray, f: np.ndarray, sigma: np.ndarray, draws: int = RESAMPLING_DRAWS,
+                         seed: int = 0) -> Iterator[tuple[np.ndarray, Extrapolation]]:
+    """The ladder resampled within its rungs' errors: ``draws`` times (``numpy.random.
+    default_rng(seed)``, so deterministic) f_i + sigma_i x N(0, 1) for every rung (a NaN
+    sigma counts as 0, a NaN answer stays NaN), each draw with its :func:`richardson`.
+
+    Yields (the drawn answers, their extrapolation).
+    """
+    h = np.asarray(h, dtype=float)
+    f = np.asarray(f, dtype=float)
+    spread = np.nan_to_num(np.abs(np.asarray(sigma, dtype=float)))
+    rng = np.random.default_rng(seed)
+    for _ in range(draws):
+        sample = f + spread * rng.standard_normal(h.size)
+        yield sample, richardson(h, sample)

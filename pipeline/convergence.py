@@ -58,7 +58,7 @@ import numpy as np
 import yaml
 
 from impactpipe import storage
-from impactpipe.analysis.richardson import Extrapolation, richardson
+from impactpipe.analysis.richardson import RESAMPLING_DRAWS, Extrapolation, resampled_richardson, richardson
 
 from . import checks
 from .config import ConfigError, key_paths
@@ -160,8 +160,6 @@ def parse_floats(text: str, option: str) -> list[float]:
 
 # --------------------------------------------------------------------------- Richardson
 
-#: Resamplings of the rung means behind :func:`richardson_uncertainty`.
-UNCERTAINTY_DRAWS = 4000
 
 
 @dataclass
@@ -206,11 +204,11 @@ def _next_refinement(h: np.ndarray, f: np.ndarray, ext: Extrapolation) -> float:
 
 
 def richardson_uncertainty(h: np.ndarray, f: np.ndarray, sem: np.ndarray, tolerance: float,
-                           draws: int = UNCERTAINTY_DRAWS, seed: int = 0) -> Uncertainty | None:
+                           draws: int = RESAMPLING_DRAWS, seed: int = 0) -> Uncertainty | None:
     """Richardson f* and the cheapest-rung test under the rungs' standard errors.
 
     Each draw replaces every rung's mean f_i by f_i + sem_i x N(0, 1) (the rungs' hand-offs
-    are independent runs) and extrapolates with :func:`richardson`.  Returns None unless every
+    are independent runs) and extrapolates (:func:`resampled_richardson`).  Returns None unless every
     rung with an answer has a finite, positive standard error (``--seeds`` or several hand-off
     times).  Deterministic for a given ``seed``.
     """
@@ -220,13 +218,10 @@ def richardson_uncertainty(h: np.ndarray, f: np.ndarray, sem: np.ndarray, tolera
     good = np.isfinite(f) & np.isfinite(h)
     if good.sum() < 3 or not (np.isfinite(sem[good]).all() and (sem[good] > 0).all()):
         return None
-    rng = np.random.default_rng(seed)
     within = np.zeros(h.size)
     next_within = 0
     values = []
-    for _ in range(draws):
-        sample = np.where(good, f + np.nan_to_num(sem) * rng.standard_normal(h.size), np.nan)
-        ext = richardson(h, sample)
+    for sample, ext in resampled_richardson(h, np.where(good, f, np.nan), sem, draws, seed):
         if not ext.ok:
             continue
         values.append(ext.value)

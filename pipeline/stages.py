@@ -221,6 +221,9 @@ def _adopted_summary(source: dict[str, Any], adopted: list[str]) -> dict[str, An
 
 #: What a stage record without a ``version`` field was written by (the field came with 0.2.1).
 UNRECORDED_VERSION = "0.2.0 or earlier"
+#: The phrase of a plan reason whose stage record comes from another impactpipe version.
+OTHER_VERSION = "written by impactpipe"
+
 
 def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
          from_stage: str | None = None, force: bool = False) -> list[tuple[str, str]]:
@@ -255,12 +258,12 @@ def plan(config: Config, run_dir: Path, stages: Iterable[str] | None = None,
         elif rec.get("hash") != hashes[stage]:
             reason = "run: its config sections changed"
         elif written != version:
-            reason = (f"skip: up to date, but written by impactpipe {written} (this is {version}); "
+            reason = (f"skip: up to date, but {OTHER_VERSION} {written} (this is {version}); "
                       f"`--from {stage}` reruns it with this version")
         else:
             reason = "skip: up to date"
         if reason.startswith("run: previous attempt") and written != version:
-            reason += (f"; its checkpoint was written by impactpipe {written} (this is {version}), so the "
+            reason += (f"; its checkpoint was {OTHER_VERSION} {written} (this is {version}), so the "
                        f"resumed stage mixes two versions: `--from {stage}` starts it over")
         if reason.startswith("run"):
             upstream_reran = True
@@ -320,7 +323,7 @@ def _run_locked(config: Config, run_dir: Path, stages: Iterable[str] | None, fro
                        summary=summary, signals=signals)
     with signals:
         for stage, reason in plan(config, run_dir, stages, from_stage, force):
-            mixed = "written by impactpipe" in reason
+            mixed = OTHER_VERSION in reason
             if reason.startswith("skip"):
                 log.log(logging.WARNING if mixed else logging.INFO, "%s: %s", stage, reason[6:])
                 continue

@@ -18,7 +18,7 @@ from impactpipe.nbody.diagnostics import potential_energy
 from impactpipe.nbody.resolver import (CTX_N_BOUNCE, CTX_N_MERGE, CTX_N_OVERLAP, CTX_PARTICLE_STEPS, PARAM_PUSH_ENERGY,
                                        particle_view)
 from impactpipe.nbody.result import ESCAPE_ORBIT
-from impactpipe.nbody.simulation import build_simulation
+from impactpipe.nbody.simulation import build_simulation, contact_speed
 
 RHO = 2000.0  # kg/m^3
 
@@ -316,6 +316,25 @@ def test_linetree_bounce_step_is_set_by_contacts_not_by_far_ejecta():
                                collision_model="merge") == pytest.approx(min(t_dyn / 100.0, 0.5 * r_packed / v_rel))
     with pytest.raises(ValueError, match="needs the particle positions"):
         collision_time_step(m, r, vel, bulk_density=RHO, collision_search="linetree", collision_model="bounce")
+
+
+def test_contact_speed_finds_pairs_near_contact_including_a_large_body():
+    """Twenty small bodies 3 radii apart on a line (no pair within 0.5 r of contact) and a large
+    body 0.5 r from the first: the only pair in reach is the large one's, whose radius is far
+    above the 90th percentile the k-d tree's pair search uses."""
+    m = np.array([1e9] * 20 + [1e15])
+    r = sphere_radius(m)
+    pos = np.zeros((21, 3))
+    pos[:20, 0] = 3.0 * r[0] * np.arange(20)
+    pos[20, 0] = -(r[20] + 1.5 * r[0])
+    vel = np.zeros((21, 3))
+    vel[:20, 1] = np.linspace(0.0, 5.0, 20)  # neighbours differ by 0.26 m/s
+    vel[20] = [7.0, 0.0, 0.0]
+    assert contact_speed(pos, vel, r, 0.6 * r[0]) == pytest.approx(7.0, rel=1e-12)
+    assert contact_speed(pos, vel, r, 0.4 * r[0]) == 0.0
+    vel[20] = 0.0  # at rest, the small neighbours (gap r) are the fastest pairs within 1.1 r
+    assert contact_speed(pos, vel, r, 1.1 * r[0]) == pytest.approx(5.0 / 19.0, rel=1e-9)
+    assert contact_speed(pos, vel, r, 0.6 * r[0]) == 0.0
 
 
 # --- cloud collapse -----------------------------------------------------------------
