@@ -103,10 +103,10 @@ from impactpipe.hydro.scheme.pencil_layout import (
     PHI_SECOND_ORDER,
     allocate_scratch,
 )
-from impactpipe.pipeline.adapters.hydro import build_simulation, output_times
+from impactpipe.pipeline.adapters.hydro import build_simulation
 from impactpipe.pipeline.config import load_config
 from impactpipe.pipeline.convergence import richardson
-from impactpipe.pipeline.derived import derive
+from impactpipe.pipeline.derived import derive, snapshot_times
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs" / "reference" / "case9a.yaml"
@@ -375,7 +375,7 @@ def run(config_path: Path, cells: float, out: Path, windows: tuple[float, ...], 
     scene = config.scene
     budget = EnergyBudget(sim, scene.target.radius, scene.projectile.radius, windows)
     sim.observer = budget
-    stops = sorted(set(t for t in list(output_times(config, end)) + list(windows) + list(times) if 0 < t <= end))
+    stops = sorted(set(t for t in list(snapshot_times(config, end)) + list(windows) + list(times) if 0 < t <= end))
     result = {"config": str(config_path), "cells_per_projectile_radius": cells, "levels": int(values["levels"]),
               "end_time": end, "regions": REGIONS, "quantities": QUANTITIES, "classes": CLASSES,
               "near_field_radii": NEAR_FIELD, "wall_band_radii": WALL_BAND, "history": [budget.record()]}

@@ -62,6 +62,7 @@ from impactpipe.analysis.richardson import RESAMPLING_DRAWS, Extrapolation, resa
 
 from . import checks
 from .config import ConfigError, key_paths
+from .derived import derive, snapshot_times
 from .stages import STAGES, read_records, stage_hashes
 from .sweep import Sweep, SweepSpec, donor_problems, handoff_time_params, open_runner, with_replicates
 
@@ -345,26 +346,35 @@ def _answer_names(depths: list[float]) -> list[str]:
             *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
 
 
-def _rung_params(key: str, value: Any, values: list[Any]) -> dict[str, Any]:
+def _snapshots(sweep: Sweep, params: dict[str, Any]) -> list[float]:
+    """Snapshot times (s) of the hydro run of the point ``params`` (with no hand-off-time settings)."""
+    config = sweep.config_for(params)
+    return snapshot_times(config, derive(config)["end_time"])
+
+
+def _rung_params(sweep: Sweep, key: str, value: Any, values: list[Any]) -> dict[str, Any]:
     """Config overrides of one rung; a hand-off-time ladder also runs the hydro to its latest
-    time with a snapshot at every rung (the hydro run is then shared by the whole ladder)."""
+    time with a snapshot at every rung, unless the config's own snapshots hold them all (the
+    hydro run is shared by the whole ladder either way)."""
     params = {key: value}
     if key == "handoff.time":
-        params.update(handoff_time_params(values))
+        params.update(handoff_time_params(values, _snapshots(sweep, {})))
     return params
 
 
-def _rung_points(params: dict[str, Any], handoff_times: list[float] | None,
+def _rung_points(sweep: Sweep, params: dict[str, Any], handoff_times: list[float] | None,
                  seeds: int | None = None) -> list[dict[str, Any]]:
     """The runs of one rung: the rung itself, or one run per combination of the hand-off times
     (``handoff_times``: the hydro run goes to the latest time with a snapshot at each, as in a
-    hand-off scan) and of the hand-off seeds 1..``seeds``; all of them share one hydro run."""
+    hand-off scan, unless its own snapshots hold them all) and of the hand-off seeds
+    1..``seeds``; all of them share one hydro run."""
     replicates: dict[str, list[Any]] = {}
     if handoff_times:
         replicates["handoff.time"] = sorted(handoff_times)
     if seeds and seeds > 1:
         replicates["handoff.seed"] = list(range(1, seeds + 1))
-    return with_replicates(params, replicates)
+    snapshots = _snapshots(sweep, params) if handoff_times else None
+    return with_replicates(params, replicates, snapshots)
 
 
 def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir: str | Path,
@@ -418,8 +428,12 @@ def plan_ladders(config_path: str | Path, ladders: dict[str, list[Any]], out_dir
             messages.append(f"--vary {key}: values must be numbers > 0 (got {values})")
             continue
         for value in values:
-            params = _rung_params(key, value, values)
-            points = _rung_points(params, handoff_times, seeds)
+            try:
+                params = _rung_params(sweep, key, value, values)
+                points = _rung_points(sweep, params, handoff_times, seeds)
+            except ConfigError as exc:
+                messages += [f"--vary {key}={value}: {m}" for m in exc.messages]
+                continue
             bad = False
             for point in points:
                 try:

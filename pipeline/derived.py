@@ -298,6 +298,23 @@ def as_plain(values: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+#: Snapshots written when the config names no output times: this many, evenly spaced, plus t = 0.
+DEFAULT_SNAPSHOTS = 10
+
+
+def snapshot_times(config: Config, end_time: float) -> list[float]:
+    """Hydro snapshot times (s): ``hydro.output_times``, or every ``hydro.output_interval``, or
+    DEFAULT_SNAPSHOTS evenly spaced from 0; always with the end time ``end_time``."""
+    hydro = config.hydro
+    if hydro.output_times is not None:
+        times = [t for t in hydro.output_times if t <= end_time]
+    elif hydro.output_interval is not None:
+        times = list(np.arange(0.0, end_time, hydro.output_interval))
+    else:
+        times = list(np.linspace(0.0, end_time, DEFAULT_SNAPSHOTS + 1)[:-1])
+    return sorted(set(times) | {end_time})
+
+
 def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     """Requests this version cannot carry out, as ``key: message`` lines (checked before any work)."""
     errors = []
@@ -318,11 +335,11 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         errors.extend(_impact_geometry_errors(config.scene, values["geometry"]))
     t_handoff = config.handoff.time
     if t_handoff is not None:
-        outputs = config.hydro.output_times or []
-        end = values["end_time"]
-        if not (any(abs(t - t_handoff) <= 1e-9 * max(t, 1e-300) for t in outputs) or abs(end - t_handoff) <= 1e-9 * end):
-            errors.append(f"handoff.time: {t_handoff:g} s has no hydro snapshot; it must be one of "
-                          f"hydro.output_times or the hydro end time ({end:.6g} s)")
+        times = snapshot_times(config, values["end_time"])
+        if not any(abs(t - t_handoff) <= 1e-9 * max(t, 1e-300) for t in times):
+            errors.append(f"handoff.time: {t_handoff:g} s has no hydro snapshot; the snapshots are at "
+                          f"{', '.join(f'{t:.6g}' for t in times)} s (hydro.output_times, hydro.output_interval "
+                          f"or, by default, {DEFAULT_SNAPSHOTS} evenly spaced up to the end time)")
     errors.extend(_particle_resolution_errors(config, values))
     if config.hydro.max_levels not in ("auto", 1) and config.scene.problem != "impact":
         errors.append(f"hydro.max_levels: {config.hydro.max_levels} levels; only impact scenes refine adaptively "

@@ -272,21 +272,28 @@ def grid_points(sweep: Sweep) -> list[dict[str, Any]]:
     return points
 
 
-def handoff_time_params(times: list[float]) -> dict[str, Any]:
+def handoff_time_params(times: list[float], snapshots: list[float] | None = None) -> dict[str, Any]:
     """Hydro settings that let one hydro run serve hand-offs at each of ``times`` (s): the
-    stage runs to the latest time with a snapshot at every one."""
+    stage runs to the latest time with a snapshot at every one.  When ``snapshots`` (the
+    snapshot times the point's hydro run writes without these settings) already hold every
+    time, nothing is set: that hydro run serves them as it is, and a finished one is reused."""
     times = sorted(float(t) for t in times)
+    if snapshots is not None and all(any(abs(s - t) <= 1e-9 * max(abs(s), 1e-300) for s in snapshots)
+                                     for t in times):
+        return {}
     return {"hydro.end_time": times[-1], "hydro.output_times": times}
 
 
-def with_replicates(point: dict[str, Any], replicates: dict[str, list[Any]]) -> list[dict[str, Any]]:
+def with_replicates(point: dict[str, Any], replicates: dict[str, list[Any]],
+                    snapshots: list[float] | None = None) -> list[dict[str, Any]]:
     """The runs of one point: one per combination of the ``replicates`` values (the point
     itself when there are none).  ``handoff.time`` replicates also get
-    :func:`handoff_time_params`, so they share one hydro run like a hand-off scan."""
+    :func:`handoff_time_params` (with the point's own ``snapshots``, if given), so they share
+    one hydro run like a hand-off scan."""
     keys = list(replicates)
     runs = [{**point, **dict(zip(keys, combo))} for combo in itertools.product(*(replicates[k] for k in keys))]
     if "handoff.time" in replicates:
-        shared = handoff_time_params(replicates["handoff.time"])
+        shared = handoff_time_params(replicates["handoff.time"], snapshots)
         runs = [{**run, **shared} for run in runs]
     return runs
 

@@ -16,6 +16,7 @@ from sweep_stand_ins import _finish
 from impactpipe.pipeline import stages
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config, load_yaml
+from impactpipe.pipeline.derived import derive
 from impactpipe.analysis.richardson import richardson
 from impactpipe.pipeline.convergence import (LadderError, cheapest_within, parse_vary,
                                              richardson_uncertainty, run_ladders)
@@ -382,6 +383,27 @@ def test_ladder_adopts_the_hydro_run_of_a_finished_run(tmp_path):
                                     "--vary", "hydro.cfl=0.1,0.2", "--reuse-hydro", str(donor)])
     assert bad.exit_code == 2 and "its hydro settings match no rung's" in bad.output
     assert not (tmp_path / "bad").exists()
+
+
+def test_handoff_time_ladder_on_the_default_snapshots_adopts_a_finished_hydro_run(tmp_path):
+    """Hand-off times that are snapshots the config writes anyway (10 evenly spaced by default)
+    need no hydro settings of their own: a finished run of the config serves the ladder, and
+    --handoff-times on those snapshots does too; a time off the snapshots gets its own hydro run."""
+    donor = tmp_path / "donor" / "run"
+    stages.run(load_config(QUICKSTART), donor, show_progress=False, stage_functions=STAGES)
+    end = derive(load_config(QUICKSTART))["end_time"]
+    times = [0.6 * end, 0.8 * end, end]
+    out = tmp_path / "ladder"
+    with cf.ThreadPoolExecutor(2) as pool:
+        run_ladders(QUICKSTART, {"handoff.time": times}, out, executor=pool, stage_functions=STAGES,
+                    show_progress=False, reuse_runs=[donor])
+        run_ladders(QUICKSTART, {"hydro.cfl": [0.4]}, tmp_path / "averaged", executor=pool, stage_functions=STAGES,
+                    show_progress=False, reuse_runs=[donor], handoff_times=times[:2])
+    assert not any(stage == "hydro" for (_, stage) in calls(out) | calls(tmp_path / "averaged"))
+    assert sum(n for (_, stage), n in calls(out).items() if stage == "handoff") == 3
+    bad = CliRunner().invoke(main, ["convergence", str(QUICKSTART), "--out", str(tmp_path / "bad"),
+                                    "--vary", f"handoff.time={0.55 * end},{end}", "--reuse-hydro", str(donor)])
+    assert bad.exit_code == 2 and "its hydro settings match no rung's" in bad.output
 
 
 @pytest.mark.validation

@@ -48,6 +48,20 @@ def test_handoff_time_without_snapshot_is_rejected(tmp_path):
     assert result.exit_code == 2 and "handoff.time: 0.5 s has no hydro snapshot" in result.output
 
 
+def test_handoff_time_on_a_default_snapshot_is_accepted(tmp_path):
+    """Without output times the hydro stage writes 10 evenly spaced snapshots: each is a valid
+    hand-off time, so a finished run serves a hand-off-time ladder without rerunning its hydro."""
+    config = tiny_config(tmp_path)
+    config.write_text(config.read_text().replace("handoff: {", "handoff: {time: 0.6, ")
+                      .replace("hydro:\n", "hydro:\n  end_time: 1.0\n"))
+    result = CliRunner().invoke(main, ["validate", str(config)])
+    assert result.exit_code == 0, result.output
+    config.write_text(config.read_text().replace("time: 0.6,", "time: 0.65,"))
+    result = CliRunner().invoke(main, ["validate", str(config)])
+    assert result.exit_code == 2 and "handoff.time: 0.65 s has no hydro snapshot; the snapshots are at 0, 0.1," \
+        in result.output
+
+
 def test_slope_text_says_why_there_is_no_slope():
     none = slope_text(float("nan"), float("nan"), 1, 12.7)
     assert none.startswith("no slope of M_lr/M_T over hand-offs at t >= 12.7 s")

@@ -38,22 +38,6 @@ class HydroStageFailure(RuntimeError):
 
 WORK_FILE = ".hydro.work.h5"
 CHECKPOINT_FILE = "hydro.checkpoint.h5"
-#: Snapshots written when the config names no output times: this many, evenly spaced, plus t = 0.
-DEFAULT_SNAPSHOTS = 10
-
-
-def output_times(config, end_time: float) -> list[float]:
-    """Snapshot times (s): ``hydro.output_times``, or every ``hydro.output_interval``, or 10 evenly spaced."""
-    hydro = config.hydro
-    if hydro.output_times is not None:
-        times = [t for t in hydro.output_times if t <= end_time]
-    elif hydro.output_interval is not None:
-        times = list(np.arange(0.0, end_time, hydro.output_interval))
-    else:
-        times = list(np.linspace(0.0, end_time, DEFAULT_SNAPSHOTS + 1)[:-1])
-    return sorted(set(times) | {end_time})
-
-
 def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
     """The scene as the parameters of its problem module's ``setup``.
 
@@ -112,7 +96,7 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     work = ctx.run_dir / WORK_FILE
     checkpoint = ctx.run_dir / CHECKPOINT_FILE
     sim, initial = _resume_or_start(config, values, work, checkpoint, ctx.stage_hash)
-    times = [t for t in output_times(config, end_time) if t > sim.time]
+    times = [t for t in derived.snapshot_times(config, end_time) if t > sim.time]
     if sim.time == 0.0 and sim.step_count == 0:
         _append(work, sim.snapshot())
     progress = ctx.progress("hydro", end_time)
