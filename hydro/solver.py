@@ -44,7 +44,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     NFLOOR,
     allocate_scratch,
 )
-from impactpipe.hydro.scheme.timestep import cell_thermodynamics, max_signal_rate
+from impactpipe.hydro.scheme.timestep import allocate_rate_work, cell_thermodynamics, max_signal_rate
 from impactpipe.storage import atomic_path, compression
 
 logger = logging.getLogger(__name__)
@@ -165,6 +165,7 @@ class Simulation:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
         self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape), nq)
+        self._rate_work = allocate_rate_work(numba.config.NUMBA_NUM_THREADS, mesh.padded_shape)
         self._face_flux = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim,
                                              state.nmat, state.arhoq.shape[1])
         if mesh.adaptive:
@@ -183,9 +184,8 @@ class Simulation:
     def stable_dt(self) -> float:
         """CFL time step of the current state (s)."""
         st = self.state
-        max_signal_rate(st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, self.mesh.block_dx, self.eos.kind,
-                        self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, self.mesh.ndim,
-                        self._rate)
+        max_signal_rate(st.alpha, st.arho, st.arhoe, st.momentum, self.mesh.block_dx, self.eos.kind, self.eos.params,
+                        self.eos.table, self.shear_modulus, self.mesh.ndim, self._rate_work, self._rate)
         rate = float(self._rate.max())
         if not np.isfinite(rate):
             raise HydroFailure("non-finite signal speed", self.time, int(np.argmax(~np.isfinite(self._rate))),

@@ -1,5 +1,6 @@
 """The admissibility rules that let dilute, hot and tensile material run (docs/hydro.md, case 8c)."""
 
+import numba
 import numpy as np
 import pytest
 
@@ -7,7 +8,7 @@ from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.scheme.mixture import DISTENDED_FRACTION, material_state
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
-from impactpipe.hydro.scheme.timestep import max_signal_rate
+from impactpipe.hydro.scheme.timestep import allocate_rate_work, max_signal_rate
 from impactpipe.hydro.eos import pressure_sound_speed
 
 BASALT = preset_material("basalt")["eos"]
@@ -51,8 +52,8 @@ def test_a_trace_material_does_not_set_the_time_step():
     mom = np.zeros((1, 3, 1, 1, 1))
     out = np.zeros(1)
     dx = np.ones((1, 3))
-    max_signal_rate(alpha, arho, arhoe, np.zeros((1, 0, 1, 1, 1)), mom, dx, eos.kind, eos.params, eos.table,
-                    np.zeros((2, 2)), np.zeros(2), 1, out)
+    max_signal_rate(alpha, arho, arhoe, mom, dx, eos.kind, eos.params, eos.table, np.zeros((2, 2)), 1,
+                    allocate_rate_work(numba.config.NUMBA_NUM_THREADS, (1, 1, 1)), out)
     c_basalt = np.sqrt(pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, BASALT["rho0"], 0.0)[1])
     assert out[0] == pytest.approx(c_basalt, rel=1e-6)
 

@@ -12,48 +12,95 @@ rho_k c_k^2 over the materials present and per material the longitudinal speed
 the bulk sound speed from the EOS plus the shear modulus term of material strength (G_k = 0
 for a strengthless material; ``shear_modulus`` arguments are the (M, 2) shear table of
 :mod:`impactpipe.hydro.strength.parameters`: G_k = shear[k, 0] + shear[k, 1] rho_k c_K,k^2).
-Both kernels gather the cell's mixture with :func:`impactpipe.hydro.scheme.mixture.mixture_state`.
+The cell thermodynamics gather the cell's mixture with :func:`impactpipe.hydro.scheme.mixture.mixture_state`;
+the time step sums the same terms material by material (:func:`max_signal_rate`).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import get_thread_id, njit, prange
 
+from impactpipe.hydro.eos import IDEAL_GAS, TILLOTSON, pressure_sound_speed
+from impactpipe.hydro.eos.ideal_gas import ideal_gas_pressure_sound_speed
+from impactpipe.hydro.eos.tillotson import tillotson_pressure_sound_speed
 from impactpipe.hydro.mesh.blocks import GHOST
-from impactpipe.hydro.scheme.mixture import mixture_state
+from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_speed_squared
 
 #: Material volume fraction below which a cell counts as void (no signal, no Riemann state).
 PHI_VOID = 1.0e-6
 
 
 @njit(cache=True, parallel=True)
-def max_signal_rate(alpha, arho, arhoe, arhoq, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus,
-                    tensile_strength, ndim, out):
+def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus, ndim, work,
+                    out):
     """Per block, the largest max_d (|u_d| + c) / dx_d (1/s) over non-void interior cells, into ``out[NB]``.
 
-    c = sqrt(K / rho), the signal speed of the cell's mixture (:func:`impactpipe.hydro.scheme.mixture.mixture_state`).
+    c = sqrt(K / rho) with the sums of :func:`impactpipe.hydro.scheme.mixture.mixture_state`,
+
+        rho = sum_k alpha_k rho_k,  phi = sum_k alpha_k,  K = sum_k alpha_k rho_k c_k^2
+
+    (c_k^2 the material's signal speed squared, :func:`impactpipe.hydro.scheme.mixture.
+    signal_speed_squared`, over the present materials: alpha_k > ALPHA_MIN and alpha_k rho_k > 0),
+    accumulated in the same order, so the rate is the one of the per-cell gather bit for bit
+    (tests/test_hydro_timestep.py).  The sums run material by material over a block's cells
+    into the per-thread ``work[thread, 0:3]`` (rho, phi, K; shape (threads, 3, nx, ny, nz)), so
+    the EOS model is chosen once per material and block rather than once per cell; ideal gas
+    and Tillotson call their model directly.  Cells with rho <= 0 or phi < PHI_VOID carry no
+    signal.  ``mom`` is the momentum density (kg/m^2/s), ``block_dx`` the cell sizes (m).
     """
     nb, nmat, nx, ny, nz = alpha.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     for b in prange(nb):
+        w = work[get_thread_id()]
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    w[0, ix, iy, iz] = 0.0
+                    w[1, ix, iy, iz] = 0.0
+                    w[2, ix, iy, iz] = 0.0
+        for k in range(nmat):
+            kind = eos_kind[k]
+            row = eos_params[k]
+            shear = shear_modulus[k]
+            for ix in range(gx, nx - gx):
+                for iy in range(gy, ny - gy):
+                    for iz in range(gz, nz - gz):
+                        a = alpha[b, k, ix, iy, iz]
+                        ar = arho[b, k, ix, iy, iz]
+                        w[0, ix, iy, iz] += ar
+                        w[1, ix, iy, iz] += a
+                        if not (a > ALPHA_MIN and ar > 0.0):
+                            continue
+                        rk = ar / a
+                        ek = arhoe[b, k, ix, iy, iz] / ar
+                        if kind == IDEAL_GAS:
+                            pk, c2 = ideal_gas_pressure_sound_speed(row, rk, ek)
+                        elif kind == TILLOTSON:
+                            pk, c2 = tillotson_pressure_sound_speed(row, rk, ek)
+                        else:
+                            pk, c2, flag = pressure_sound_speed(kind, row, eos_table, rk, ek)
+                        w[2, ix, iy, iz] += ar * signal_speed_squared(c2, rk, shear)
         rate = 0.0
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
-                    rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
-                        alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
-                        tensile_strength, False, None, 0, 0)
-                    if rho <= 0.0 or phi < PHI_VOID:
+                    rho = w[0, ix, iy, iz]
+                    if rho <= 0.0 or w[1, ix, iy, iz] < PHI_VOID:
                         continue
-                    c = np.sqrt(kmod / rho)
+                    c = np.sqrt(w[2, ix, iy, iz] / rho)
                     for d in range(ndim):
                         r = (abs(mom[b, d, ix, iy, iz]) / rho + c) / block_dx[b, d]
                         if r > rate:
                             rate = r
         out[b] = rate
+
+
+def allocate_rate_work(threads: int, padded_shape) -> np.ndarray:
+    """Per-thread work array of :func:`max_signal_rate`: (threads, 3, nx, ny, nz) float64."""
+    return np.zeros((threads, 3) + tuple(padded_shape))
 
 
 @njit(cache=True, parallel=True)
