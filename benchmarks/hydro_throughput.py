@@ -14,7 +14,13 @@ Each case runs with 1 and 2 numba threads after a warm-up step (kernels come fro
 numba cache).  Memory: peak bytes of traced allocations (tracemalloc, numpy arrays of the
 state, its last-good copy, scratch and snapshots) per interior cell.
 
-    python benchmarks/hydro_throughput.py --json [--quick] [--steps N]
+With ``--reference SCRIPT`` a reference kernel (a script that takes the mesh size N and prints
+``cell-updates/s: X``, such as a naive one-stage PLM + HLLC kernel on an N^2 box) runs right
+before each measurement with the same number of threads (NUMBA_NUM_THREADS), and each result
+carries ``reference_cell_updates_per_s`` and ``ratio_to_reference``: a ratio taken in one job
+is the figure to compare between machines and runs, not the absolute rate.
+
+    python benchmarks/hydro_throughput.py --json [--quick] [--steps N] [--reference SCRIPT]
 """
 
 from __future__ import annotations
@@ -22,6 +28,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
+import subprocess
+import sys
 import time
 import tracemalloc
 
@@ -100,6 +109,16 @@ def measure(case: str, quick: bool, steps: int, threads: int) -> dict:
     }
 
 
+def reference_rate(script: str, size: int, threads: int) -> float:
+    """Cell-updates/s printed by the reference kernel ``script`` at size N = ``size`` on ``threads`` threads."""
+    env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+    out = subprocess.run([sys.executable, script, str(size)], env=env, capture_output=True, text=True, check=True)
+    match = re.search(r"cell-updates/s:\s*([0-9.eE+-]+)", out.stdout)
+    if match is None:
+        raise RuntimeError(f"{script} printed no 'cell-updates/s: X': {out.stdout!r}")
+    return float(match.group(1))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
@@ -107,13 +126,20 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=10, help="timed steps per case (default 10)")
     parser.add_argument("--cases", nargs="*",
                         default=["2d-ideal-gas", "2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material"])
+    parser.add_argument("--reference", metavar="SCRIPT", help="reference kernel run before each measurement")
+    parser.add_argument("--reference-size", type=int, default=512, help="its mesh size N (default 512)")
     args = parser.parse_args()
     results = []
     for case in args.cases:
         for threads in (1, 2):
             if threads > numba.config.NUMBA_NUM_THREADS:
                 continue
-            results.append(measure(case, args.quick, args.steps, threads))
+            reference = reference_rate(args.reference, args.reference_size, threads) if args.reference else None
+            result = measure(case, args.quick, args.steps, threads)
+            if reference is not None:
+                result["reference_cell_updates_per_s"] = reference
+                result["ratio_to_reference"] = result["cell_updates_per_s"] / reference
+            results.append(result)
     for case in args.cases:
         rates = {r["threads"]: r["cell_updates_per_s"] for r in results if r["case"] == case}
         if 1 in rates and 2 in rates:
@@ -129,8 +155,9 @@ def main() -> None:
         print(json.dumps(report, indent=2))
     else:
         for r in results:
+            ratio = f"  {r['ratio_to_reference']:.2f}x the reference" if "ratio_to_reference" in r else ""
             print(f"{r['case']:18s} threads={r['threads']} cells={r['cells']:9d} "
-                  f"{r['cell_updates_per_s']:.3e} cell-updates/s  {r['peak_bytes_per_cell']:.0f} B/cell")
+                  f"{r['cell_updates_per_s']:.3e} cell-updates/s  {r['peak_bytes_per_cell']:.0f} B/cell{ratio}")
 
 
 if __name__ == "__main__":
