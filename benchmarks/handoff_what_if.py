@@ -33,7 +33,8 @@ from scipy.spatial import cKDTree
 
 from impactpipe.pipeline import load_config, run as run_pipeline
 
-#: Files a rerun from the N-body stage needs (the hydro file is hard-linked, the others copied).
+#: Files a rerun from the N-body stage needs besides the hydro file (hard-linked where the file
+#: system allows, else copied).
 COPIED = ("config.resolved.yaml", "stages.json", "handoff.h5")
 #: Most rounds of :func:`remove_overlaps`.
 OVERLAP_ROUNDS = 100
@@ -85,7 +86,10 @@ def main() -> None:
         copy.mkdir(parents=True)
         for name in COPIED:
             shutil.copy2(run / name, copy / name)
-        os.link(run / "hydro.h5", copy / "hydro.h5")
+        try:
+            os.link(run / "hydro.h5", copy / "hydro.h5")
+        except OSError:
+            shutil.copy2(run / "hydro.h5", copy / "hydro.h5")
         alter(copy / "handoff.h5", args.drift, args.radius_scale, args.no_overlap)
         run_pipeline(load_config(copy / "config.resolved.yaml"), copy, from_stage="nbody", show_progress=False)
         before = json.loads((run / "summary.json").read_text())["M_lr_over_M_T"]
