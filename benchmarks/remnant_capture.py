@@ -1,8 +1,9 @@
 """Which hand-off mass ends in the largest remnant: the N-body stage's share of M_lr/M_T.
 
 Reads the finished runs of an ``impactpipe convergence`` directory and, for every rung of its
-ladder (the run directories ``KEY=VALUE_seed=N-HASH``, one ladder per directory), compares
-each hand-off particle's state with its fate:
+ladder (the run directories ``KEY=VALUE_seed=N-HASH``, one ladder per directory; with
+``--handoff-times`` ``KEY=VALUE_time=T_seed=N-HASH``, one row per value and time, labelled
+``VALUE/T``), compares each hand-off particle's state with its fate:
 
     impactpipe convergence configs/reference/case9a.yaml --workers 1 \\
         --vary hydro.cells_per_projectile_radius=5,10,20,40 --seeds 5 --out runs/case9a-convergence
@@ -63,15 +64,16 @@ def particle_fates(run: Path):
 
 def rung_table(directory: Path) -> str:
     """The per-rung table of the module docstring for the runs under ``directory``/runs."""
-    rungs: dict[tuple[str, float], list] = {}
+    rungs: dict[tuple[float, ...], list] = {}
     for run in sorted((directory / "runs").iterdir()):
-        found = re.match(r"([A-Za-z_]+)=([0-9.eE+-]+?)_seed=", run.name)
-        if found and (run / "nbody.h5").exists():
-            rungs.setdefault((found.group(1), float(found.group(2))), []).append(particle_fates(run))
+        found = re.match(r"(.+?)_seed=\d+-", run.name)
+        values = tuple(float(v) for v in re.findall(r"=([0-9.eE+-]+)(?=_|$)", found.group(1))) if found else ()
+        if values and (run / "nbody.h5").exists():
+            rungs.setdefault(values, []).append(particle_fates(run))
     nbins = len(SPEED_BINS) - 1
     lines = ["rung   seeds  bound  kept (sem)       kept of bound  carried off (mixed / bound-only)"
              "  kept fraction per bin of |v - V| / v_esc: " + " ".join(f"{b:g}" for b in SPEED_BINS[1:-1])]
-    for (key, value), runs in sorted(rungs.items()):
+    for values, runs in sorted(rungs.items()):
         rows = []
         in_bin = np.zeros(nbins)
         kept_in_bin = np.zeros(nbins)
@@ -87,7 +89,8 @@ def rung_table(directory: Path) -> str:
         mean = rows.mean(axis=0)
         sem = rows[:, 1].std(ddof=1) / np.sqrt(len(rows)) if len(rows) > 1 else float("nan")
         share = np.divide(kept_in_bin, in_bin, out=np.full(nbins, np.nan), where=in_bin > 0)
-        lines.append(f"{value:5g}  {len(runs):5d}  {mean[0]:.3f}  {mean[1]:.3f} ({sem:.3f})  {mean[2]:.3f}"
+        label = "/".join(f"{v:g}" for v in values)
+        lines.append(f"{label:>5s}  {len(runs):5d}  {mean[0]:.3f}  {mean[1]:.3f} ({sem:.3f})  {mean[2]:.3f}"
                      f"          {mean[3]:.3f} / {mean[4]:.3f}                    "
                      + " ".join(f"{v:.2f}" for v in share))
     return "\n".join(lines)

@@ -49,3 +49,8 @@ def test_bound_mass_carried_off_by_an_unbound_fragment_is_counted_as_such(tmp_pa
     assert len(table) == 2 and row[:3] == ["10", "1", f"{(total - mass[2]) / total:.3f}"]
     assert row[3] == f"{(mass[0] + mass[1]) / total:.3f}"
     assert row[6:9] == [f"{mass[3] / total:.3f}", "/", f"{mass[4] / total:.3f}"]
+    # runs of a ladder handed off at several times: one row per value and time
+    _write_run(runs / "cells_per_projectile_radius=10_time=14_seed=1-def")
+    _write_run(runs / "cells_per_projectile_radius=10_time=14_seed=2-ghi")
+    table = rc.rung_table(tmp_path / "ladder").splitlines()
+    assert [line.split()[:2] for line in table[1:]] == [["10", "1"], ["10/14", "2"]]
