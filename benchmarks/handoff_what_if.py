@@ -79,6 +79,12 @@ def main() -> None:
     change.add_argument("--radius-scale", type=float, help="multiply every radius by this factor")
     change.add_argument("--no-overlap", action="store_true", help="shrink overlapping spheres to touching")
     args = parser.parse_args()
+    if args.radius_scale is not None and not args.radius_scale > 0.0:
+        parser.error(f"--radius-scale must be > 0 (got {args.radius_scale})")
+    missing = [str(run) for run in args.runs if not all((run / name).is_file() for name in (*COPIED, "hydro.h5"))]
+    if missing:
+        parser.error("not finished runs (no hydro.h5, handoff.h5, stages.json or config.resolved.yaml): "
+                     + ", ".join(missing))
     for run in args.runs:
         copy = args.out / run.name
         if copy.exists():

@@ -162,7 +162,6 @@ def parse_floats(text: str, option: str) -> list[float]:
 # --------------------------------------------------------------------------- Richardson
 
 
-
 @dataclass
 class Uncertainty:
     """How the seed scatter of a ladder's rung means carries into its Richardson estimate.

@@ -315,6 +315,18 @@ def snapshot_times(config: Config, end_time: float) -> list[float]:
     return sorted(set(times) | {end_time})
 
 
+#: Relative tolerance within which a requested time (s) is a snapshot time.
+SNAPSHOT_TIME_TOLERANCE = 1e-9
+
+
+def snapshot_at(times, time: float) -> int | None:
+    """Index of the first of ``times`` (s) within SNAPSHOT_TIME_TOLERANCE x ``time`` of ``time``, or None."""
+    for index, t in enumerate(times):
+        if abs(t - time) <= SNAPSHOT_TIME_TOLERANCE * max(abs(time), 1e-300):
+            return index
+    return None
+
+
 def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     """Requests this version cannot carry out, as ``key: message`` lines (checked before any work)."""
     errors = []
@@ -336,7 +348,7 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     t_handoff = config.handoff.time
     if t_handoff is not None:
         times = snapshot_times(config, values["end_time"])
-        if not any(abs(t - t_handoff) <= 1e-9 * max(t, 1e-300) for t in times):
+        if snapshot_at(times, t_handoff) is None:
             errors.append(f"handoff.time: {t_handoff:g} s has no hydro snapshot; the snapshots are at "
                           f"{', '.join(f'{t:.6g}' for t in times)} s (hydro.output_times, hydro.output_interval "
                           f"or, by default, {DEFAULT_SNAPSHOTS} evenly spaced up to the end time)")

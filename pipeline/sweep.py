@@ -52,6 +52,7 @@ from impactpipe import storage
 from . import checks, runstore
 from .config import (Config, ConfigError, Strict, _LineFinder, duplicate_keys, key_paths, load_yaml, parse_config,
                      read_yaml_text, unknown_keys)
+from .derived import snapshot_at
 from .lock import process_alive, recorded_holder, run_lock
 from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
 
@@ -278,8 +279,7 @@ def handoff_time_params(times: list[float], snapshots: list[float] | None = None
     snapshot times the point's hydro run writes without these settings) already hold every
     time, nothing is set: that hydro run serves them as it is, and a finished one is reused."""
     times = sorted(float(t) for t in times)
-    if snapshots is not None and all(any(abs(s - t) <= 1e-9 * max(abs(s), 1e-300) for s in snapshots)
-                                     for t in times):
+    if snapshots is not None and all(snapshot_at(snapshots, t) is not None for t in times):
         return {}
     return {"hydro.end_time": times[-1], "hydro.output_times": times}
 

@@ -16,6 +16,7 @@ from impactpipe.handoff.moments import target_kinetic_energy
 from impactpipe.handoff.spheres import blocks_to_spheres
 from impactpipe.handoff.store import write_particles
 
+from .. import derived
 from ..stages import StageContext
 
 
@@ -75,8 +76,8 @@ def snapshot_index(hydro_path, time: float | None) -> int:
     with h5py.File(hydro_path, "r") as f:
         names = sorted(f["snapshots"])
         times = [float(f["snapshots"][name].attrs["time"]) for name in names]
-    for index, t in enumerate(times):
-        if abs(t - time) <= 1e-9 * max(time, 1e-300):
-            return index
+    index = derived.snapshot_at(times, time)
+    if index is not None:
+        return index
     raise ValueError(f"handoff.time = {time:g} s: no hydro snapshot at that time (snapshots at "
                      f"{', '.join(f'{t:.6g}' for t in times)} s)")
