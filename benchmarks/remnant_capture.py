@@ -21,7 +21,10 @@ merging with unbound mass), "bound-only" otherwise.
 Printed per rung, as fractions of the hand-off mass averaged over the rung's seeds: the bound
 mass, the kept mass (with its standard error over seeds), the kept part of the bound mass, the
 bound mass that left in mixed and in bound-only bodies, and the kept fraction of the mass in
-bins of s.
+bins of s; then the state of the bound mass at hand-off, in the centre-of-mass frame of all
+the particles (position X, velocity V): its kinetic energy K_b = sum_bound m_i |v_i - V|^2 / 2
+(J) and its mass-weighted mean radial speed <v_r> = sum_bound m_i (v_i - V).(x_i - X) /
+|x_i - X| / sum_bound m_i (m/s; positive: the bound mass is moving apart).
 """
 
 from __future__ import annotations
@@ -39,13 +42,28 @@ from impactpipe.nbody.diagnostics import escape_speed_ratio
 SPEED_BINS = np.array([0.0, 0.3, 0.6, 0.8, 1.0, 1.25, 1.5, 2.0, 4.0, np.inf])
 
 
+def bound_motion(position, velocity, mass, bound):
+    """(K_b (J), <v_r> (m/s)) of the bound particles, in the centre-of-mass frame of all
+    particles (module docstring); positions (N, 3) m, velocities (N, 3) m/s, masses (N,) kg."""
+    total = mass.sum()
+    rel_x = position - (mass[:, None] * position).sum(axis=0) / total
+    rel_v = velocity - (mass[:, None] * velocity).sum(axis=0) / total
+    m = mass[bound]
+    kinetic = 0.5 * float((m * (rel_v[bound] ** 2).sum(axis=1)).sum())
+    distance = np.linalg.norm(rel_x[bound], axis=1)
+    radial = (rel_v[bound] * rel_x[bound]).sum(axis=1) / np.where(distance > 0.0, distance, 1.0)
+    return kinetic, float((m * radial).sum() / m.sum()) if m.sum() > 0.0 else float("nan")
+
+
 def particle_fates(run: Path):
     """(mass (kg), speed / escape speed, kept, bound mass carried off by mixed bodies (kg),
-    bound mass escaped in bound-only bodies (kg)) of one finished run directory."""
+    bound mass escaped in bound-only bodies (kg), (K_b (J), <v_r> (m/s)) of
+    :func:`bound_motion`) of one finished run directory."""
     with h5py.File(run / "handoff.h5") as f:
         p = f["particles"]
         mass, ids = p["mass"][:], p["id"][:]
-        ratio = escape_speed_ratio(p["position"][:], p["velocity"][:], mass)
+        position, velocity = p["position"][:], p["velocity"][:]
+        ratio = escape_speed_ratio(position, velocity, mass)
     with h5py.File(run / "nbody.h5") as f:
         kept = np.isin(ids, f["members"][:])
         members, offsets = f["escaped_members"][:], f["escaped_members_offset"][:]
@@ -59,7 +77,7 @@ def particle_fates(run: Path):
             alone += carried
         else:
             mixed += carried
-    return mass, ratio, kept, mixed, alone
+    return mass, ratio, kept, mixed, alone, bound_motion(position, velocity, mass, bound)
 
 
 def rung_table(directory: Path) -> str:
@@ -72,16 +90,17 @@ def rung_table(directory: Path) -> str:
             rungs.setdefault(values, []).append(particle_fates(run))
     nbins = len(SPEED_BINS) - 1
     lines = ["rung   seeds  bound  kept (sem)       kept of bound  carried off (mixed / bound-only)"
+             "  K_b (J)    <v_r> (m/s)"
              "  kept fraction per bin of |v - V| / v_esc: " + " ".join(f"{b:g}" for b in SPEED_BINS[1:-1])]
     for values, runs in sorted(rungs.items()):
         rows = []
         in_bin = np.zeros(nbins)
         kept_in_bin = np.zeros(nbins)
-        for mass, ratio, kept, mixed, alone in runs:
+        for mass, ratio, kept, mixed, alone, (kinetic, radial) in runs:
             total = mass.sum()
             bound = ratio < 1.0
             rows.append([(mass * bound).sum() / total, (mass * kept).sum() / total,
-                         (mass * kept * bound).sum() / total, mixed / total, alone / total])
+                         (mass * kept * bound).sum() / total, mixed / total, alone / total, kinetic, radial])
             which = np.digitize(ratio, SPEED_BINS) - 1
             in_bin += np.bincount(which, mass, nbins) / total
             kept_in_bin += np.bincount(which, mass * kept, nbins) / total
@@ -92,6 +111,7 @@ def rung_table(directory: Path) -> str:
         label = "/".join(f"{v:g}" for v in values)
         lines.append(f"{label:>5s}  {len(runs):5d}  {mean[0]:.3f}  {mean[1]:.3f} ({sem:.3f})  {mean[2]:.3f}"
                      f"          {mean[3]:.3f} / {mean[4]:.3f}                    "
+                     f"{mean[5]:.3e}  {mean[6]:5.2f}        "
                      + " ".join(f"{v:.2f}" for v in share))
     return "\n".join(lines)
 

@@ -38,13 +38,24 @@ def test_bound_mass_carried_off_by_an_unbound_fragment_is_counted_as_such(tmp_pa
     runs = tmp_path / "ladder" / "runs"
     runs.mkdir(parents=True)
     mass = _write_run(runs / "cells_per_projectile_radius=10_seed=1-abc")
-    m, ratio, kept, carried, alone = rc.particle_fates(runs / "cells_per_projectile_radius=10_seed=1-abc")
+    m, ratio, kept, carried, alone, (kinetic, radial) = rc.particle_fates(runs / "cells_per_projectile_radius=10_seed=1-abc")
     assert np.array_equal(kept, [True, True, False, False, False])
     assert ratio[2] > 1.0 > ratio[3] and ratio[1] < 1.0 and ratio[4] < 1.0
     np.testing.assert_allclose(ratio[2], 5.0 / np.sqrt(2 * G * (1e15 + 2e12) / 1e4), rtol=2e-3)
     assert carried == mass[3] and alone == mass[4]
-    table = rc.rung_table(tmp_path / "ladder").splitlines()
+    # the bound particles' motion in the frame of the whole set (V = 3e12 kg m/s along z and
+    # -5e12 along x, over the total mass)
     total = mass.sum()
+    frame_x = (mass[:, None] * np.array([[0, 0, 0], [1e4, 0, 0], [-1e4, 0, 0], [0, 2e4, 0], [0, 0, 3e4]])).sum(0) / total
+    frame_v = np.array([-5e12, 0.0, 2e12]) / total
+    velocity = np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 1.0]]) - frame_v
+    offset = np.array([[0, 0, 0], [1e4, 0, 0], [0, 2e4, 0], [0, 0, 3e4]]) - frame_x
+    bound_mass = mass[[0, 1, 3, 4]]
+    np.testing.assert_allclose(kinetic, 0.5 * (bound_mass * (velocity ** 2).sum(1)).sum(), rtol=1e-12)
+    radial = (velocity * offset).sum(1) / np.linalg.norm(offset, axis=1)
+    np.testing.assert_allclose(rc.particle_fates(runs / "cells_per_projectile_radius=10_seed=1-abc")[5][1],
+                               (bound_mass * radial).sum() / bound_mass.sum(), rtol=1e-12)
+    table = rc.rung_table(tmp_path / "ladder").splitlines()
     row = table[1].split()
     assert len(table) == 2 and row[:3] == ["10", "1", f"{(total - mass[2]) / total:.3f}"]
     assert row[3] == f"{(mass[0] + mass[1]) / total:.3f}"
