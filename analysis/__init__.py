@@ -14,6 +14,7 @@ from .energies import (
     scale_qstar_to_velocity,
     sphere_mass,
 )
+from .handoff_error import HandoffTimeError, fit_by_handoff_time, qstar_handoff_error, write_handoff_table
 from .io import AnalysisData, read_analysis, write_analysis
 from .plots import (
     plot_cumulative_pressure,
@@ -30,6 +31,7 @@ from .richardson import Extrapolation, richardson
 __all__ = [
     "AnalysisData",
     "Extrapolation",
+    "HandoffTimeError",
     "MassFractionCurve",
     "QStarFit",
     "Remnant",
@@ -41,6 +43,7 @@ __all__ = [
     "cumulative_mass_fraction",
     "escape_speed",
     "find_remnants",
+    "fit_by_handoff_time",
     "fit_qstar",
     "fit_qstar_size_law",
     "impact_energy",
@@ -52,6 +55,7 @@ __all__ = [
     "plot_qstar",
     "plot_velocity_distribution",
     "provenance_owner",
+    "qstar_handoff_error",
     "qstar_resolution_error",
     "read_analysis",
     "reduced_impact_energy",
@@ -61,6 +65,7 @@ __all__ = [
     "sphere_mass",
     "touching_groups",
     "write_analysis",
+    "write_handoff_table",
     "write_qstar_table",
     "write_resolution_table",
 ]

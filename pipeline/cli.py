@@ -155,9 +155,15 @@ def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, schedul
         qstar = plus_minus(record.get("Qstar_D", float("nan")), record.get("Qstar_D_uncertainty", float("nan")), ".4g")
         group = ", ".join(f"{k}={record[k]}" for k in sweep.spec.axis_values() if k in record)
         click.echo(f"  Q*_D = {qstar} J/kg ({record['status']}{scatter})" + (f" for {group}" if group else ""))
+        if "Qstar_D_handoff_error" in record:
+            click.echo(f"    hand-off-time error {record['Qstar_D_handoff_error']:.4g} J/kg (standard deviation of "
+                       f"Q*_D over the hand-off times; slope {record['Qstar_D_handoff_slope']:.4g} J/kg per s, "
+                       f"{record['handoff_status']})")
     for ladder in result["resolution"]:
         group = ", ".join(f"{k}={ladder[k]}" for k in sweep.spec.axis_values() if k in ladder)
-        click.echo(f"  {ladder['summary'] or ladder['status']}" + (f" for {group}" if group else ""))
+        handoff = (f"; hand-off time +- {ladder['handoff_error']:.4g} J/kg (finest rung)"
+                   if "handoff_error" in ladder else "")
+        click.echo(f"  {ladder['summary'] or ladder['status']}{handoff}" + (f" for {group}" if group else ""))
     tables = ["results.csv", "results.h5"] + (["replicates.csv"] if sweep.spec.replicates else []) \
         + (["qstar.csv"] if result["qstar"] else []) + (["qstar_resolution.csv"] if result["resolution"] else [])
     click.echo(f"tables in {sweep.directory}/: {', '.join(tables)}")
@@ -250,7 +256,9 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     several resolutions (hydro.cells_per_projectile_radius) are fitted per resolution, and
     Q*_D gets its resolution error over that ladder (Richardson, refused where the observed
     order says it cannot be trusted; :mod:`impactpipe.analysis.resolution_error`), beside
-    the fit's error from the runs' scatter.  Five or more target radii also get the fit of
+    the fit's error from the runs' scatter.  Runs of one resolution handed off at several
+    times are also fitted per time, and Q*_D gets its hand-off-time error over them
+    (:mod:`impactpipe.analysis.handoff_error`, ``qstar_handoff*.csv``).  Five or more target radii also get the fit of
     Q*_D(R) = q_b R^alpha + rho q_g R^beta (at each radius's finest resolution).
     """
     from impactpipe.analysis.energies import fit_qstar_size_law
@@ -294,6 +302,7 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
             label = f"R_T = {radius:g} m" + (f", {cells:g} cells per R_P" if len(ladder) > 1 else "")
             rung_suffix = suffix + (f"_n{cells:g}" if len(ladder) > 1 else "")
             fits[cells] = _qstar_fit(rung, by, label, out, rung_suffix, radius, common_velocity, mu)
+            _handoff_time_fits(rung, label, out / f"qstar_handoff{rung_suffix}.csv")
         if len(ladder) > 1:
             cells = sorted(fits)
             resolution = qstar_resolution_error(cells, [fits[n].qstar for n in cells],
@@ -310,6 +319,24 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     elif len(sizes) > 1:
         click.echo(f"{len(sizes)} target radii: the size-law fit needs at least 5")
     click.echo(f"wrote tables and figures to {out}/")
+
+
+def _handoff_time_fits(group: list[dict], label: str, path: Path) -> None:
+    """Runs of one rung handed off at several times: Q*_D fitted at each time and the
+    hand-off-time error over them (:mod:`impactpipe.analysis.handoff_error`), printed and
+    written to ``path``; nothing for runs handed off at one time."""
+    from impactpipe.analysis.handoff_error import fit_by_handoff_time, write_handoff_table
+
+    times = [run["summary"].get("handoff_time", run["config"].handoff.time) for run in group]
+    if None in times or len(set(times)) < 2:
+        return
+    result, problems = fit_by_handoff_time(times, *([r["summary"][k] for r in group]
+                                                     for k in ("Q", "M_lr_over_M_T", "N_lr")))
+    for line in problems:
+        click.echo(f"{label}, {line}", err=True)
+    if result is not None:
+        click.echo(f"{label}: {result.describe()}")
+        write_handoff_table(path, result)
 
 
 def _qstar_fit(group: list[dict], by: str, label: str, out: Path, suffix: str, radius: float,

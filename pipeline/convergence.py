@@ -62,7 +62,6 @@ from impactpipe.analysis.richardson import RESAMPLING_DRAWS, Extrapolation, resa
 
 from . import checks
 from .config import ConfigError, key_paths
-from .derived import derive, snapshot_times
 from .stages import STAGES, read_records, stage_hashes
 from .sweep import Sweep, SweepSpec, donor_problems, handoff_time_params, open_runner, with_replicates
 
@@ -345,19 +344,13 @@ def _answer_names(depths: list[float]) -> list[str]:
             *(f"peak_pressure_at_{d:g}Rp" for d in depths)]
 
 
-def _snapshots(sweep: Sweep, params: dict[str, Any]) -> list[float]:
-    """Snapshot times (s) of the hydro run of the point ``params`` (with no hand-off-time settings)."""
-    config = sweep.config_for(params)
-    return snapshot_times(config, derive(config)["end_time"])
-
-
 def _rung_params(sweep: Sweep, key: str, value: Any, values: list[Any]) -> dict[str, Any]:
     """Config overrides of one rung; a hand-off-time ladder also runs the hydro to its latest
     time with a snapshot at every rung, unless the config's own snapshots hold them all (the
     hydro run is shared by the whole ladder either way)."""
     params = {key: value}
     if key == "handoff.time":
-        params.update(handoff_time_params(values, _snapshots(sweep, {})))
+        params.update(handoff_time_params(values, sweep.snapshots({})))
     return params
 
 
@@ -372,7 +365,7 @@ def _rung_points(sweep: Sweep, params: dict[str, Any], handoff_times: list[float
         replicates["handoff.time"] = sorted(handoff_times)
     if seeds and seeds > 1:
         replicates["handoff.seed"] = list(range(1, seeds + 1))
-    snapshots = _snapshots(sweep, params) if handoff_times else None
+    snapshots = sweep.snapshots(params) if handoff_times else None
     return with_replicates(params, replicates, snapshots)
 
 

@@ -52,7 +52,7 @@ from impactpipe import storage
 from . import checks, runstore
 from .config import (Config, ConfigError, Strict, _LineFinder, duplicate_keys, key_paths, load_yaml, parse_config,
                      read_yaml_text, unknown_keys)
-from .derived import snapshot_at
+from .derived import derive, snapshot_at, snapshot_times
 from .lock import process_alive, recorded_holder, run_lock
 from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
 
@@ -211,6 +211,18 @@ class Sweep:
         overrides = {**self.spec.overrides, **params}
         return parse_config(self.base_text, source=self.base_path, overrides=overrides)
 
+    def snapshots(self, params: dict[str, Any]) -> list[float]:
+        """Snapshot times (s) of the hydro run of the point ``params`` (with no hand-off-time settings)."""
+        config = self.config_for(params)
+        return snapshot_times(config, derive(config)["end_time"])
+
+    def replicate_runs(self, point: dict[str, Any]) -> list[dict[str, Any]]:
+        """The runs of one point (:func:`with_replicates`); ``handoff.time`` replicates that are
+        all snapshots of the point's own hydro run share that run as it is."""
+        replicates = self.spec.replicates
+        snapshots = self.snapshots(point) if "handoff.time" in replicates else None
+        return with_replicates(point, replicates, snapshots)
+
 
 def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
     """Read and validate a sweep file and the base config of every grid point (raises SweepError)."""
@@ -250,7 +262,7 @@ def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
     directory = Path(output or spec.output or Path("sweeps") / spec.name)
     sweep = Sweep(spec=spec, base_text=base_text, base_path=base_path, directory=directory, source=path)
     messages = []
-    for params in (p for point in grid_points(sweep) for p in with_replicates(point, spec.replicates)):
+    for params in (p for point in grid_points(sweep) for p in sweep.replicate_runs(point)):
         try:
             checks.check(sweep.config_for(params))
         except ConfigError as exc:
@@ -467,7 +479,7 @@ class SweepRunner:
 
     def add_replicates(self, point: dict[str, Any], group: str = "") -> list[str]:
         """Register the runs of one point (:func:`with_replicates`); returns their names."""
-        return [self.add_point(run, group, point) for run in with_replicates(point, self.sweep.spec.replicates)]
+        return [self.add_point(run, group, point) for run in self.sweep.replicate_runs(point)]
 
     def add_donor(self, run_dir: str | Path) -> bool:
         """Offer a finished run from outside the sweep: points with its hydro hash adopt its hydro
@@ -761,7 +773,31 @@ class SweepRunner:
                            "replicate_std": fit.replicate_std})
         except (ValueError, np.linalg.LinAlgError) as exc:
             record.update({"Qstar_D": float("nan"), "fit_error": str(exc)})
+        record.update(handoff_time_fields(runs))
         return record
+
+
+def handoff_time_fields(points: list[dict[str, Any]]) -> dict[str, Any]:
+    """Fields of a Q*_D record from finished points handed off at several times (``replicates:
+    handoff.time``): Q*_D fitted at each time (``Qstar_D_t<T>``), their mean and standard
+    deviation (``Qstar_D_handoff_mean``, ``Qstar_D_handoff_error``, the hand-off-time error),
+    the slope against the time and its error (J/kg/s) and ``handoff_status`` (plateau, trend or
+    two times; :mod:`impactpipe.analysis.handoff_error`).  Empty for points of one hand-off time."""
+    from impactpipe.analysis.handoff_error import fit_by_handoff_time
+
+    times = [p["params"].get("handoff.time") for p in points]
+    if None in times or len(set(times)) < 2:
+        return {}
+    result, problems = fit_by_handoff_time(times, *([p["summary"].get(k, np.nan) for p in points]
+                                                    for k in ("Q", "M_lr_over_M_T", "N_lr")))
+    for line in problems:
+        log.warning("%s", line)
+    if result is None:
+        return {"handoff_status": "; ".join(problems)}
+    return {"Qstar_D_handoff_mean": result.mean, "Qstar_D_handoff_error": result.error,
+            "Qstar_D_handoff_slope": result.slope, "Qstar_D_handoff_slope_err": result.slope_err,
+            "handoff_status": result.status,
+            **{f"Qstar_D_t{t:g}": q for t, q in zip(result.times, result.qstar)}}
 
 
 def initial_bracket(config: Config, variable: str) -> tuple[float, float]:
@@ -1135,7 +1171,7 @@ def run_sweep(sweep: Sweep, executor: cf.Executor | None = None, show_progress: 
     wanted = None
     if sweep.spec.mode == "grid":
         wanted = {stage_hashes(sweep.config_for(run))["hydro"] for point in grid_points(sweep)
-                  for run in with_replicates(point, sweep.spec.replicates)}
+                  for run in sweep.replicate_runs(point)}
     messages = donor_problems(reuse_runs, wanted, "point")
     if messages:
         raise SweepError(messages)
@@ -1168,17 +1204,18 @@ def rung_fits(sweep: Sweep, points: dict[str, dict[str, Any]]) -> list[dict[str,
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for p in points.values():
         if p["status"] == "complete":
-            groups.setdefault(tuple(p["params"].get(k) for k in others), []).append(p["summary"])
+            groups.setdefault(tuple(p["params"].get(k) for k in others), []).append(p)
     records = []
-    for key, summaries in groups.items():
+    for key, finished in groups.items():
         record = dict(zip(others, key))
-        q, mlr, n_lr = (np.array([s.get(k, np.nan) for s in summaries], dtype=float)
+        q, mlr, n_lr = (np.array([p["summary"].get(k, np.nan) for p in finished], dtype=float)
                         for k in ("Q", "M_lr_over_M_T", "N_lr"))
         try:
             fit = fit_qstar(q, mlr, n_lr)
             record.update({"Qstar_D": fit.qstar, "Qstar_D_uncertainty": fit.qstar_err, "brackets": fit.brackets})
         except (ValueError, np.linalg.LinAlgError) as exc:
             record.update({"Qstar_D": float("nan"), "fit_error": str(exc)})
+        record.update(handoff_time_fields(finished))
         records.append(record)
     return records
 
@@ -1206,6 +1243,9 @@ def resolution_ladders(sweep: Sweep, records: list[dict[str, Any]]) -> list[dict
             ladder = qstar_resolution_error([r[RESOLUTION_KEY] for r in fitted], [r["Qstar_D"] for r in fitted],
                                             [r.get("Qstar_D_uncertainty", float("nan")) for r in fitted],
                                             brackets=[r.get("brackets", True) for r in fitted])
+            finest = max(fitted, key=lambda r: r[RESOLUTION_KEY])
+            if "Qstar_D_handoff_error" in finest:
+                row["handoff_error"] = finest["Qstar_D_handoff_error"]
             row.update({"Qstar_D": ladder.qstar[0], "seed_error": ladder.seed_error[0],
                         "resolution_error": ladder.error, "richardson": ladder.extrapolated,
                         "observed_order": ladder.order, "last_change": ladder.last_change,

@@ -37,7 +37,7 @@ def hydro(ctx):
 
 def handoff(ctx):
     _finish(ctx, "handoff")
-    return {}
+    return {} if ctx.config.handoff.time is None else {"handoff_time": ctx.config.handoff.time}
 
 
 def nbody(ctx):
@@ -70,6 +70,19 @@ def resolved_analysis(ctx):
     QSTAR (1 + RESOLUTION_C / n^2) at n = hydro.cells_per_projectile_radius."""
     result = analysis(ctx)
     qstar = QSTAR * (1.0 + RESOLUTION_C / ctx.config.hydro.cells_per_projectile_radius ** 2)
+    result["M_lr_over_M_T"] = max(0.0, 1.0 - 0.5 * result["Q"] / qstar)
+    return result
+
+
+#: Q*_D of ``timed_analysis`` handed off at t seconds: QSTAR (1 + HANDOFF_TIME_C t).
+HANDOFF_TIME_C = 0.01
+
+
+def timed_analysis(ctx):
+    """``analysis`` whose Q*_D grows linearly with the hand-off time t = handoff.time (s):
+    QSTAR (1 + HANDOFF_TIME_C t)."""
+    result = analysis(ctx)
+    qstar = QSTAR * (1.0 + HANDOFF_TIME_C * ctx.config.handoff.time)
     result["M_lr_over_M_T"] = max(0.0, 1.0 - 0.5 * result["Q"] / qstar)
     return result
 
@@ -112,6 +125,8 @@ STAGES = {s: f"sweep_stand_ins:{s}" for s in ("hydro", "handoff", "nbody", "anal
 NOISY_STAGES = {**STAGES, "analysis": "sweep_stand_ins:noisy_analysis"}
 #: Stages whose Q*_D depends on the resolution (``resolved_analysis``).
 RESOLVED_STAGES = {**STAGES, "analysis": "sweep_stand_ins:resolved_analysis"}
+#: Stages whose Q*_D depends on the hand-off time (``timed_analysis``).
+TIMED_STAGES = {**STAGES, "analysis": "sweep_stand_ins:timed_analysis"}
 #: Stages whose analysis takes 0.3 s, so a sweep can be killed while points are still running.
 SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
 #: Stages whose hydro takes a minute (``hanging_hydro``).

@@ -25,6 +25,7 @@ EXAMPLES = [
     ("impactpipe.analysis.io", "read_analysis"),
     ("impactpipe.analysis.qstar", "fit_qstar"),
     ("impactpipe.analysis.resolution_error", "qstar_resolution_error"),
+    ("impactpipe.analysis.handoff_error", "qstar_handoff_error"),
 ]
 
 
