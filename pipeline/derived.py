@@ -312,7 +312,7 @@ def snapshot_times(config: Config, end_time: float) -> list[float]:
         times = list(np.arange(0.0, end_time, hydro.output_interval))
     else:
         times = list(np.linspace(0.0, end_time, DEFAULT_SNAPSHOTS + 1)[:-1])
-    return sorted(set(times) | {end_time})
+    return sorted({float(t) for t in times} | {float(end_time)})
 
 
 #: Relative tolerance within which a requested time (s) is a snapshot time.

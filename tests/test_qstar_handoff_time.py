@@ -123,7 +123,8 @@ def test_handoff_time_replicates_on_the_points_own_snapshots_share_its_hydro_run
     from impactpipe.pipeline.stages import stage_hashes
 
     snapshots = load_sweep(write_sweep(tmp_path)).snapshots({})
-    times = [float(snapshots[6]), float(snapshots[-1])]
+    times = [snapshots[6], snapshots[-1]]
+    assert all(type(t) is float for t in snapshots)
     sweep = load_sweep(write_sweep(tmp_path, replicates={"handoff.time": times, "handoff.seed": [1, 2]}))
     point = {"scene.impact.velocity": 2000.0}
     runs = sweep.replicate_runs(point)
