@@ -84,7 +84,7 @@ def rung_table(directory: Path) -> str:
     """The per-rung table of the module docstring for the runs under ``directory``/runs."""
     rungs: dict[tuple[float, ...], list] = {}
     for run in sorted((directory / "runs").iterdir()):
-        found = re.match(r"(.+?)_seed=\d+-", run.name)
+        found = re.match(r"(.+?)_seed=\d+[_-]", run.name)
         values = tuple(float(v) for v in re.findall(r"=([0-9.eE+-]+)(?=_|$)", found.group(1))) if found else ()
         if values and (run / "nbody.h5").exists():
             rungs.setdefault(values, []).append(particle_fates(run))

@@ -63,5 +63,7 @@ def test_bound_mass_carried_off_by_an_unbound_fragment_is_counted_as_such(tmp_pa
     # runs of a ladder handed off at several times: one row per value and time
     _write_run(runs / "cells_per_projectile_radius=10_time=14_seed=1-def")
     _write_run(runs / "cells_per_projectile_radius=10_time=14_seed=2-ghi")
+    # the hydro keys a hand-off-time ladder sets follow the seed in the name
+    _write_run(runs / "cells_per_projectile_radius=10_time=14_seed=3_end_time=15_output_times=-14.0--15.0--jkl")
     table = rc.rung_table(tmp_path / "ladder").splitlines()
-    assert [line.split()[:2] for line in table[1:]] == [["10", "1"], ["10/14", "2"]]
+    assert [line.split()[:2] for line in table[1:]] == [["10", "1"], ["10/14", "3"]]
