@@ -120,7 +120,8 @@ def fit_by_handoff_time(handoff_times, q, mlr, n_lr) -> tuple[HandoffTimeError |
 
     Args (one entry per run): ``handoff_times`` (s), ``q`` specific impact energy (J/kg),
     ``mlr`` M_lr/M_T, ``n_lr`` particles in the largest remnant; each time's runs go to
-    :func:`impactpipe.analysis.qstar.fit_qstar` with its defaults.
+    :func:`impactpipe.analysis.qstar.fit_qstar` with its defaults.  Runs with a NaN time, Q or
+    M_lr/M_T (unfinished) are left out.
 
     Returns (result, problems): the :class:`HandoffTimeError` over the times whose runs could
     be fitted (None with fewer than two such times, or when the runs share one time), and one
@@ -129,8 +130,10 @@ def fit_by_handoff_time(handoff_times, q, mlr, n_lr) -> tuple[HandoffTimeError |
     from impactpipe.analysis.qstar import fit_qstar
 
     t, q, mlr, n_lr = (np.asarray(a, dtype=float) for a in (handoff_times, q, mlr, n_lr))
+    finished = np.isfinite(t) & np.isfinite(q) & np.isfinite(mlr)
+    t, q, mlr, n_lr = t[finished], q[finished], mlr[finished], n_lr[finished]
     times, values, errors, problems = [], [], [], []
-    for time in np.unique(t[np.isfinite(t)]):
+    for time in np.unique(t):
         at = t == time
         try:
             fit = fit_qstar(q[at], mlr[at], n_lr[at])

@@ -258,8 +258,9 @@ def qstar_cmd(run_dirs: tuple[str, ...], by: str, common_velocity: float | None,
     order says it cannot be trusted; :mod:`impactpipe.analysis.resolution_error`), beside
     the fit's error from the runs' scatter.  Runs of one resolution handed off at several
     times are also fitted per time, and Q*_D gets its hand-off-time error over them
-    (:mod:`impactpipe.analysis.handoff_error`, ``qstar_handoff*.csv``).  Five or more target radii also get the fit of
-    Q*_D(R) = q_b R^alpha + rho q_g R^beta (at each radius's finest resolution).
+    (:mod:`impactpipe.analysis.handoff_error`, ``qstar_handoff*.csv``).  Five or more target
+    radii also get the fit of Q*_D(R) = q_b R^alpha + rho q_g R^beta (at each radius's finest
+    resolution).
     """
     from impactpipe.analysis.energies import fit_qstar_size_law
     from impactpipe.analysis.resolution_error import qstar_resolution_error, write_resolution_table

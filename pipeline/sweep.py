@@ -788,8 +788,9 @@ def handoff_time_fields(points: list[dict[str, Any]]) -> dict[str, Any]:
     times = [p["params"].get("handoff.time") for p in points]
     if None in times or len(set(times)) < 2:
         return {}
-    result, problems = fit_by_handoff_time(times, *([p["summary"].get(k, np.nan) for p in points]
-                                                    for k in ("Q", "M_lr_over_M_T", "N_lr")))
+    result, problems = fit_by_handoff_time(times, *([p["summary"].get(k, default) for p in points]
+                                                    for k, default in (("Q", np.nan), ("M_lr_over_M_T", np.nan),
+                                                                       ("N_lr", 10 ** 6))))
     for line in problems:
         log.warning("%s", line)
     if result is None:

@@ -82,6 +82,10 @@ def test_fit_by_handoff_time_fits_each_time_and_names_the_unfittable():
     result, problems = fit_by_handoff_time(one_run, q[:7], mlr[:7], np.full(7, 5000))
     assert list(result.times) == [14.0, 16.0] and len(problems) == 1 and problems[0].startswith("hand-off at 20 s")
     assert fit_by_handoff_time(t[:3], q[:3], mlr[:3], np.full(3, 5000)) == (None, [])
+    unfinished = mlr.copy()
+    unfinished[[0, 4]] = np.nan
+    result, problems = fit_by_handoff_time(t, q, unfinished, np.full(q.size, 5000))
+    assert problems == [] and result.qstar == pytest.approx([timed_qstar(x) for x in (14.0, 16.0, 18.0)], rel=1e-9)
 
 
 def test_a_sweep_with_handoff_time_replicates_reports_the_handoff_time_error(tmp_path):
