@@ -535,8 +535,8 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
               help="Report the cheapest rung within this of the extrapolated M_lr/M_T.")
 @click.option("--handoff-times", default=None, metavar="T1,T2,...",
               help="Hand off every rung at each of these times (s) from one hydro run and take the mean "
-                   "M_lr/M_T over them (e.g. 10,12,15 on the hand-off plateau): averages out the "
-                   "reaccumulation's scatter.")
+                   "M_lr/M_T over them (e.g. 12,13.5,15, after 4 target sound-crossing times): averages "
+                   "out the reaccumulation's scatter and the hand-off time's trend.")
 @click.option("--seeds", type=int, default=None, metavar="N",
               help="Hand off every rung with the seeds 1..N (ring phases and velocity noise) from its one hydro "
                    "run and take the mean M_lr/M_T, with its standard error (sem column) and the 68 % "
