@@ -12,8 +12,9 @@ same arithmetic for material m alone:
   (the general path would compute zero fluxes and leave every cell as it is); else -1;
 - :func:`reconstruct_plain`, :func:`face_flux_plain`: the MUSCL-Hancock face states and
   the HLLC fluxes of steps 2-3 of the sweep with one material, from the cell values of the
-  sweep's gather (step 1, the same for both paths), written to the same scratch rows
-  (absent materials get zero fluxes);
+  sweep's plain gather (step 1: :func:`impactpipe.hydro.scheme.directional._gather_plain`,
+  the general gather's rows with material m's EOS called directly), written to the same
+  scratch rows (absent materials get zero fluxes);
 - :func:`update_plain`: the flux-form update of step 4 with the equal-strain closure
   alpha_m += alpha_m dV of a full cell (none at the tensile limit, which opens void) and
   rho e = E - |m|^2 / (2 rho).  A cell whose new state needs a rule of the general update
