@@ -536,7 +536,10 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
 @click.option("--handoff-times", default=None, metavar="T1,T2,...",
               help="Hand off every rung at each of these times (s) from one hydro run and take the mean "
                    "M_lr/M_T over them (e.g. 12,13.5,15, after 4 target sound-crossing times): averages "
-                   "out the reaccumulation's scatter and the hand-off time's trend.")
+                   "out the reaccumulation's scatter and the hand-off time's trend.  Default the config's "
+                   "handoff.window.")
+@click.option("--single-handoff", is_flag=True,
+              help="Hand off at handoff.time only, even where the config sets a handoff.window.")
 @click.option("--seeds", type=int, default=None, metavar="N",
               help="Hand off every rung with the seeds 1..N (ring phases and velocity noise) from its one hydro "
                    "run and take the mean M_lr/M_T, with its standard error (sem column) and the 68 % "
@@ -552,11 +555,12 @@ def handoff_scan_cmd(config_path: str, times: str, out_dir: str | None, workers:
 @click.option("-v", "--verbose", count=True, help="More log output.")
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
 def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tolerance: float,
-                    handoff_times: str | None, seeds: int | None, reuse_hydro: tuple[str, ...], out_dir: str | None,
+                    handoff_times: str | None, single_handoff: bool, seeds: int | None,
+                    reuse_hydro: tuple[str, ...], out_dir: str | None,
                     backend: str, scheduler: str | None, workers: int | None, verbose: int, quiet: bool) -> None:
     """Run convergence ladders of CONFIG: answers (M_lr/M_T, N_lr, peak pressures at fixed depths) against
     cost (wall seconds, cell-updates, particle-steps), with a Richardson estimate of the converged value."""
-    from .convergence import LadderError, format_table, parse_floats, parse_vary, run_ladders
+    from .convergence import LadderError, format_table, parse_floats, parse_vary, run_ladders, window_times
 
     _setup_logging(verbose, quiet)
     config, _ = _load_or_exit(config_path)
@@ -572,6 +576,10 @@ def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tole
         ladders = parse_vary(varies)
         depth_values = parse_floats(depths, "--depths")
         times = parse_floats(handoff_times, "--handoff-times") if handoff_times is not None else None
+        if handoff_times is not None and single_handoff:
+            raise LadderError(["--single-handoff: not with --handoff-times"])
+        if times is None and not single_handoff and config.handoff.window:
+            times = window_times(config.handoff.window, ladders)
         result = run_ladders(config_path, ladders, out, depths=depth_values, tolerance=tolerance,
                              execution={k: v for k, v in execution.items() if v is not None},
                              show_progress=not quiet, handoff_times=times, seeds=seeds,

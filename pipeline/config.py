@@ -322,6 +322,18 @@ class Handoff(Strict):
                                 "leaf blocks finer than that are merged into their ancestor blocks first, so the "
                                 "N-body particles are those of a coarser mesh; hydro.cells_per_projectile_radius "
                                 "divided by a power of two; default the leaf blocks as they are")
+    window: list[float] | None = Field(
+        None, description="hand-off window (s): two or more increasing hand-off times, after ~4 target "
+                          "sound-crossing times, over which `impactpipe convergence` averages M_lr/M_T by default "
+                          "(one hydro run to the last of them, a hand-off and N-body run at each); their mean is "
+                          "the answer and their spread the hand-off-time error")
+
+    @field_validator("window")
+    @classmethod
+    def _window_increasing(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and (len(v) < 2 or any(t <= 0 for t in v) or sorted(set(v)) != v):
+            raise ValueError(f"must be two or more increasing times > 0 s (got {v})")
+        return v
 
 
 class Restitution(Strict):

@@ -354,6 +354,18 @@ def _rung_params(sweep: Sweep, key: str, value: Any, values: list[Any]) -> dict[
     return params
 
 
+def window_times(window: list[float], ladders: dict[str, list[Any]]) -> list[float] | None:
+    """The hand-off times of a ladder run from the config's ``handoff.window`` (s): the window,
+    or None (a single hand-off at ``handoff.time``) where a ladder varies a key the window sets
+    (the hand-off time, the hydro end or snapshot times, the window itself); that is logged."""
+    clash = [k for k in ("handoff.time", "handoff.window", "hydro.end_time", "hydro.output_times") if k in ladders]
+    if clash:
+        log.warning("handoff.window %s not used: the %s ladder sets the hand-off times", window, clash[0])
+        return None
+    log.info("handing off at the config's handoff.window: %s s", ", ".join(f"{t:g}" for t in window))
+    return list(window)
+
+
 def _rung_points(sweep: Sweep, params: dict[str, Any], handoff_times: list[float] | None,
                  seeds: int | None = None) -> list[dict[str, Any]]:
     """The runs of one rung: the rung itself, or one run per combination of the hand-off times

@@ -127,8 +127,11 @@ def applicable_stages(config: Config) -> tuple[str, ...]:
 
 
 def stage_hashes(config: Config) -> dict[str, str]:
-    """Content hash per stage, chained so a change upstream changes every hash downstream."""
+    """Content hash per stage, chained so a change upstream changes every hash downstream.
+    ``handoff.window`` is left out: it tells the convergence tool where to hand off, not a stage
+    what to compute."""
     data = config.model_dump(mode="json")
+    data["handoff"].pop("window")
     data["materials"] = config.resolved_materials()
     hashes: dict[str, str] = {}
     previous = ""

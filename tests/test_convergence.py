@@ -316,6 +316,43 @@ def test_ladder_averaged_over_handoff_times(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+def test_cli_hands_off_over_the_config_window_by_default(tmp_path, monkeypatch):
+    """A config's handoff.window is the ladder's hand-off times unless --handoff-times or
+    --single-handoff says otherwise, or a ladder sets the hand-off times itself; a bad window is
+    refused with its line before any work; the window leaves every stage hash as it is."""
+    from impactpipe.pipeline import convergence
+
+    def spy(config_path, ladders, out, **kwargs):
+        raise LadderError([f"spy: times={kwargs['handoff_times']}"])
+
+    monkeypatch.setattr(convergence, "run_ladders", spy)
+    text = QUICKSTART.read_text().replace("seed: 1}", "seed: 1, window: [0.8, 1.2, 1.6]}")
+    config = tmp_path / "window.yaml"
+    config.write_text(text)
+    runner = CliRunner()
+
+    def times_used(*args):
+        result = runner.invoke(main, ["convergence", str(config), "--out", str(tmp_path / "out"), *args])
+        assert result.exit_code == 2
+        return result.output.strip().splitlines()[-1]
+
+    assert times_used("--vary", "hydro.cfl=0.2,0.4") == "spy: times=[0.8, 1.2, 1.6]"
+    assert times_used("--vary", "hydro.cfl=0.2,0.4", "--single-handoff") == "spy: times=None"
+    assert times_used("--vary", "hydro.cfl=0.2,0.4", "--handoff-times", "1,2") == "spy: times=[1.0, 2.0]"
+    assert times_used("--vary", "handoff.time=0.5,1.0") == "spy: times=None"
+    assert times_used("--vary", "hydro.end_time=1.5,2.0") == "spy: times=None"
+    assert times_used("--vary", "hydro.cfl=0.2,0.4", "--single-handoff", "--handoff-times", "1,2") == \
+        "--single-handoff: not with --handoff-times"
+    assert stages.stage_hashes(load_config(config)) == stages.stage_hashes(load_config(QUICKSTART))
+    for window in ("[1.2, 0.8]", "[1.0]", "[0.0, 1.0]"):
+        config.write_text(QUICKSTART.read_text().replace("seed: 1}", f"seed: 1, window: {window}}}"))
+        result = runner.invoke(main, ["convergence", str(config), "--out", str(tmp_path / "out"),
+                                      "--vary", "hydro.cfl=0.2,0.4"])
+        assert result.exit_code == 2
+        assert "window.yaml:19: handoff.window: must be two or more increasing times > 0 s" in result.output
+    assert not (tmp_path / "out").exists()
+
+
 def test_ladders_averaged_over_seeds_and_a_particle_resolution_ladder(tmp_path):
     """--seeds 3: each rung hands off with seeds 1-3 from one hydro run; its answer is their mean
     (the stand-in's seed term averages to zero) with the standard error of that mean.  A
