@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState
-from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, temperature
+from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_densities, temperature
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
@@ -109,7 +109,8 @@ def test_failed_material_at_zero_pressure_keeps_its_cohesion():
         strength.work[0, 0, :, :, 0] = shear_rate * ys[None, :]
         strength.work[0, WK_PHI] = 1.0
         update_stress(1e-6, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
-                      mesh.block_dx, eos.kind, eos.params, eos.table, arrays.model, arrays.params, arrays.shear,
+                      mesh.block_dx, eos.kind, eos.params, eos.table, reference_densities(eos),
+                      arrays.model, arrays.params, arrays.shear,
                       arrays.tensile_strength, strength.work, strength.counts, strength.amounts)
     s = mesh.interior(state.arhoq)[0, :4, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
     von_mises = np.sqrt(1.5 * (s[0] ** 2 + s[1] ** 2 + s[2] ** 2 + 2.0 * s[3] ** 2))

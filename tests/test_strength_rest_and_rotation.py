@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
-from impactpipe.hydro.eos import pack_eos, pressure_sound_speed
+from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_densities
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
@@ -76,7 +76,8 @@ def _rotation_kernel_run(steps_per_revolution):
         strength.work[0, 1, :, :, 0] = omega * x
         strength.work[0, WK_PHI] = 1.0
         update_stress(dt, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
-                      mesh.block_dx, eos.kind, eos.params, eos.table, arrays.model, arrays.params, arrays.shear,
+                      mesh.block_dx, eos.kind, eos.params, eos.table, reference_densities(eos),
+                      arrays.model, arrays.params, arrays.shear,
                       arrays.tensile_strength, strength.work, strength.counts, strength.amounts)
     cell = mesh.interior(state.arhoq)[0, :4, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
     return s0, cell

@@ -77,9 +77,7 @@ from numba import get_thread_id, njit, prange
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
-from impactpipe.hydro.eos import IDEAL_GAS, TILLOTSON, pressure_sound_speed
-from impactpipe.hydro.eos.ideal_gas import ideal_gas_pressure_sound_speed
-from impactpipe.hydro.eos.tillotson import tillotson_pressure_sound_speed
+from impactpipe.hydro.eos import pressure_sound_speed_in_line
 from impactpipe.hydro.scheme.mixture import (ALPHA_MIN, DISTENDED_FRACTION, damaged_tensile_strength, mixture_state,
                                              signal_speed_squared)
 from impactpipe.hydro.scheme.riemann import UPWIND_LEFT, UPWIND_NONE
@@ -309,9 +307,8 @@ def _gather_plain(sc, i, m, rho0_m, b, axis, t1, t2, j1, j2, interior, alpha, ar
                   eos_params, eos_table, shear_modulus, tensile_strength, nq, wq_row, floors):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
-    called directly for ideal gas and Tillotson instead of through the generic dispatcher
-    (which costs about ten times the ideal-gas call) and the absent materials' rows written
-    without an EOS call (alpha_k, zeros, their Y_T,k (1 - D_k)).
+    called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`) and the absent
+    materials' rows written without an EOS call (alpha_k, zeros, their Y_T,k (1 - D_k)).
     """
     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
     kind = eos_kind[m]
@@ -320,13 +317,7 @@ def _gather_plain(sc, i, m, rho0_m, b, axis, t1, t2, j1, j2, interior, alpha, ar
     ar = arho[b, m, ix, iy, iz]
     rk = ar / a
     ek = arhoe[b, m, ix, iy, iz] / ar
-    flag = 0
-    if kind == IDEAL_GAS:
-        pk, c2b = ideal_gas_pressure_sound_speed(params, rk, ek)
-    elif kind == TILLOTSON:
-        pk, c2b = tillotson_pressure_sound_speed(params, rk, ek)
-    else:
-        pk, c2b, flag = pressure_sound_speed(kind, params, eos_table, rk, ek)
+    pk, c2b, flag = pressure_sound_speed_in_line(kind, params, eos_table, rk, ek)
     ytk = damaged_tensile_strength(tensile_strength[m], arhoq, nq, b, m, ix, iy, iz, ar)
     p_min = -ytk
     if rk < DISTENDED_FRACTION * rho0_m:

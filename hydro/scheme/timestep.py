@@ -21,9 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
-from impactpipe.hydro.eos import IDEAL_GAS, TILLOTSON, pressure_sound_speed
-from impactpipe.hydro.eos.ideal_gas import ideal_gas_pressure_sound_speed
-from impactpipe.hydro.eos.tillotson import tillotson_pressure_sound_speed
+from impactpipe.hydro.eos import pressure_sound_speed_in_line
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_speed_squared
 
@@ -46,7 +44,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     (tests/test_hydro_timestep.py).  The sums run material by material over a block's cells
     into the per-thread ``work[thread, 0:3]`` (rho, phi, K; shape (threads, 3, nx, ny, nz)), so
     the EOS model is chosen once per material and block rather than once per cell; ideal gas
-    and Tillotson call their model directly.  Cells with rho <= 0 or phi < PHI_VOID carry no
+    and Tillotson are called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`).  Cells with rho <= 0 or phi < PHI_VOID carry no
     signal.  ``mom`` is the momentum density (kg/m^2/s), ``block_dx`` the cell sizes (m).
     """
     nb, nmat, nx, ny, nz = alpha.shape
@@ -76,12 +74,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                             continue
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] / ar
-                        if kind == IDEAL_GAS:
-                            pk, c2 = ideal_gas_pressure_sound_speed(row, rk, ek)
-                        elif kind == TILLOTSON:
-                            pk, c2 = tillotson_pressure_sound_speed(row, rk, ek)
-                        else:
-                            pk, c2, flag = pressure_sound_speed(kind, row, eos_table, rk, ek)
+                        pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, rk, ek)
                         w[2, ix, iy, iz] += ar * signal_speed_squared(c2, rk, shear)
         rate = 0.0
         for ix in range(gx, nx - gx):

@@ -39,9 +39,10 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.eos import reference_densities
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.boundary import fill_field_ghosts
+from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
@@ -78,6 +79,7 @@ class MaterialStrength:
         self.face_flux = self._face_flux_arrays(mesh)
         #: (axis, side) of the reflecting domain faces that are rough (module docstring).
         self.rough_walls: list[tuple[int, int]] = []
+        self._rho0: tuple[object, np.ndarray] | None = None
 
     def set_rough_wall(self, axis: int, side: int) -> None:
         """Make the reflecting domain face on ``side`` (0 low, 1 high) of ``axis`` a rough, no-slip wall."""
@@ -128,7 +130,8 @@ class MaterialStrength:
         a = self.arrays
         mesh = self.mesh
         update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
-                      mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table, a.model, a.params, a.shear,
+                      mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table, self._reference_densities(eos),
+                      a.model, a.params, a.shear,
                       a.tensile_strength, self.work, self.counts, self.amounts)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(axis)
@@ -165,14 +168,30 @@ class MaterialStrength:
             for wall_axis, side in self.rough_walls:
                 if wall_axis == axis:
                     self._flip_wall_ghosts(state.momentum, axis, side, [c for c in range(3) if c != axis])
-        cell_velocities(state.alpha, state.arho, state.momentum, eos.kind, eos.params, eos.table, self.work)
+        cell_velocities(state.alpha, state.arho, state.momentum, self._reference_densities(eos), self.work)
+
+    def _reference_densities(self, eos) -> np.ndarray:
+        """The materials' reference densities (kg/m^3) of the packed EOS ``eos``, computed once per EOS."""
+        if self._rho0 is None or self._rho0[0] is not eos:
+            self._rho0 = (eos, reference_densities(eos))
+        return self._rho0[1]
 
     def _fill_work_ghosts(self, axis: int) -> None:
+        """Ghosts of the work arrays along ``axis``.  On a uniform mesh only the stress slots:
+        :func:`cell_velocities` already computed the velocities and fills of the ghost cells
+        from the conserved ghosts, with the values the copies and wall flips would give.  On an
+        adaptive mesh every slot (coarse/fine ghosts of velocity are restricted velocities)."""
         mesh = self.mesh
-        fill_field_ghosts(self.work, mesh, axis)
+        if mesh.adaptive:
+            fill_field_ghosts(self.work, mesh, axis)
+            slots = range(NWORK)
+        else:
+            fill_ghosts(self.work[:, WK_S:WK_S + self.ns], mesh.neighbor, mesh.neighbor_level, axis,
+                        int(mesh.ghost[axis]), -1)
+            slots = range(WK_S, WK_S + self.ns)
         for side in (0, 1):
             flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-            self._flip_wall_ghosts(self.work, axis, side, flips)
+            self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if c in slots])
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components) -> None:
         """Negate ``components`` of ``array`` in the ghost slabs of the reflecting faces on ``side`` of ``axis``."""

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
+from impactpipe.hydro.eos import pressure_sound_speed_in_line, temperature_in_line
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN
 from impactpipe.hydro.strength.damage import shear_damage_increment
@@ -76,12 +76,13 @@ def stress_slots(ndim: int) -> int:
 
 
 @njit(cache=True, parallel=True)
-def cell_velocities(alpha, arho, mom, eos_kind, eos_params, eos_table, work):
+def cell_velocities(alpha, arho, mom, rho0, work):
     """Velocity and material fill of every padded cell (ghosts filled beforehand) into ``work``.
 
-    The fill is min(phi, sum_k alpha_k rho_k / rho0_k) (materials without a reference
-    density count by volume): material expanded far below rho0 fills a cell by volume but
-    is as light as a spray, and the stress tractions scale with it.
+    The fill is min(phi, sum_k alpha_k rho_k / rho0_k) (``rho0[M]`` the materials' reference
+    densities, kg/m^3; materials without one, rho0 = 0, count by volume): material expanded
+    far below rho0 fills a cell by volume but is as light as a spray, and the stress
+    tractions scale with it.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     for b in prange(nb):
@@ -95,8 +96,8 @@ def cell_velocities(alpha, arho, mom, eos_kind, eos_params, eos_table, work):
                         ar = arho[b, k, ix, iy, iz]
                         rho += ar
                         phi += alpha[b, k, ix, iy, iz]
-                        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
-                        solid += ar / rho0 if rho0 > 0.0 else alpha[b, k, ix, iy, iz]
+                        r0 = rho0[k]
+                        solid += ar / r0 if r0 > 0.0 else alpha[b, k, ix, iy, iz]
                     if rho > 0.0 and phi >= PHI_VOID:
                         for d in range(3):
                             work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
@@ -167,8 +168,10 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
 
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
-                  eos_table, model, params, shear, tensile_strength, work, counts, amounts):
+                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts):
     """One strength step of ``dt`` (s) for every interior cell; see the module docstring.
+    ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
+    reference_densities`).
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocities`);
     its stress slots are written for the interior cells.  Counters accumulate per block.
@@ -232,7 +235,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         dmg = arhoq[b, base + ns + 1, ix, iy, iz] * inv
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] * inv
-                        pk, c2b, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                        pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table, rk, ek)
                         # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
                         if pk < -tensile_strength[k] * (1.0 - dmg):
                             if dmg < 1.0:
@@ -249,10 +252,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         # the mean stress the material bears: no more tension than it still holds,
                         # as in the sweeps, which open void instead of stretching it further
                         p_held = max(pk, -tensile_strength[k] * (1.0 - dmg))
-                        tk = temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                        tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, rk, ek)
                         y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk, dmg))
-                        rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)
-                        if rk < STRENGTH_MIN_DENSITY_FRACTION * rho0:
+                        if rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
                         sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz, y, g)
