@@ -11,12 +11,13 @@ Two measurements in one job:
    fills, sweeps, reflux, strength and gravity sources) over ``--steps`` steps, and the
    compulsory traffic of a step per interior cell: with S the bytes of the state fields
    (alpha, arho, arhoe, arhoq, momentum, energy) per interior cell, padded cells included,
+   and S_i the same without the ghost cells,
 
-       B = S (2 ndim + 1 + 2)
+       B = S (2 ndim + 1) + 2 S_i
 
    -- each of the ndim sweeps reads and writes the state once, the time-step kernel reads it
-   once, the last-good copy reads and writes it once (ghost fills and the sweeps' scratch are
-   left out: they are cache-resident or small).  The bandwidth ceiling is then
+   once, the last-good copy reads and writes its interior cells once (ghost fills and the
+   sweeps' scratch are left out: they are cache-resident or small).  The bandwidth ceiling is then
    R_max = bandwidth / B cell-updates/s, and ``roofline_fraction`` = measured rate / R_max:
    near 1 a step is limited by memory traffic, far below 1 by arithmetic and latency.
 
@@ -77,6 +78,11 @@ def state_bytes_per_cell(sim) -> float:
     return sum(getattr(sim.state, name).nbytes for name in FIELDS) / sim.mesh.ncells
 
 
+def interior_bytes_per_cell(sim) -> float:
+    """S_i: bytes of the state fields per interior cell, ghost cells left out (the last-good copy)."""
+    return sum(sim.mesh.interior(getattr(sim.state, name)).nbytes for name in FIELDS) / sim.mesh.ncells
+
+
 def phase_times(case: str, quick: bool, steps: int, threads: int) -> dict:
     """Seconds per phase over ``steps`` steps after one warm-up step, and the step's totals."""
     numba.set_num_threads(threads)
@@ -134,7 +140,7 @@ def main() -> None:
             run = phase_times(case, not args.full, args.steps, t)
             sim = run["sim"]
             s = state_bytes_per_cell(sim)
-            b = s * (2 * sim.mesh.ndim + 3)
+            b = s * (2 * sim.mesh.ndim + 1) + 2 * interior_bytes_per_cell(sim)
             rate = run["updates"] / run["wall"]
             ceiling = bandwidth[t] / b
             rows.append({
