@@ -66,11 +66,12 @@ def _smooth_box(geometry, cells, block_cells, nmat):
     return Simulation(mesh, ["gas", "heavy"][:nmat], specs, state)
 
 
-def build(case: str, quick: bool) -> Simulation:
-    """The Simulation of a benchmark case."""
+def build(case: str, quick: bool, block_cells: int | None = None) -> Simulation:
+    """The Simulation of a benchmark case; ``block_cells`` replaces the box cases' block edge
+    (16 cells in 2D, 8 in 3D)."""
     if case == "2d-ideal-gas":
         n = 256 if quick else 512
-        return _smooth_box("2d-planar", [n, n], 16, 1)
+        return _smooth_box("2d-planar", [n, n], block_cells or 16, 1)
     if case in ("2d-cyl-tillotson", "2d-cyl-strength"):
         materials = {"basalt": preset_material("basalt")}
         if case == "2d-cyl-strength":
@@ -81,15 +82,15 @@ def build(case: str, quick: bool) -> Simulation:
         return PROBLEMS["impact"].setup(params, materials)
     if case == "3d-two-material":
         n = 48 if quick else 128
-        return _smooth_box("3d", [n, n, n], 8, 2)
+        return _smooth_box("3d", [n, n, n], block_cells or 8, 2)
     raise ValueError(f"unknown case {case!r}")
 
 
-def measure(case: str, quick: bool, steps: int, threads: int) -> dict:
+def measure(case: str, quick: bool, steps: int, threads: int, block_cells: int | None = None) -> dict:
     """Cell-updates per second of ``steps`` steps with ``threads`` numba threads."""
     numba.set_num_threads(threads)
     tracemalloc.start()
-    sim = build(case, quick)
+    sim = build(case, quick, block_cells)
     sim.step()
     _, setup_peak = tracemalloc.get_traced_memory()
     tracemalloc.reset_peak()
@@ -133,6 +134,7 @@ def main() -> None:
                         default=["2d-ideal-gas", "2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material"])
     parser.add_argument("--reference", metavar="SCRIPT", help="reference kernel run before each measurement")
     parser.add_argument("--reference-size", type=int, default=512, help="its mesh size N (default 512)")
+    parser.add_argument("--block-cells", type=int, help="block edge of the box cases (default 16 in 2D, 8 in 3D)")
     args = parser.parse_args()
     results = []
     for case in args.cases:
@@ -140,7 +142,7 @@ def main() -> None:
             if threads > numba.config.NUMBA_NUM_THREADS:
                 continue
             reference = reference_rate(args.reference, args.reference_size, threads) if args.reference else None
-            result = measure(case, args.quick, args.steps, threads)
+            result = measure(case, args.quick, args.steps, threads, args.block_cells)
             if reference is not None:
                 result["reference_cell_updates_per_s"] = reference
                 result["ratio_to_reference"] = result["cell_updates_per_s"] / reference
