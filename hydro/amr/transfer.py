@@ -305,18 +305,20 @@ def prolong_field_ghosts(field, plan):
                 field[plan[e, P_SRC], c, plan[e, P_SX], plan[e, P_SY], plan[e, P_SZ]]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def prolong_state_ghosts(state, plan, block_lo, block_dx, geometry, ndim):
     """Fill fine ghost cells of every conserved field by prolongation (module docstring).
 
     ``state`` is the tuple (alpha, arho, arhoe, mom, energy, arhoq).  Each destination cell is
     set from the coarse source cell that contains it, at the offset between their centroids.
     The source cells' neighbours along every used axis must hold valid values (interior
-    cells, or ghosts filled before).
+    cells, or ghosts filled before).  Entries in parallel: each writes only its destination,
+    a fine block's ghost cell along the plan's axis, and reads only coarse cells next to the
+    coarse/fine face and their neighbours, which no entry of the same plan writes.
     """
     alpha, arho, arhoe, mom, energy, arhoq = state
     radial = geometry == CYLINDRICAL
-    for e in range(plan.shape[0]):
+    for e in prange(plan.shape[0]):
         db = plan[e, P_DST]
         sb = plan[e, P_SRC]
         dxi, dyi, dzi = plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]
