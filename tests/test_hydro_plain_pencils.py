@@ -71,6 +71,17 @@ def iron_on_basalt():
          "target": {"material": "basalt", "thickness": 1.0}, "cells": 200}, materials)
 
 
+def copper_on_aluminium():
+    """1D copper flyer on an aluminium plate at 2 km/s, void margins: Mie-Grueneisen materials,
+    whose plain pencils gather through the EOS dispatcher rather than an in-place call."""
+    copper = {"model": "mie_gruneisen", "rho0": 8930.0, "c0": 3940.0, "s": 1.489, "gamma0": 2.02, "cv": 385.0}
+    aluminium = {"model": "mie_gruneisen", "rho0": 2790.0, "c0": 5330.0, "s": 1.34, "gamma0": 2.0, "cv": 897.0}
+    return PROBLEMS["planar_impact"].setup(
+        {"flyer": {"material": "copper", "thickness": 1.0, "velocity": 2000.0},
+         "target": {"material": "aluminium", "thickness": 1.0}, "cells": 200},
+        {"copper": {"eos": copper}, "aluminium": {"eos": aluminium}})
+
+
 def pencil_kinds(sim):
     """(block, j1, j2, plain_material) of every pencil along x, after filling the x ghosts."""
     st = sim.state
@@ -89,6 +100,7 @@ def kind(sim, b, j1, j2=0):
 def test_pencils_are_classified_plain_empty_or_general():
     assert {k for *_, k in pencil_kinds(smooth_gas_box())} == {0}
     assert {k for *_, k in pencil_kinds(iron_on_basalt())} == {0, 1, -1, EMPTY_PENCIL}
+    assert {k for *_, k in pencil_kinds(copper_on_aluminium())} == {0, 1, -1, EMPTY_PENCIL}
     assert {k for *_, k in pencil_kinds(heavy_sphere_3d())} == {0, 1, -1}
     sim = strong_impact()
     kinds = pencil_kinds(sim)
@@ -106,8 +118,9 @@ def test_pencils_are_classified_plain_empty_or_general():
 
 
 @pytest.mark.parametrize("build, steps", [(smooth_gas_box, 30), (sod_tube, 150), (iron_on_basalt, 150),
-                                          (heavy_sphere_3d, 10), (strong_impact, 40)],
-                         ids=["smooth-gas-box", "sod", "iron-on-basalt", "heavy-sphere-3d", "impact-with-strength"])
+                                          (copper_on_aluminium, 150), (heavy_sphere_3d, 10), (strong_impact, 40)],
+                         ids=["smooth-gas-box", "sod", "iron-on-basalt", "copper-on-aluminium", "heavy-sphere-3d",
+                              "impact-with-strength"])
 def test_plain_path_gives_the_general_paths_answer_bit_for_bit(build, steps):
     runs = []
     for plain in (True, False):
