@@ -31,7 +31,7 @@ def test_a_mixed_cell_is_the_equal_strain_mixture_of_its_materials():
     shear = np.zeros((2, 2))
     alpha, rho, e, damage = [0.6, 0.3], [0.9 * BASALT["rho0"], 2.0], [0.0, 3.0e5], [0.5, 0.0]
     a, ar, are, arhoq = _cell(alpha, rho, e, damage)
-    rows = np.full((3 + 2 * MATERIAL_ROWS, 4), np.nan)
+    rows = np.full((4, 3 + 2 * MATERIAL_ROWS), np.nan)
     state = mixture_state(a, ar, are, arhoq, 0, 0, 0, 0, eos.kind, eos.params, eos.table, shear, y_t, True, rows,
                           3, 1)
     m_rho, m_phi, m_p, m_k, m_eint, m_tmass, clamps, limits = state
@@ -48,8 +48,8 @@ def test_a_mixed_cell_is_the_equal_strain_mixture_of_its_materials():
     assert (clamps, limits) == (0, 1)
     expected = [alpha[0], rho[0], e[0], p_basalt, rho[0] * c2_basalt, y_t[0] * (1.0 - damage[0]),
                 alpha[1], rho[1], e[1], p_gas, rho[1] * c2_gas, 0.0]
-    np.testing.assert_allclose(rows[3:, 1], expected, rtol=1e-14)
-    assert np.isnan(rows[:3]).all() and np.isnan(rows[:, [0, 2, 3]]).all()
+    np.testing.assert_allclose(rows[1, 3:], expected, rtol=1e-14)
+    assert np.isnan(rows[:, :3]).all() and np.isnan(rows[[0, 2, 3]]).all()
     without = mixture_state(a, ar, are, arhoq, 0, 0, 0, 0, eos.kind, eos.params, eos.table, shear, y_t, False, None,
                             0, 0)
     assert without[:5] == state[:5] and without[5] == 0.0
@@ -62,13 +62,13 @@ def test_a_trace_is_absent_from_the_sums_but_keeps_its_tension_row():
     y_t = np.array([1.0e7, 3.0])
     shear = np.zeros((2, 2))
     a, ar, are, arhoq = _cell([1.0 - 1e-11, 1e-11], [BASALT["rho0"], 2.0], [0.0, 3.0e14], [0.0, 0.0])
-    rows = np.zeros((2 * MATERIAL_ROWS, 1))
+    rows = np.zeros((1, 2 * MATERIAL_ROWS))
     m_rho, m_phi, m_p, m_k, *_ = mixture_state(a, ar, are, arhoq, 0, 0, 0, 0, eos.kind, eos.params, eos.table, shear,
                                                y_t, False, rows, 0, 0)
     p_basalt, c2_basalt, _ = pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, BASALT["rho0"], 0.0)
     assert m_rho == ar.sum() and m_phi == a.sum()
     assert m_p == a[0, 0, 0, 0, 0] * p_basalt and m_k == ar[0, 0, 0, 0, 0] * c2_basalt
-    assert list(rows[MATERIAL_ROWS:, 0]) == [1e-11, 0.0, 0.0, 0.0, 0.0, 3.0]
+    assert list(rows[0, MATERIAL_ROWS:]) == [1e-11, 0.0, 0.0, 0.0, 0.0, 3.0]
 
 
 def _sod_in_two_labels(cells, split):

@@ -78,8 +78,8 @@ from numba import get_thread_id, njit, prange
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.eos import pressure_sound_speed_in_line
-from impactpipe.hydro.scheme.mixture import (ALPHA_MIN, DISTENDED_FRACTION, damaged_tensile_strength, mixture_state,
-                                             signal_speed_squared)
+from impactpipe.hydro.scheme.mixture import (ALPHA_MIN, DISTENDED_FRACTION, mixture_state, signal_speed_squared,
+                                             tension_left)
 from impactpipe.hydro.scheme.riemann import UPWIND_LEFT, UPWIND_NONE
 from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_ENERGY_CAP,
@@ -122,7 +122,6 @@ from impactpipe.hydro.scheme.pencil_layout import (
     PHI_SMALL,
     Q_MAT,
     Q_P,
-    Q_UN,
     TENSION_TOLERANCE,
     W_C,
     W_IVL,
@@ -138,6 +137,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     W_UT2,
     W_VOL,
     pencil_cell_index,
+    pencil_offset,
 )
 from impactpipe.hydro.scheme.plain_pencils import (
     EMPTY_PENCIL,
@@ -193,6 +193,15 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     fq_row = wq_row + nmat * nq
     radial = geometry == CYLINDRICAL and axis == 0
     axial = geometry == CYLINDRICAL and axis == 1
+    # the fields flattened (C order) for the plain path, and the length of one column
+    alpha_f = alpha.reshape(alpha.size)
+    arho_f = arho.reshape(arho.size)
+    arhoe_f = arhoe.reshape(arhoe.size)
+    arhoq_f = arhoq.reshape(arhoq.size)
+    mom_f = mom.reshape(mom.size)
+    energy_f = energy.reshape(energy.size)
+    cs = nx * ny * nz
+    ncomp = mom.shape[1]
     for b in prange(nb):
         sc = scratch[get_thread_id()]
         dx = block_dx[b, axis]
@@ -210,9 +219,9 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         r_lo = block_lo[b, 0] + (i - g) * dx
                         r_hi = r_lo + dx
                         vol = abs(r_hi * r_hi - r_lo * r_lo)
-                        sc[W_IVL, i] = 2.0 * abs(r_lo) / vol
-                        sc[W_IVR, i] = 2.0 * abs(r_hi) / vol
-                        sc[W_VOL, i] = np.pi * vol * d1
+                        sc[i, W_IVL] = 2.0 * abs(r_lo) / vol
+                        sc[i, W_IVR] = 2.0 * abs(r_hi) / vol
+                        sc[i, W_VOL] = np.pi * vol * d1
                         if i == g:
                             face_area_lo = 2.0 * np.pi * abs(r_lo) * d1
                         if i == g + n - 1:
@@ -221,30 +230,51 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         r_lo = block_lo[b, 0] + (j1 - g) * d1
                         r_hi = r_lo + d1
                         ring = np.pi * abs(r_hi * r_hi - r_lo * r_lo)
-                        sc[W_IVL, i] = 1.0 / dx
-                        sc[W_IVR, i] = 1.0 / dx
-                        sc[W_VOL, i] = ring * dx
+                        sc[i, W_IVL] = 1.0 / dx
+                        sc[i, W_IVR] = 1.0 / dx
+                        sc[i, W_VOL] = ring * dx
                         face_area_lo = ring
                         face_area_hi = ring
                     else:
-                        sc[W_IVL, i] = 1.0 / dx
-                        sc[W_IVR, i] = 1.0 / dx
-                        sc[W_VOL, i] = dx * d1 * d2
+                        sc[i, W_IVL] = 1.0 / dx
+                        sc[i, W_IVR] = 1.0 / dx
+                        sc[i, W_VOL] = dx * d1 * d2
                 # 1-3. cell values, face states and fluxes: the plain path for a pencil that one material
                 # fills alone (hydro.scheme.plain_pencils), the general path otherwise
                 m = -1
                 if plain_pencils:
-                    m = plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell)
+                    m = plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell, alpha_f, arho_f,
+                                       arhoe_f, cs)
                 rho0_m = reference_density(eos_kind[m], eos_params[m], eos_table) if m >= 0 else 0.0
+                # where material m's columns and the momentum and energy of this pencil start in the
+                # flattened fields, and the pencil's stride (the plain path's indexing)
+                offset, stride = pencil_offset(nx, ny, nz, axis, j1, j2)
+                ia = (b * nmat + max(m, 0)) * cs + offset
+                imn = (b * ncomp + axis) * cs + offset
+                im1 = (b * ncomp + t1) * cs + offset
+                im2 = (b * ncomp + t2) * cs + offset
+                ie = b * cs + offset
+                iq = (b * nmat + max(m, 0)) * nq * cs + offset
                 if m == EMPTY_PENCIL:
                     for f in (g, g + n):
                         for r in range(f_row, fq_row + nmat * nq):
-                            sc[r, f] = 0.0
+                            sc[f, r] = 0.0
                 elif m >= 0:
-                    for i in range(ncell):
-                        _gather_plain(sc, i, m, rho0_m, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho,
-                                      arhoe, arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus,
-                                      tensile_strength, nq, wq_row, floors)
+                    # a strengthless material's signal speed is its bulk sound speed: its gather skips
+                    # the shear term (which the compiler would evaluate, division included, either way)
+                    shear_m = shear_modulus[m]
+                    if shear_m[0] != 0.0 or shear_m[1] != 0.0:
+                        for i in range(ncell):
+                            _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
+                                          arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
+                                          im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
+                                          shear_m, True, tensile_strength, nq, wq_row, floors, b)
+                    else:
+                        for i in range(ncell):
+                            _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
+                                          arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
+                                          im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
+                                          shear_m, False, tensile_strength, nq, wq_row, floors, b)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
@@ -268,57 +298,65 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         w = -dt * face_area_lo if side == 0 else dt * face_area_hi
                         mass = 0.0
                         for k in range(nmat):
-                            mk = sc[f_row + F_MAT + 3 * k + 1, f]
+                            mk = sc[f, f_row + F_MAT + 3 * k + 1]
                             mass += mk
                             boundary[b, BND_MATERIAL + k] += w * mk
                         boundary[b, BND_MASS] += w * mass
-                        boundary[b, BND_MOMENTUM + axis] += w * sc[f_row + F_MN, f]
-                        boundary[b, BND_MOMENTUM + t1] += w * sc[f_row + F_MT1, f]
-                        boundary[b, BND_MOMENTUM + t2] += w * sc[f_row + F_MT2, f]
-                        boundary[b, BND_ENERGY] += w * sc[f_row + F_E, f]
+                        boundary[b, BND_MOMENTUM + axis] += w * sc[f, f_row + F_MN]
+                        boundary[b, BND_MOMENTUM + t1] += w * sc[f, f_row + F_MT1]
+                        boundary[b, BND_MOMENTUM + t2] += w * sc[f, f_row + F_MT2]
+                        boundary[b, BND_ENERGY] += w * sc[f, f_row + F_E]
                     elif neighbor_level[b, axis, side] != 0:
                         f = g if side == 0 else g + n
                         area = dt * (face_area_lo if side == 0 else face_area_hi)
                         for k in range(nmat):
                             for c in range(3):
-                                face_flux[b, side, c * nmat + k, j1, j2] = area * sc[f_row + F_MAT + 3 * k + c, f]
-                        face_flux[b, side, 3 * nmat + axis, j1, j2] = area * sc[f_row + F_MN, f]
-                        face_flux[b, side, 3 * nmat + t1, j1, j2] = area * sc[f_row + F_MT1, f]
-                        face_flux[b, side, 3 * nmat + t2, j1, j2] = area * sc[f_row + F_MT2, f]
-                        face_flux[b, side, 3 * nmat + 3, j1, j2] = area * sc[f_row + F_E, f]
+                                face_flux[b, side, c * nmat + k, j1, j2] = area * sc[f, f_row + F_MAT + 3 * k + c]
+                        face_flux[b, side, 3 * nmat + axis, j1, j2] = area * sc[f, f_row + F_MN]
+                        face_flux[b, side, 3 * nmat + t1, j1, j2] = area * sc[f, f_row + F_MT1]
+                        face_flux[b, side, 3 * nmat + t2, j1, j2] = area * sc[f, f_row + F_MT2]
+                        face_flux[b, side, 3 * nmat + 3, j1, j2] = area * sc[f, f_row + F_E]
                         for c in range(nmat * nq):
-                            face_flux[b, side, 3 * nmat + 4 + c, j1, j2] = area * sc[fq_row + c, f]
+                            face_flux[b, side, 3 * nmat + 4 + c, j1, j2] = area * sc[f, fq_row + c]
                 # 4-5. update interior cells
                 if m == EMPTY_PENCIL:
                     continue
                 for i in range(g, g + n):
-                    ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
-                    if m >= 0 and update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alpha,
-                                               arho, arhoe, mom, energy, axis, t1, t2, floors, amounts,
-                                               rho0_m, arhoq, nq, fq_row):
+                    if m >= 0 and update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f, arhoe_f,
+                                               mom_f, energy_f, arhoq_f, ia + i * stride, imn + i * stride,
+                                               im1 + i * stride, im2 + i * stride, ie + i * stride, iq + i * stride,
+                                               cs, floors, amounts, rho0_m, nq, fq_row):
                         continue
+                    ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
                                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
 
 
 @njit(cache=True, inline="always")
-def _gather_plain(sc, i, m, rho0_m, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, arhoq, mom, eos_kind,
-                  eos_params, eos_table, shear_modulus, tensile_strength, nq, wq_row, floors):
+def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
+                  kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
-    called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`) and the absent
-    materials' rows written without an EOS call (alpha_k, zeros, their Y_T,k (1 - D_k)).
+    (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
+    and the absent materials' rows written without an EOS call (alpha_k, zeros, Y_T,k: an
+    absent material holds no damage).
+
+    The fields come flattened (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`), with
+    the cell's flat indices: ``ia`` in material m's column of alpha, arho and arhoe (material
+    k's is ``ia + (k - m) cs``, ``cs`` the length of a column), ``imn``, ``im1``, ``im2`` of the
+    normal and transverse momentum, ``iq`` of material m's first transported scalar (scalar j
+    at ``iq + j cs``).  ``sheared``: whether material m's shear table ``shear`` is not zero
+    (without shear modulus its signal speed is the bulk sound speed, bit for bit).
     """
-    ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
-    kind = eos_kind[m]
-    params = eos_params[m]
-    a = alpha[b, m, ix, iy, iz]
-    ar = arho[b, m, ix, iy, iz]
+    a = alpha_f[ia]
+    ar = arho_f[ia]
     rk = ar / a
-    ek = arhoe[b, m, ix, iy, iz] / ar
+    ek = arhoe_f[ia] / ar
     pk, c2b, flag = pressure_sound_speed_in_line(kind, params, eos_table, rk, ek)
-    ytk = damaged_tensile_strength(tensile_strength[m], arhoq, nq, b, m, ix, iy, iz, ar)
+    ytk = tensile_strength[m]
+    if nq > 0 and ar > 0.0:
+        ytk = tension_left(ytk, arhoq_f[iq + (nq - 1) * cs], ar)
     p_min = -ytk
     if rk < DISTENDED_FRACTION * rho0_m:
         p_min = 0.0
@@ -328,39 +366,39 @@ def _gather_plain(sc, i, m, rho0_m, b, axis, t1, t2, j1, j2, interior, alpha, ar
             floors[b, FLOOR_TENSILE_LIMIT] += 1
     if interior and flag != 0:
         floors[b, FLOOR_EOS_CLAMP] += 1
-    c2k = signal_speed_squared(c2b, rk, shear_modulus[m])
-    for k in range(alpha.shape[1]):
-        r = W_MAT + W_STRIDE * k
-        if k == m:
-            sc[r, i] = a
-            sc[r + 1, i] = rk
-            sc[r + 2, i] = ek
-            sc[r + 3, i] = pk
-            sc[r + 4, i] = rk * c2b
-            sc[r + 5, i] = ytk
-        else:
-            sc[r, i] = alpha[b, k, ix, iy, iz]
-            sc[r + 1, i] = 0.0
-            sc[r + 2, i] = 0.0
-            sc[r + 3, i] = 0.0
-            sc[r + 4, i] = 0.0
-            sc[r + 5, i] = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz,
-                                                    arho[b, k, ix, iy, iz])
-        if nq > 0:
-            ark = arho[b, k, ix, iy, iz]
-            inv_ar = 1.0 / ark if ark > 0.0 else 0.0
+    c2k = signal_speed_squared(c2b, rk, shear) if sheared else c2b
+    r = W_MAT + W_STRIDE * m
+    sc[i, r] = a
+    sc[i, r + 1] = rk
+    sc[i, r + 2] = ek
+    sc[i, r + 3] = pk
+    sc[i, r + 4] = rk * c2b
+    sc[i, r + 5] = ytk
+    if nq > 0:
+        inv_ar = 1.0 / ar if ar > 0.0 else 0.0
+        for j in range(nq):
+            sc[i, wq_row + nq * m + j] = arhoq_f[iq + j * cs] * inv_ar
+    for k in range(tensile_strength.shape[0]):
+        if k != m:
+            r = W_MAT + W_STRIDE * k
+            sc[i, r] = alpha_f[ia + (k - m) * cs]
+            sc[i, r + 1] = 0.0
+            sc[i, r + 2] = 0.0
+            sc[i, r + 3] = 0.0
+            sc[i, r + 4] = 0.0
+            sc[i, r + 5] = tensile_strength[k]
             for j in range(nq):
-                sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
+                sc[i, wq_row + nq * k + j] = arhoq_f[iq + ((k - m) * nq + j) * cs] * 0.0
     kmod = ar * c2k
-    sc[W_PHI, i] = a
-    sc[W_C, i] = np.sqrt(kmod / ar)
-    sc[W_RHO, i] = ar
-    sc[W_P, i] = a * pk
-    sc[W_K, i] = kmod
+    sc[i, W_PHI] = a
+    sc[i, W_C] = np.sqrt(kmod / ar)
+    sc[i, W_RHO] = ar
+    sc[i, W_P] = a * pk
+    sc[i, W_K] = kmod
     inv = 1.0 / ar
-    sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
-    sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
-    sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
+    sc[i, W_UN] = mom_f[imn] * inv
+    sc[i, W_UT1] = mom_f[im1] * inv
+    sc[i, W_UT2] = mom_f[im2] * inv
 
 
 @njit(cache=True, inline="always")
@@ -386,24 +424,24 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
             ar = arho[b, k, ix, iy, iz]
             inv_ar = 1.0 / ar if ar > 0.0 else 0.0
             for j in range(nq):
-                sc[wq_row + nq * k + j, i] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
-    sc[W_PHI, i] = phi
-    sc[W_C, i] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
+                sc[i, wq_row + nq * k + j] = arhoq[b, nq * k + j, ix, iy, iz] * inv_ar
+    sc[i, W_PHI] = phi
+    sc[i, W_C] = np.sqrt(kmod / rho) if rho > 0.0 else 0.0
     if rho > 0.0 and phi >= PHI_VOID:
-        sc[W_RHO, i] = rho
-        sc[W_P, i] = p
-        sc[W_K, i] = kmod
+        sc[i, W_RHO] = rho
+        sc[i, W_P] = p
+        sc[i, W_K] = kmod
         inv = 1.0 / rho
-        sc[W_UN, i] = mom[b, axis, ix, iy, iz] * inv
-        sc[W_UT1, i] = mom[b, t1, ix, iy, iz] * inv
-        sc[W_UT2, i] = mom[b, t2, ix, iy, iz] * inv
+        sc[i, W_UN] = mom[b, axis, ix, iy, iz] * inv
+        sc[i, W_UT1] = mom[b, t1, ix, iy, iz] * inv
+        sc[i, W_UT2] = mom[b, t2, ix, iy, iz] * inv
     else:
-        sc[W_RHO, i] = 0.0
-        sc[W_P, i] = 0.0
-        sc[W_K, i] = 0.0
-        sc[W_UN, i] = 0.0
-        sc[W_UT1, i] = 0.0
-        sc[W_UT2, i] = 0.0
+        sc[i, W_RHO] = 0.0
+        sc[i, W_P] = 0.0
+        sc[i, W_K] = 0.0
+        sc[i, W_UN] = 0.0
+        sc[i, W_UT1] = 0.0
+        sc[i, W_UT2] = 0.0
 
 
 @njit(cache=True, inline="always")
@@ -420,30 +458,30 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
     limit can predict tens of MPa of tension, which would pull a light neighbour to many
     km/s) falls back to the cell values (first order, counted).
     """
-    flow_second = sc[W_RHO, i] > 0.0
+    flow_second = sc[i, W_RHO] > 0.0
     material_second = flow_second
     for j in range(i - 1, i + 2):
         fill = 0.0
         rho_min = 1.0e300
         rho_max = 0.0
         for k in range(nmat):
-            a = sc[W_MAT + W_STRIDE * k, j]
+            a = sc[j, W_MAT + W_STRIDE * k]
             fill += a
             if a > ALPHA_MIN:
-                r = sc[W_MAT + W_STRIDE * k + 1, j]
+                r = sc[j, W_MAT + W_STRIDE * k + 1]
                 rho_min = min(rho_min, r)
                 rho_max = max(rho_max, r)
         alike = rho_max <= DENSITY_RATIO_SECOND_ORDER * rho_min
         if not (fill >= PHI_SECOND_ORDER and alike):
             material_second = False
-        if not (sc[W_RHO, j] > 0.0 and fill >= PHI_FLOW_SECOND_ORDER and alike):
+        if not (sc[j, W_RHO] > 0.0 and fill >= PHI_FLOW_SECOND_ORDER and alike):
             flow_second = False
     if flow_second:
         un, dun, p, p_face = predict_flow(sc, i, half, qm_row, qp_row)
-        fallback = p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i]
+        fallback = p > 0.0 and p_face < -TENSION_TOLERANCE * sc[i, W_K]
         p_min = 0.0
         for k in range(nmat):
-            p_min -= sc[W_MAT + W_STRIDE * k, i] * sc[W_MAT + W_STRIDE * k + 5, i]
+            p_min -= sc[i, W_MAT + W_STRIDE * k] * sc[i, W_MAT + W_STRIDE * k + 5]
         if p_face < p_min and p_face < p:
             fallback = True
         if material_second and not fallback:
@@ -469,10 +507,10 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
     rho_r = 0.0
     for k in range(nmat):
         qrow = Q_MAT + 3 * k
-        rho_l += sc[qp_row + qrow, il] * sc[qp_row + qrow + 1, il]
-        rho_r += sc[qm_row + qrow, ir] * sc[qm_row + qrow + 1, ir]
-    void_l = sc[W_PHI, il] < PHI_VOID or rho_l <= 0.0
-    void_r = sc[W_PHI, ir] < PHI_VOID or rho_r <= 0.0
+        rho_l += sc[il, qp_row + qrow] * sc[il, qp_row + qrow + 1]
+        rho_r += sc[ir, qm_row + qrow] * sc[ir, qm_row + qrow + 1]
+    void_l = sc[il, W_PHI] < PHI_VOID or rho_l <= 0.0
+    void_r = sc[ir, W_PHI] < PHI_VOID or rho_r <= 0.0
     side, s, p_star, chi, de, donor, up, down, krow, iv_donor = upwind_face(sc, f, rho_l, void_l, rho_r, void_r,
                                                                              qm_row, qp_row)
     donor_void = void_l if side == UPWIND_LEFT else void_r
@@ -483,27 +521,27 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
     for k in range(nmat):
         row = W_MAT + W_STRIDE * k
         qrow = Q_MAT + 3 * k
-        a_donor = sc[row, donor]
+        a_donor = sc[donor, row]
         frow = f_row + F_MAT + 3 * k
         if side == UPWIND_NONE or donor_void or a_donor < ALPHA_MIN or s == 0.0:
-            sc[frow, f] = 0.0
-            sc[frow + 1, f] = 0.0
-            sc[frow + 2, f] = 0.0
+            sc[f, frow] = 0.0
+            sc[f, frow + 1] = 0.0
+            sc[f, frow + 2] = 0.0
             for j in range(nq):
-                sc[fq_row + nq * k + j, f] = 0.0
+                sc[f, fq_row + nq * k + j] = 0.0
             continue
         # a donor cell holding void in a diverging flow (its velocity or its left neighbour's
         # negative, its own or its right neighbour's positive) may lose material through both
         # faces: each face takes at most half of its content, so together they never overdraw
         # it (the test uses cell values, the same in both blocks of a face)
         share = 1.0
-        if (sc[W_PHI, donor] <= 1.0 - FULL_TOLERANCE
-                and min(sc[W_UN, donor - 1], sc[W_UN, donor]) < 0.0 < max(sc[W_UN, donor], sc[W_UN, donor + 1])):
+        if (sc[donor, W_PHI] <= 1.0 - FULL_TOLERANCE
+                and min(sc[donor - 1, W_UN], sc[donor, W_UN]) < 0.0 < max(sc[donor, W_UN], sc[donor + 1, W_UN])):
             share = 0.5
         mk, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, share, s, chi, dt,
                                     iv_donor)
         for j in range(nq):
-            sc[fq_row + nq * k + j, f] = mk * sc[wq_row + nq * k + j, donor]
+            sc[f, fq_row + nq * k + j] = mk * sc[donor, wq_row + nq * k + j]
         mass += mk
         eint += mk * ek
     flow_fluxes(sc, f, f_row, krow, donor, mass, eint, s, p_star, de)
@@ -520,47 +558,47 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
     not share the expansion of a full cell: the cell opens void instead (tensile failure
     by void insertion, as CTH does), so no material is stretched beyond its strength.
     """
-    wl = dt * sc[W_IVL, i]
-    wr = dt * sc[W_IVR, i]
-    vol = sc[W_VOL, i]
+    wl = dt * sc[i, W_IVL]
+    wr = dt * sc[i, W_IVR]
+    vol = sc[i, W_VOL]
     fl = i
     fr = i + 1
-    dv = wr * sc[f_row + F_S, fr] - wl * sc[f_row + F_S, fl]
-    rho_old = sc[W_RHO, i]
+    dv = wr * sc[fr, f_row + F_S] - wl * sc[fl, f_row + F_S]
+    rho_old = sc[i, W_RHO]
     # volume fractions after the fluxes
     asum = 0.0
     for k in range(nmat):
         frow = f_row + F_MAT + 3 * k
-        a_new = alpha[b, k, ix, iy, iz] - (wr * sc[frow, fr] - wl * sc[frow, fl])
+        a_new = alpha[b, k, ix, iy, iz] - (wr * sc[fr, frow] - wl * sc[fl, frow])
         alpha[b, k, ix, iy, iz] = a_new
         asum += a_new
     # volume closure and p dV work
-    full = sc[W_PHI, i] > 1.0 - FULL_TOLERANCE
+    full = sc[i, W_PHI] > 1.0 - FULL_TOLERANCE
     relax = 0.0
     if asum <= 1.0 and not full:
         want = 0.0
         for k in range(nmat):
             row = W_MAT + W_STRIDE * k
-            if sc[row + 3, i] > 0.0 and sc[row + 4, i] > 0.0:
-                want += alpha[b, k, ix, iy, iz] * sc[row + 3, i] / sc[row + 4, i]
+            if sc[i, row + 3] > 0.0 and sc[i, row + 4] > 0.0:
+                want += alpha[b, k, ix, iy, iz] * sc[i, row + 3] / sc[i, row + 4]
         if want > 0.0:
             relax = min(1.0, (1.0 - asum) / want)
     for k in range(nmat):
         frow = f_row + F_MAT + 3 * k
         row = W_MAT + W_STRIDE * k
         a_flux = alpha[b, k, ix, iy, iz]
-        work_pressure = sc[row + 3, i]
+        work_pressure = sc[i, row + 3]
         if asum > 1.0:
             a_new = a_flux / asum
-        elif dv > 0.0 and full and sc[row + 3, i] > -sc[row + 5, i]:
-            a_new = a_flux + sc[row, i] * dv
-        elif relax > 0.0 and sc[row + 3, i] > 0.0 and sc[row + 4, i] > 0.0:
-            a_new = a_flux * (1.0 + relax * sc[row + 3, i] / sc[row + 4, i])
-            work_pressure = 0.5 * sc[row + 3, i]
+        elif dv > 0.0 and full and sc[i, row + 3] > -sc[i, row + 5]:
+            a_new = a_flux + sc[i, row] * dv
+        elif relax > 0.0 and sc[i, row + 3] > 0.0 and sc[i, row + 4] > 0.0:
+            a_new = a_flux * (1.0 + relax * sc[i, row + 3] / sc[i, row + 4])
+            work_pressure = 0.5 * sc[i, row + 3]
         else:
             a_new = a_flux
-        ar = arho[b, k, ix, iy, iz] - (wr * sc[frow + 1, fr] - wl * sc[frow + 1, fl])
-        ae = arhoe[b, k, ix, iy, iz] - (wr * sc[frow + 2, fr] - wl * sc[frow + 2, fl])
+        ar = arho[b, k, ix, iy, iz] - (wr * sc[fr, frow + 1] - wl * sc[fl, frow + 1])
+        ae = arhoe[b, k, ix, iy, iz] - (wr * sc[fr, frow + 2] - wl * sc[fl, frow + 2])
         ae -= work_pressure * (a_new - a_flux)
         if a_new < 0.0:
             a_new = 0.0
@@ -572,20 +610,20 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         arhoe[b, k, ix, iy, iz] = ae
         for j in range(nq):
             c = nq * k + j
-            arhoq[b, c, ix, iy, iz] -= wr * sc[fq_row + c, fr] - wl * sc[fq_row + c, fl]
-    mn = mom[b, axis, ix, iy, iz] - (wr * sc[f_row + F_MN, fr] - wl * sc[f_row + F_MN, fl])
+            arhoq[b, c, ix, iy, iz] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
+    mn = mom[b, axis, ix, iy, iz] - (wr * sc[fr, f_row + F_MN] - wl * sc[fl, f_row + F_MN])
     if radial:
-        p_half = 0.5 * (sc[qm_row + Q_P, i] + sc[qp_row + Q_P, i])
+        p_half = 0.5 * (sc[i, qm_row + Q_P] + sc[i, qp_row + Q_P])
         mn += p_half * (wr - wl)
-    m1 = mom[b, t1, ix, iy, iz] - (wr * sc[f_row + F_MT1, fr] - wl * sc[f_row + F_MT1, fl])
-    m2 = mom[b, t2, ix, iy, iz] - (wr * sc[f_row + F_MT2, fr] - wl * sc[f_row + F_MT2, fl])
-    e_tot = energy[b, 0, ix, iy, iz] - (wr * sc[f_row + F_E, fr] - wl * sc[f_row + F_E, fl])
+    m1 = mom[b, t1, ix, iy, iz] - (wr * sc[fr, f_row + F_MT1] - wl * sc[fl, f_row + F_MT1])
+    m2 = mom[b, t2, ix, iy, iz] - (wr * sc[fr, f_row + F_MT2] - wl * sc[fl, f_row + F_MT2])
+    e_tot = energy[b, 0, ix, iy, iz] - (wr * sc[fr, f_row + F_E] - wl * sc[fl, f_row + F_E])
     rho = 0.0
     for k in range(nmat):
         rho += arho[b, k, ix, iy, iz]
     if not (rho == rho and e_tot == e_tot and mn == mn and m1 == m1 and m2 == m2):
         _record_failure(failure, b, FAIL_NAN, ix, iy, iz)
-    elif rho < -FAIL_NEGATIVE_FRACTION * rho_old and sc[W_PHI, i] > PHI_SMALL:
+    elif rho < -FAIL_NEGATIVE_FRACTION * rho_old and sc[i, W_PHI] > PHI_SMALL:
         # in spray cells (filled below PHI_SMALL) an overdraw is a transport artifact, floored
         # and counted below; in any fuller cell a negative density is a failure
         _record_failure(failure, b, FAIL_NEGATIVE_DENSITY, ix, iy, iz)
@@ -656,9 +694,9 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
     if solid < fill:
         fill = solid
     if fill < PHI_SMALL:
-        vmax = max(abs(sc[f_row + F_S, fl]), abs(sc[f_row + F_S, fr]))
+        vmax = max(abs(sc[fl, f_row + F_S]), abs(sc[fr, f_row + F_S]))
         for j in range(i - 1, i + 2):
-            vj = np.sqrt(sc[W_UN, j] ** 2 + sc[W_UT1, j] ** 2 + sc[W_UT2, j] ** 2)
+            vj = np.sqrt(sc[j, W_UN] ** 2 + sc[j, W_UT1] ** 2 + sc[j, W_UT2] ** 2)
             if vj > vmax:
                 vmax = vj
         m_abs = np.sqrt(mn * mn + m1 * m1 + m2 * m2)
@@ -679,14 +717,14 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             e_tot = e_new
         h_max = 0.0
         for j in range(i - 1, i + 2):
-            rho_j = sc[W_RHO, j]
+            rho_j = sc[j, W_RHO]
             if rho_j > 0.0:
                 e_j = 0.0
                 for k in range(nmat):
                     row = W_MAT + W_STRIDE * k
-                    e_j += sc[row, j] * sc[row + 1, j] * sc[row + 2, j]
-                h_j = ((e_j + max(sc[W_P, j], 0.0)) / rho_j
-                       + 0.5 * (sc[W_UN, j] ** 2 + sc[W_UT1, j] ** 2 + sc[W_UT2, j] ** 2))
+                    e_j += sc[j, row] * sc[j, row + 1] * sc[j, row + 2]
+                h_j = ((e_j + max(sc[j, W_P], 0.0)) / rho_j
+                       + 0.5 * (sc[j, W_UN] ** 2 + sc[j, W_UT1] ** 2 + sc[j, W_UT2] ** 2))
                 if h_j > h_max:
                     h_max = h_j
         if e_tot > rho * h_max:

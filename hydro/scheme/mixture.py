@@ -71,7 +71,14 @@ def damaged_tensile_strength(tensile_strength, arhoq, nq, b, k, ix, iy, iz, ar):
     """
     if nq == 0 or not ar > 0.0:
         return tensile_strength
-    damage = arhoq[b, nq * k + nq - 1, ix, iy, iz] / ar
+    return tension_left(tensile_strength, arhoq[b, nq * k + nq - 1, ix, iy, iz], ar)
+
+
+@njit(cache=True, inline="always")
+def tension_left(tensile_strength, damage_amount, ar):
+    """Y_T (1 - D) (Pa) with D = ``damage_amount`` / ``ar`` (alpha_k rho_k D_k over alpha_k rho_k,
+    both kg/m^3, ``ar`` > 0), 1 - D clipped to [0, 1]."""
+    damage = damage_amount / ar
     return tensile_strength * min(max(1.0 - damage, 0.0), 1.0)
 
 
@@ -115,7 +122,7 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
     module docstring (rho T only with ``with_temperature``, else 0) and how many present
     materials the EOS clamped and how many sit at their tensile limit (p_k raised to
     -Y_T,k (1 - D_k), or to 0 when distended).  With ``materials`` an array (not None),
-    material k's MATERIAL_ROWS values go to ``materials[row + MATERIAL_ROWS k + j, col]``
+    material k's MATERIAL_ROWS values go to ``materials[col, row + MATERIAL_ROWS k + j]``
     (an absent material gets alpha_k, zeros and its Y_T,k (1 - D_k)).
     """
     nmat = alpha.shape[1]
@@ -148,10 +155,10 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
                 limits += 1
         if materials is not None:
             r = row + MATERIAL_ROWS * k
-            materials[r, col] = a
-            materials[r + 1, col] = rk
-            materials[r + 2, col] = ek
-            materials[r + 3, col] = pk
-            materials[r + 4, col] = rk * c2b
-            materials[r + 5, col] = ytk
+            materials[col, r] = a
+            materials[col, r + 1] = rk
+            materials[col, r + 2] = ek
+            materials[col, r + 3] = pk
+            materials[col, r + 4] = rk * c2b
+            materials[col, r + 5] = ytk
     return rho, phi, p, kmod, eint, tmass, clamps, limits

@@ -94,7 +94,8 @@ BND_MATERIAL = 5
 FAIL_NAN = 1
 FAIL_NEGATIVE_DENSITY = 2
 
-# Rows of the per-thread scratch: cell values W, face states FM/FP, face fluxes F.
+# Rows of each cell's record in the per-thread scratch ``sc[cell, row]``: cell values W, face
+# states FM/FP, face fluxes F.
 W_RHO, W_UN, W_UT1, W_UT2, W_P, W_C, W_K, W_PHI, W_VOL, W_IVL, W_IVR = range(11)
 W_MAT = 11          # + W_STRIDE k: alpha_k, rho_k, e_k, p_k, K_k = rho_k c_K,k^2, Y_T,k (1 - D_k)
 W_STRIDE = MATERIAL_ROWS    # the per-material rows of hydro.mixture.mixture_state
@@ -110,8 +111,12 @@ def scratch_rows(nmat: int, nq: int = 0) -> int:
 
 
 def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int, nq: int = 0) -> np.ndarray:
-    """Per-thread scratch ``(nthreads, rows, pencil_cells + 1)`` for :func:`impactpipe.hydro.scheme.directional.sweep`."""
-    return np.zeros((nthreads, scratch_rows(nmat, nq), pencil_cells + 1))
+    """Per-thread scratch ``(nthreads, pencil_cells + 1, rows)`` for :func:`impactpipe.hydro.scheme.directional.sweep`.
+
+    Cell-major: ``sc[i, row]``, the rows of one cell (or face) side by side, so the loops over a
+    pencil's cells advance one pointer rather than one per row (the compiler keeps too many
+    row pointers of a row-major scratch on the stack)."""
+    return np.zeros((nthreads, pencil_cells + 1, scratch_rows(nmat, nq)))
 
 
 @njit(cache=True, inline="always")
@@ -122,3 +127,22 @@ def pencil_cell_index(axis, i, j1, j2):
     if axis == 1:
         return j1, i, j2
     return j1, j2, i
+
+
+@njit(cache=True, inline="always")
+def pencil_offset(nx, ny, nz, axis, j1, j2):
+    """(offset, stride) of the pencil along ``axis`` at transverse indices (j1, j2) in one column
+    of a C-ordered field ``[NB, C, NX, NY, NZ]`` seen as a flat array: cell i of the pencil in
+    column c of block b is element ``(b C + c) NX NY NZ + offset + i stride``.
+
+    The plain path indexes the flattened fields this way, with one integer per access
+    instead of five (each with its own offset and negative-index check), and without the
+    reference counting that a view per pencil costs.
+    """
+    ix, iy, iz = pencil_cell_index(axis, 0, j1, j2)
+    offset = (ix * ny + iy) * nz + iz
+    if axis == 0:
+        return offset, ny * nz
+    if axis == 1:
+        return offset, nz
+    return offset, 1

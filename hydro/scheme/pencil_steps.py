@@ -46,23 +46,23 @@ from impactpipe.hydro.scheme.pencil_layout import (
 @njit(cache=True, inline="always")
 def predict_flow(sc, i, half, qm_row, qp_row):
     """Face states of (u_n, u_t1, u_t2, p) of cell i; returns (u_n, du_n, p, lowest face pressure)."""
-    un = sc[W_UN, i]
-    dun = mc_slope(sc[W_UN, i - 1], un, sc[W_UN, i + 1])
-    dp = mc_slope(sc[W_P, i - 1], sc[W_P, i], sc[W_P, i + 1])
+    un = sc[i, W_UN]
+    dun = mc_slope(sc[i - 1, W_UN], un, sc[i + 1, W_UN])
+    dp = mc_slope(sc[i - 1, W_P], sc[i, W_P], sc[i + 1, W_P])
     for c in range(3):
         row = W_UN + c
-        q = sc[row, i]
-        dq = mc_slope(sc[row, i - 1], q, sc[row, i + 1])
+        q = sc[i, row]
+        dq = mc_slope(sc[i - 1, row], q, sc[i + 1, row])
         if c == 0:
-            qh = q - half * (un * dq + dp / sc[W_RHO, i])
+            qh = q - half * (un * dq + dp / sc[i, W_RHO])
         else:
             qh = q - half * un * dq
-        sc[qm_row + Q_UN + c, i] = qh - 0.5 * dq
-        sc[qp_row + Q_UN + c, i] = qh + 0.5 * dq
-    p = sc[W_P, i]
-    ph = p - half * (un * dp + sc[W_K, i] * dun)
-    sc[qm_row + Q_P, i] = ph - 0.5 * dp
-    sc[qp_row + Q_P, i] = ph + 0.5 * dp
+        sc[i, qm_row + Q_UN + c] = qh - 0.5 * dq
+        sc[i, qp_row + Q_UN + c] = qh + 0.5 * dq
+    p = sc[i, W_P]
+    ph = p - half * (un * dp + sc[i, W_K] * dun)
+    sc[i, qm_row + Q_P] = ph - 0.5 * dp
+    sc[i, qp_row + Q_P] = ph + 0.5 * dp
     return un, dun, p, ph - 0.5 * abs(dp)
 
 
@@ -74,35 +74,35 @@ def predict_material(sc, i, row, qrow, half, un, dun, qm_row, qp_row):
     e_k of a cell with e_k >= 0 are clipped at 0.  Returns True if a face density is not
     positive (the cell must fall back to first order).
     """
-    a = sc[row, i]
-    da = mc_slope(sc[row, i - 1], a, sc[row, i + 1])
+    a = sc[i, row]
+    da = mc_slope(sc[i - 1, row], a, sc[i + 1, row])
     ah = a - half * un * da
-    sc[qm_row + qrow, i] = min(max(ah - 0.5 * da, 0.0), 1.0)
-    sc[qp_row + qrow, i] = min(max(ah + 0.5 * da, 0.0), 1.0)
-    rk = sc[row + 1, i]
-    ek = sc[row + 2, i]
+    sc[i, qm_row + qrow] = min(max(ah - 0.5 * da, 0.0), 1.0)
+    sc[i, qp_row + qrow] = min(max(ah + 0.5 * da, 0.0), 1.0)
+    rk = sc[i, row + 1]
+    ek = sc[i, row + 2]
     if not rk > 0.0:
         for c in (1, 2):
-            sc[qm_row + qrow + c, i] = 0.0
-            sc[qp_row + qrow + c, i] = 0.0
+            sc[i, qm_row + qrow + c] = 0.0
+            sc[i, qp_row + qrow + c] = 0.0
         return False
-    rkm = sc[row + 1, i - 1] if sc[row + 1, i - 1] > 0.0 else rk
-    rkp = sc[row + 1, i + 1] if sc[row + 1, i + 1] > 0.0 else rk
-    ekm = sc[row + 2, i - 1] if sc[row + 1, i - 1] > 0.0 else ek
-    ekp = sc[row + 2, i + 1] if sc[row + 1, i + 1] > 0.0 else ek
+    rkm = sc[i - 1, row + 1] if sc[i - 1, row + 1] > 0.0 else rk
+    rkp = sc[i + 1, row + 1] if sc[i + 1, row + 1] > 0.0 else rk
+    ekm = sc[i - 1, row + 2] if sc[i - 1, row + 1] > 0.0 else ek
+    ekp = sc[i + 1, row + 2] if sc[i + 1, row + 1] > 0.0 else ek
     drk = mc_slope(rkm, rk, rkp)
     dek = mc_slope(ekm, ek, ekp)
     rh = rk - half * (un * drk + rk * dun)
-    eh = ek - half * (un * dek + sc[row + 3, i] / rk * dun)
+    eh = ek - half * (un * dek + sc[i, row + 3] / rk * dun)
     em = eh - 0.5 * dek
     ep = eh + 0.5 * dek
     if ek >= 0.0:
         em = max(em, 0.0)
         ep = max(ep, 0.0)
-    sc[qm_row + qrow + 1, i] = rh - 0.5 * drk
-    sc[qp_row + qrow + 1, i] = rh + 0.5 * drk
-    sc[qm_row + qrow + 2, i] = em
-    sc[qp_row + qrow + 2, i] = ep
+    sc[i, qm_row + qrow + 1] = rh - 0.5 * drk
+    sc[i, qp_row + qrow + 1] = rh + 0.5 * drk
+    sc[i, qm_row + qrow + 2] = em
+    sc[i, qp_row + qrow + 2] = ep
     return rh - 0.5 * abs(drk) <= 0.0
 
 
@@ -115,16 +115,16 @@ def cell_value_faces(sc, i, qm_row, qp_row, rows, qrows, flow=True):
     """
     if flow:
         for c in range(3):
-            sc[qm_row + Q_UN + c, i] = sc[W_UN + c, i]
-            sc[qp_row + Q_UN + c, i] = sc[W_UN + c, i]
-        sc[qm_row + Q_P, i] = sc[W_P, i]
-        sc[qp_row + Q_P, i] = sc[W_P, i]
+            sc[i, qm_row + Q_UN + c] = sc[i, W_UN + c]
+            sc[i, qp_row + Q_UN + c] = sc[i, W_UN + c]
+        sc[i, qm_row + Q_P] = sc[i, W_P]
+        sc[i, qp_row + Q_P] = sc[i, W_P]
     for k in range(rows[2]):
         row = rows[0] + rows[1] * k
         qrow = qrows[0] + qrows[1] * k
         for c in range(3):
-            sc[qm_row + qrow + c, i] = sc[row + c, i]
-            sc[qp_row + qrow + c, i] = sc[row + c, i]
+            sc[i, qm_row + qrow + c] = sc[i, row + c]
+            sc[i, qp_row + qrow + c] = sc[i, row + c]
 
 
 @njit(cache=True, inline="always")
@@ -138,11 +138,11 @@ def upwind_face(sc, f, rho_l, void_l, rho_r, void_r, qm_row, qp_row):
     il = f - 1
     ir = f
     side, s, p_star, chi, de = hllc_face(
-        rho_l, sc[qp_row + Q_UN, il], sc[qp_row + Q_P, il], sc[W_C, il], void_l,
-        rho_r, sc[qm_row + Q_UN, ir], sc[qm_row + Q_P, ir], sc[W_C, ir], void_r)
+        rho_l, sc[il, qp_row + Q_UN], sc[il, qp_row + Q_P], sc[il, W_C], void_l,
+        rho_r, sc[ir, qm_row + Q_UN], sc[ir, qm_row + Q_P], sc[ir, W_C], void_r)
     if side == UPWIND_LEFT:
-        return side, s, p_star, chi, de, il, il - 1, ir, qp_row, sc[W_IVR, il]
-    return side, s, p_star, chi, de, ir, ir + 1, il, qm_row, sc[W_IVL, ir]
+        return side, s, p_star, chi, de, il, il - 1, ir, qp_row, sc[il, W_IVR]
+    return side, s, p_star, chi, de, ir, ir + 1, il, qm_row, sc[ir, W_IVL]
 
 
 @njit(cache=True, inline="always")
@@ -155,24 +155,24 @@ def material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, 
     donor is mixed or partly void, capped at ``share`` of the donor's mass; internal energy
     flux = mass flux x e_k.  Stores the three and returns (mass flux, specific energy e_k).
     """
-    a_donor = sc[row, donor]
-    af = ultrabee_face(sc[row, up], a_donor, sc[row, down], nu)
+    a_donor = sc[donor, row]
+    af = ultrabee_face(sc[up, row], a_donor, sc[down, row], nu)
     if af > 1.0:
         af = 1.0
     if af * flow > share * a_donor:
         af = share * a_donor / flow
     if a_donor < 1.0 - FULL_TOLERANCE:
-        mk = af * sc[row + 1, donor] * s
-        ek = sc[row + 2, donor]
+        mk = af * sc[donor, row + 1] * s
+        ek = sc[donor, row + 2]
     else:
-        mk = af * sc[krow + qrow + 1, donor] * chi * s
-        ek = sc[krow + qrow + 2, donor]
-    mcap = share * a_donor * sc[row + 1, donor] / (dt * iv_donor)
+        mk = af * sc[donor, krow + qrow + 1] * chi * s
+        ek = sc[donor, krow + qrow + 2]
+    mcap = share * a_donor * sc[donor, row + 1] / (dt * iv_donor)
     if abs(mk) > mcap:
         mk = mcap if mk > 0.0 else -mcap
-    sc[frow, f] = af * s
-    sc[frow + 1, f] = mk
-    sc[frow + 2, f] = mk * ek
+    sc[f, frow] = af * s
+    sc[f, frow + 1] = mk
+    sc[f, frow + 2] = mk * ek
     return mk, ek
 
 
@@ -183,11 +183,11 @@ def flow_fluxes(sc, f, f_row, krow, donor, mass, eint, s, p_star, de):
     Normal momentum mass s + p*, transverse mass u_t,K, energy eint + mass (|u_K|^2 / 2 + de)
     + p* s with the upwind face state K (Q rows ``krow`` of cell ``donor``); stores s.
     """
-    un = sc[krow + Q_UN, donor]
-    ut1 = sc[krow + Q_UT1, donor]
-    ut2 = sc[krow + Q_UT2, donor]
-    sc[f_row + F_MN, f] = mass * s + p_star
-    sc[f_row + F_MT1, f] = mass * ut1
-    sc[f_row + F_MT2, f] = mass * ut2
-    sc[f_row + F_E, f] = eint + mass * (0.5 * (un * un + ut1 * ut1 + ut2 * ut2) + de) + p_star * s
-    sc[f_row + F_S, f] = s
+    un = sc[donor, krow + Q_UN]
+    ut1 = sc[donor, krow + Q_UT1]
+    ut2 = sc[donor, krow + Q_UT2]
+    sc[f, f_row + F_MN] = mass * s + p_star
+    sc[f, f_row + F_MT1] = mass * ut1
+    sc[f, f_row + F_MT2] = mass * ut2
+    sc[f, f_row + F_E] = eint + mass * (0.5 * (un * un + ut1 * ut1 + ut2 * ut2) + de) + p_star * s
+    sc[f, f_row + F_S] = s

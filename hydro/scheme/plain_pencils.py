@@ -55,6 +55,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     W_STRIDE,
     W_VOL,
     pencil_cell_index,
+    pencil_offset,
 )
 from impactpipe.hydro.scheme.pencil_steps import (
     cell_value_faces,
@@ -72,11 +73,13 @@ EMPTY_PENCIL = -2
 
 
 @njit(cache=True, inline="always")
-def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell):
+def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell, alpha_f, arho_f, arhoe_f, cs):
     """The material m that fills every cell of the pencil alone, EMPTY_PENCIL, or -1.
 
     See the module docstring.  An empty pencil (every cell void, with zero momentum, energy
     and transported scalars) has no fluxes and no update: the sweep leaves it as it is.
+    ``alpha_f``, ``arho_f``, ``arhoe_f``: the first three fields flattened, ``cs`` the length
+    of one column (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`).
     """
     nmat = alpha.shape[1]
     ix, iy, iz = pencil_cell_index(axis, 0, j1, j2)
@@ -99,14 +102,18 @@ def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncel
                 if arhoq[b, c, ix, iy, iz] != 0.0:
                     return -1
         return EMPTY_PENCIL
+    offset, stride = pencil_offset(alpha.shape[2], alpha.shape[3], alpha.shape[4], axis, j1, j2)
+    im = (b * nmat + m) * cs + offset
     for i in range(ncell):
-        ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
-        if not (alpha[b, m, ix, iy, iz] > 1.0 - FULL_TOLERANCE and arho[b, m, ix, iy, iz] > 0.0):
+        if not (alpha_f[im + i * stride] > 1.0 - FULL_TOLERANCE and arho_f[im + i * stride] > 0.0):
             return -1
-        for k in range(nmat):
-            if k != m and (alpha[b, k, ix, iy, iz] != 0.0 or arho[b, k, ix, iy, iz] != 0.0
-                           or arhoe[b, k, ix, iy, iz] != 0.0):
-                return -1
+    for k in range(nmat):
+        if k != m:
+            ik = (b * nmat + k) * cs + offset
+            for i in range(ncell):
+                c = ik + i * stride
+                if alpha_f[c] != 0.0 or arho_f[c] != 0.0 or arhoe_f[c] != 0.0:
+                    return -1
     return m
 
 
@@ -122,8 +129,8 @@ def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
     row = W_MAT + W_STRIDE * m
     qrow = Q_MAT + 3 * m
     un, dun, p, p_face = predict_flow(sc, i, half, qm_row, qp_row)
-    first_order = ((p > 0.0 and p_face < -TENSION_TOLERANCE * sc[W_K, i])
-                   or (p_face < -sc[row, i] * sc[row + 5, i] and p_face < p))
+    first_order = ((p > 0.0 and p_face < -TENSION_TOLERANCE * sc[i, W_K])
+                   or (p_face < -sc[i, row] * sc[i, row + 5] and p_face < p))
     if predict_material(sc, i, row, qrow, half, un, dun, qm_row, qp_row):
         first_order = True
     if first_order:
@@ -145,8 +152,8 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
     frow = f_row + F_MAT + 3 * m
     il = f - 1
     ir = f
-    rho_l = sc[qp_row + qrow, il] * sc[qp_row + qrow + 1, il]
-    rho_r = sc[qm_row + qrow, ir] * sc[qm_row + qrow + 1, ir]
+    rho_l = sc[il, qp_row + qrow] * sc[il, qp_row + qrow + 1]
+    rho_r = sc[ir, qm_row + qrow] * sc[ir, qm_row + qrow + 1]
     side, s, p_star, chi, de, donor, up, down, krow, iv_donor = upwind_face(sc, f, rho_l, False, rho_r, False,
                                                                              qm_row, qp_row)
     mass, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, abs(s) * dtdx,
@@ -154,17 +161,17 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
     for k in range(nmat):
         if k != m:
             for c in range(3):
-                sc[f_row + F_MAT + 3 * k + c, f] = 0.0
+                sc[f, f_row + F_MAT + 3 * k + c] = 0.0
             for j in range(nq):
-                sc[fq_row + nq * k + j, f] = 0.0
+                sc[f, fq_row + nq * k + j] = 0.0
     for j in range(nq):
-        sc[fq_row + nq * m + j, f] = mass * sc[wq_row + nq * m + j, donor]
+        sc[f, fq_row + nq * m + j] = mass * sc[donor, wq_row + nq * m + j]
     flow_fluxes(sc, f, f_row, krow, donor, mass, mass * ek, s, p_star, de)
 
 
 @njit(cache=True, inline="always")
-def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alpha, arho, arhoe, mom, energy,
-                 axis, t1, t2, floors, amounts, rho0, arhoq, nq, fq_row):
+def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f, arhoe_f, mom_f, energy_f, arhoq_f,
+                 ia, imn, im1, im2, ie, iq, cs, floors, amounts, rho0, nq, fq_row):
     """Step 4 for interior cell i of a plain pencil; False (cell untouched) if it needs the general update.
 
     U_new = U - dt (A_+ F_+ - A_- F_-) / V for alpha_m rho_m, momentum, E and the transported
@@ -174,35 +181,39 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alp
     reconciliation for one material, in its arithmetic (the difference from the transported
     internal energy counted as reconciled), a negative value floored at 0 with E raised to
     match (counted).  ``rho0`` is material m's reference density (kg/m^3; 0 for a gas).
+    The fields come flattened (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`) with
+    the cell's flat indices: ``ia`` in material m's column of alpha, arho and arhoe, ``imn``,
+    ``im1``, ``im2`` of the normal and transverse momentum, ``ie`` of E, ``iq`` of material m's
+    first transported scalar (scalar j at ``iq + j cs``, ``cs`` the length of a column).
     """
     row = W_MAT + W_STRIDE * m
     frow = f_row + F_MAT + 3 * m
-    wl = dt * sc[W_IVL, i]
-    wr = dt * sc[W_IVR, i]
+    wl = dt * sc[i, W_IVL]
+    wr = dt * sc[i, W_IVR]
     fl = i
     fr = i + 1
-    ar = arho[b, m, ix, iy, iz] - (wr * sc[frow + 1, fr] - wl * sc[frow + 1, fl])
-    mn = mom[b, axis, ix, iy, iz] - (wr * sc[f_row + F_MN, fr] - wl * sc[f_row + F_MN, fl])
+    ar = arho_f[ia] - (wr * sc[fr, frow + 1] - wl * sc[fl, frow + 1])
+    mn = mom_f[imn] - (wr * sc[fr, f_row + F_MN] - wl * sc[fl, f_row + F_MN])
     if radial:
-        mn += 0.5 * (sc[qm_row + Q_P, i] + sc[qp_row + Q_P, i]) * (wr - wl)
-    m1 = mom[b, t1, ix, iy, iz] - (wr * sc[f_row + F_MT1, fr] - wl * sc[f_row + F_MT1, fl])
-    m2 = mom[b, t2, ix, iy, iz] - (wr * sc[f_row + F_MT2, fr] - wl * sc[f_row + F_MT2, fl])
-    e_tot = energy[b, 0, ix, iy, iz] - (wr * sc[f_row + F_E, fr] - wl * sc[f_row + F_E, fl])
-    dv = wr * sc[f_row + F_S, fr] - wl * sc[f_row + F_S, fl]
-    a_flux = alpha[b, m, ix, iy, iz] - (wr * sc[frow, fr] - wl * sc[frow, fl])
+        mn += 0.5 * (sc[i, qm_row + Q_P] + sc[i, qp_row + Q_P]) * (wr - wl)
+    m1 = mom_f[im1] - (wr * sc[fr, f_row + F_MT1] - wl * sc[fl, f_row + F_MT1])
+    m2 = mom_f[im2] - (wr * sc[fr, f_row + F_MT2] - wl * sc[fl, f_row + F_MT2])
+    e_tot = energy_f[ie] - (wr * sc[fr, f_row + F_E] - wl * sc[fl, f_row + F_E])
+    dv = wr * sc[fr, f_row + F_S] - wl * sc[fl, f_row + F_S]
+    a_flux = alpha_f[ia] - (wr * sc[fr, frow] - wl * sc[fl, frow])
     if a_flux > 1.0:
         a_new = 1.0
-    elif dv > 0.0 and sc[row + 3, i] > -sc[row + 5, i]:
-        a_new = a_flux + sc[row, i] * dv
+    elif dv > 0.0 and sc[i, row + 3] > -sc[i, row + 5]:
+        a_new = a_flux + sc[i, row] * dv
     else:
         a_new = a_flux
     if not (ar > PHI_SMALL * rho0 and a_new >= PHI_VOID and e_tot == e_tot and mn == mn and m1 == m1
             and m2 == m2):
         return False
-    ae = (arhoe[b, m, ix, iy, iz] - (wr * sc[frow + 2, fr] - wl * sc[frow + 2, fl])
-          - sc[row + 3, i] * (a_new - a_flux))
+    ae = (arhoe_f[ia] - (wr * sc[fr, frow + 2] - wl * sc[fl, frow + 2])
+          - sc[i, row + 3] * (a_new - a_flux))
     e_int = e_tot - 0.5 * (mn * mn + m1 * m1 + m2 * m2) / ar
-    vol = sc[W_VOL, i]
+    vol = sc[i, W_VOL]
     amounts[b, AMOUNT_ENERGY_RECONCILED] += abs(e_int - ae) * vol
     delta = (e_int - ae) / ar
     if delta < 0.0 and ae > 0.0 and e_int >= 0.0:
@@ -214,14 +225,14 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz, alp
         amounts[b, AMOUNT_ENERGY_FLOOR] -= ae * vol
         e_tot -= ae
         ae = 0.0
-    alpha[b, m, ix, iy, iz] = min(a_new, 1.0)
-    arho[b, m, ix, iy, iz] = ar
-    arhoe[b, m, ix, iy, iz] = ae
+    alpha_f[ia] = min(a_new, 1.0)
+    arho_f[ia] = ar
+    arhoe_f[ia] = ae
     for j in range(nq):
         c = nq * m + j
-        arhoq[b, c, ix, iy, iz] -= wr * sc[fq_row + c, fr] - wl * sc[fq_row + c, fl]
-    mom[b, axis, ix, iy, iz] = mn
-    mom[b, t1, ix, iy, iz] = m1
-    mom[b, t2, ix, iy, iz] = m2
-    energy[b, 0, ix, iy, iz] = e_tot
+        arhoq_f[iq + j * cs] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
+    mom_f[imn] = mn
+    mom_f[im1] = m1
+    mom_f[im2] = m2
+    energy_f[ie] = e_tot
     return True

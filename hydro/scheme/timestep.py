@@ -63,6 +63,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
             kind = eos_kind[k]
             row = eos_params[k]
             shear = shear_modulus[k]
+            sheared = shear[0] != 0.0 or shear[1] != 0.0
             for ix in range(gx, nx - gx):
                 for iy in range(gy, ny - gy):
                     for iz in range(gz, nz - gz):
@@ -75,7 +76,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] / ar
                         pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, rk, ek)
-                        w[2, ix, iy, iz] += ar * signal_speed_squared(c2, rk, shear)
+                        w[2, ix, iy, iz] += ar * (signal_speed_squared(c2, rk, shear) if sheared else c2)
         rate = 0.0
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
