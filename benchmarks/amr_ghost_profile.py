@@ -18,7 +18,7 @@ GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 717.5}
 
 
 def main() -> None:
-    sim = PROBLEMS["sedov"].setup({"cells": 256, "end_time": 0.1, "deposit_cells": 3.5, "max_level": 2},
+    sim = PROBLEMS["sedov"].setup({"cells": 256, "end_time": 0.1, "deposit_cells": 3.5, "levels": 3},
                                   {"gas": {"eos": GAS}}, geometry="2d-cylindrical")
     sim.run(0.01)
     profile = cProfile.Profile()

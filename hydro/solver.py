@@ -308,12 +308,21 @@ class Simulation:
         finally:
             self.regrid_seconds += time.perf_counter() - started
 
+    def refinement_flags(self) -> tuple[np.ndarray, np.ndarray]:
+        """(refine, coarsen): per block, whether the refinement rule refines it or lets it coarsen now.
+
+        Fills the state's ghosts along every axis and raises ``peak_pressure`` (Pa) to the
+        largest |p| on the mesh (:func:`impactpipe.hydro.amr.regrid.flag_blocks`).
+        """
+        for axis in range(self.mesh.ndim):
+            fill_state_ghosts(self.state, self.mesh, axis)
+        refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
+                                                          self.tensile_strength, self.refinement, self.peak_pressure)
+        return refine, coarsen
+
     def _regrid(self) -> bool:
         mesh, st = self.mesh, self.state
-        for axis in range(mesh.ndim):
-            fill_state_ghosts(st, mesh, axis)
-        refine, coarsen, self.peak_pressure = flag_blocks(mesh, st, self.eos, self.shear_modulus,
-                                                          self.tensile_strength, self.refinement, self.peak_pressure)
+        refine, coarsen = self.refinement_flags()
         plan = plan_leaves(mesh, refine, coarsen)
         if plan is None:
             return False

@@ -290,9 +290,7 @@ def leaves_index(mesh: BlockMesh, key: tuple) -> int:
 
 def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, HydroState]:
     """The new mesh of ``plan`` and the state moved onto it (ghosts of ``state`` filled on every axis)."""
-    new_mesh = BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, mesh.domain_hi, mesh.blocks_per_axis,
-                                     mesh.block_cells, mesh.boundaries, plan["level"], plan["index"],
-                                     mesh.max_level)
+    new_mesh = planned_mesh(mesh, plan)
     nq = state.arhoq.shape[1] // state.nmat
     new = HydroState.empty(new_mesh, state.nmat, nq)
     keep = plan["keep"]
@@ -314,6 +312,22 @@ def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, H
     return new_mesh, new
 
 
+def planned_mesh(mesh: BlockMesh, plan: dict) -> BlockMesh:
+    """The mesh (no state) of the leaves of ``plan`` (:func:`plan_leaves`) over the root grid of ``mesh``."""
+    return BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, mesh.domain_hi, mesh.blocks_per_axis,
+                                 mesh.block_cells, mesh.boundaries, plan["level"], plan["index"], mesh.max_level)
+
+
+def refined(mesh: BlockMesh, refine: np.ndarray) -> BlockMesh | None:
+    """``mesh`` with the blocks flagged in ``refine`` (NB,) split (2:1 balanced, nothing coarsened).
+
+    Flags at ``max_level`` are dropped; None when no block splits.
+    """
+    refine = np.asarray(refine, dtype=bool) & (mesh.block_level < mesh.max_level)
+    plan = plan_leaves(mesh, refine, np.zeros(mesh.nblocks, dtype=bool))
+    return None if plan is None else planned_mesh(mesh, plan)
+
+
 def refine_to(mesh: BlockMesh, wanted_level) -> BlockMesh:
     """A mesh (no state) whose blocks are refined until each reaches ``wanted_level(mesh)``.
 
@@ -322,13 +336,35 @@ def refine_to(mesh: BlockMesh, wanted_level) -> BlockMesh:
     mesh of a problem before its state is set.
     """
     for _ in range(mesh.max_level):
-        refine = (np.asarray(wanted_level(mesh)) > mesh.block_level) & (mesh.block_level < mesh.max_level)
-        plan = plan_leaves(mesh, refine, np.zeros(mesh.nblocks, dtype=bool))
-        if plan is None:
+        finer = refined(mesh, np.asarray(wanted_level(mesh)) > mesh.block_level)
+        if finer is None:
             break
-        mesh = BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, mesh.domain_hi, mesh.blocks_per_axis,
-                                     mesh.block_cells, mesh.boundaries, plan["level"], plan["index"], mesh.max_level)
+        mesh = finer
     return mesh
+
+
+def refine_initial(mesh: BlockMesh, build, wanted_level=None):
+    """The simulation ``build(mesh)`` on ``mesh`` refined where its refinement rule flags its initial state.
+
+    ``build`` maps a mesh to a new Simulation (:class:`impactpipe.hydro.solver.Simulation`) whose
+    initial state the problem sets on that mesh; ``wanted_level`` (optional, as in
+    :func:`refine_to`) asks for levels the rule cannot see on a coarse mesh, such as a source
+    smaller than a root cell.  After :func:`refine_to`, the blocks that the simulation's
+    rule flags to refine (:meth:`~impactpipe.hydro.solver.Simulation.refinement_flags`) split
+    and the problem sets its state again on the finer mesh, until no block is flagged: every
+    cell holds the initial data at its own size (none is prolonged), and the finest level
+    is reached only where the rule asks for it (no finest-level copy of the whole domain is
+    made).  Coarsening is left to the run's regrids.  A uniform mesh is built once.
+    """
+    if wanted_level is not None:
+        mesh = refine_to(mesh, wanted_level)
+    sim = build(mesh)
+    while sim.mesh.adaptive:
+        finer = refined(sim.mesh, sim.refinement_flags()[0])
+        if finer is None:
+            break
+        sim = build(finer)
+    return sim
 
 
 def summed_rows(counters: np.ndarray, nblocks: int) -> np.ndarray:

@@ -8,6 +8,12 @@ define ``check_parameters(params) -> list[str]``, cross checks beyond each param
 bounds.  ``materials`` maps a material name to its resolved spec ``{"eos": {...}}``;
 ``hydro_options`` are ``block_cells``, ``cfl`` and ``geometry`` where the problem allows a
 choice.  Unknown parameter keys raise ``KeyError``.
+
+Every ``setup`` also takes ``levels`` (1: uniform) and ``refinement`` (the ``hydro.refinement``
+keys) in ``params``, from :data:`~impactpipe.hydro.problems.common.ADAPTIVE_DEFAULTS`: its
+resolution keys count cells of the finest level and, with ``levels`` > 1, the mesh is adaptive
+(:func:`~impactpipe.hydro.problems.common.adaptive_mesh`), refined at t = 0 where the
+refinement rule flags the initial state (the impact: where the bodies' surfaces are).
 """
 
 from impactpipe.hydro.problems import (

@@ -3,7 +3,10 @@
 rho(x, 0) = density (1 + amplitude sin(2 pi x / length)), u = (velocity, 0, 0),
 p = pressure.  The exact solution is the initial profile shifted by velocity * t; after
 ``end_time`` = length / velocity (one crossing) it equals the initial data.  1d-planar,
-or along x in 2d-planar / 3d (one periodic block across).
+or along x in 2d-planar / 3d (one periodic root block across).  ``cells`` counts the finest
+level; with ``levels`` > 1 the mesh is adaptive
+(:func:`~impactpipe.hydro.problems.common.adaptive_simulation`); the wave refines only where
+its density changes across a cell by more than ``refinement.density_jump``.
 """
 
 from __future__ import annotations
@@ -11,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
-from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_simulation, check_geometry, material_list,
+                                              merged, tube_mesh)
 from impactpipe.hydro.problems.parameters import Parameter, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -30,7 +34,7 @@ PARAMETERS = {
 }
 
 #: What :func:`setup` takes for parameters a call leaves out.
-DEFAULTS = setup_defaults(PARAMETERS)
+DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def exact_density(p: dict, x: np.ndarray, t: float) -> np.ndarray:
@@ -45,16 +49,18 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     check_geometry("advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["material"]])
-    ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
-    bc = block_cells or {1: 8, 2: 16, 3: 8}[ndim]
-    dx = p["length"] / p["cells"]
-    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["length"]] + [bc * dx] * (ndim - 1),
-                             [p["cells"]] + [bc] * (ndim - 1), [("periodic", "periodic")] * ndim, bc)
-    state = HydroState.empty(mesh, 1)
+    mesh = tube_mesh(geometry, p["length"], p["cells"], ("periodic", "periodic"), block_cells, p["levels"])
+    return adaptive_simulation(mesh, lambda m: initial_state(m, p, eos), names, specs, cfl, p["refinement"])
+
+
+def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
+    """The density wave (kg/m^3, cell averages of the sine over each cell's own width) at ``velocity``
+    (m/s) and ``pressure`` (Pa)."""
     x = mesh.cell_centers()[:, 0]
-    # cell averages of the sine profile (exact integral over each cell)
+    dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
     k = 2.0 * np.pi / p["length"]
-    avg = (np.cos(k * (x - 0.5 * dx)) - np.cos(k * (x + 0.5 * dx))) / (k * dx)
-    rho = p["density"] * (1.0 + p["amplitude"] * avg)
-    state.set_material(mesh, 1.0, 0, eos, rho, np.array([p["velocity"], 0.0, 0.0]), pressure=p["pressure"])
-    return new_simulation(mesh, names, specs, state, cfl)
+    average = (np.cos(k * (x - 0.5 * dx)) - np.cos(k * (x + 0.5 * dx))) / (k * dx)
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, 1.0, 0, eos, p["density"] * (1.0 + p["amplitude"] * average),
+                       np.array([p["velocity"], 0.0, 0.0]), pressure=p["pressure"])
+    return state

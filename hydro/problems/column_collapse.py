@@ -11,8 +11,12 @@ Boundaries: x = 0 reflecting (the back wall, free slip: a mirror plane), z = 0 r
 and rough (:meth:`impactpipe.hydro.strength.model.MaterialStrength.set_rough_wall`: the
 floor holds the material by its own friction, as a bed glued with the same grains does),
 outflow at x_max and z_max.  Mesh (:func:`domain`): square cells dx = H0 /
-``cells_per_height``; x spans L0 plus twice the run-out the scaling law predicts, z spans H0
-plus one cell, each rounded up to whole blocks.
+``cells_per_height`` at the finest level; x spans L0 plus twice the run-out the scaling law
+predicts, z spans H0 plus one cell, each rounded up to whole root blocks.  With ``levels`` > 1
+the mesh is adaptive: root cells are 2^(levels - 1) dx, the blocks the refinement rule flags
+at t = 0 (the column's free surfaces) start at the finest level, and ``refinement`` decides
+where the mesh refines and coarsens as the column collapses
+(:func:`~impactpipe.hydro.amr.regrid.refine_initial`).
 
 Initial state: the material at its reference density rho0, at rest, with the hydrostatic
 pressure p = rho0 g (H0 - z_m) (z_m the centroid height of the material in the cell) put in
@@ -32,16 +36,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.gravity import ExternalGravity
 from impactpipe.hydro.mesh.blocks import BlockMesh
-from impactpipe.hydro.problems.common import (
-    check_geometry,
-    material_list,
-    merged,
-    strength_specs,
-    tensile_strengths,
-)
+from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, check_geometry, material_list, merged,
+                                              root_cell_multiple, strength_specs, tensile_strengths)
 from impactpipe.hydro.problems.parameters import Parameter, setup_defaults, violations
 from impactpipe.hydro.solver import Simulation
 from impactpipe.hydro.mesh.state import HydroState
@@ -81,7 +81,7 @@ PARAMETERS = {
 }
 
 #: What :func:`setup` takes for parameters a call leaves out.
-DEFAULTS = setup_defaults(PARAMETERS)
+DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def scaling_runout(aspect_ratio: float) -> float:
@@ -104,18 +104,20 @@ def scaling_height(aspect_ratio: float) -> float:
     return a if a <= 0.7 else a ** (1.0 / 3.0)
 
 
-def domain(height: float, width: float, cells_per_height: int, block_cells: int | None = None) -> dict:
+def domain(height: float, width: float, cells_per_height: int, block_cells: int | None = None,
+           levels: int = 1) -> dict:
     """The mesh box (see the module docstring); lengths in m.
 
-    Returns ``cell_size``, ``lo``, ``hi``, ``cells`` (per axis, multiples of ``block_cells``),
-    ``boundaries`` and ``block_cells``.
+    Returns ``cell_size`` (the finest), ``lo``, ``hi``, ``cells`` (per axis at the finest level,
+    multiples of ``block_cells`` 2^(levels - 1)), ``boundaries`` and ``block_cells``.
     """
     bc = int(block_cells or BLOCK_CELLS)
+    multiple = root_cell_multiple(bc, levels)
     dx = height / cells_per_height
     room = 2.0 * scaling_runout(height / width) * width
 
     def whole_blocks(length: float) -> int:
-        return int(np.ceil(length / dx / bc - 1e-9)) * bc
+        return int(np.ceil(length / dx / multiple - 1e-9)) * multiple
 
     nx = whole_blocks(width + room)
     nz = whole_blocks(height + dx)
@@ -139,9 +141,30 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     if cfl > MAX_CFL:
         raise ValueError(f"cfl: must be <= {MAX_CFL:g} for a column collapse (got {cfl:g}); see MAX_CFL")
     names, specs, eos = material_list(materials, [p["material"]])
-    box = domain(p["height"], p["width"], int(p["cells_per_height"]), block_cells)
-    mesh = BlockMesh.uniform(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"])
-    dx = box["cell_size"]
+    box = domain(p["height"], p["width"], int(p["cells_per_height"]), block_cells, p["levels"])
+    mesh = adaptive_mesh(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"],
+                         p["levels"])
+    rule = rule_from_config(p["refinement"])
+
+    def build(m: BlockMesh) -> Simulation:
+        sim = Simulation(m, names, specs, initial_state(m, p, eos), cfl=cfl,
+                         tensile_strength=tensile_strengths(materials, names),
+                         strength=strength_specs(materials, names),
+                         gravity=ExternalGravity([0.0, -p["gravity"], 0.0], m), refinement=rule)
+        if sim.strength is not None:
+            sim.strength.set_rough_wall(VERTICAL_AXIS, 0)
+        return sim
+
+    return refine_initial(mesh, build)
+
+
+def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
+    """The column at rest at its reference density (kg/m^3) in hydrostatic equilibrium, void elsewhere.
+
+    Each cell's volume fraction is the area of the column inside it over its own; its pressure
+    rho0 g (H0 - z_m) (Pa) is taken at the centroid height z_m (m) of the material in it.
+    """
+    dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
     centres = mesh.cell_centers()
     x, z = centres[:, 0], centres[:, 1]
     depth = _overlap(z - 0.5 * dx, z + 0.5 * dx, 0.0, p["height"])
@@ -151,12 +174,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     pressure = rho0 * p["gravity"] * np.clip(p["height"] - centroid, 0.0, None)
     state = HydroState.empty(mesh, 1)
     state.set_material(mesh, fraction, 0, eos, rho0, np.zeros(3), pressure=pressure)
-    gravity = ExternalGravity([0.0, -p["gravity"], 0.0], mesh)
-    sim = Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strengths(materials, names),
-                     strength=strength_specs(materials, names), gravity=gravity)
-    if sim.strength is not None:
-        sim.strength.set_rough_wall(VERTICAL_AXIS, 0)
-    return sim
+    return state
 
 
 def kinetic_energy(snapshot) -> float:
@@ -171,7 +189,8 @@ def deposit(snapshot) -> dict:
     """Run-out and height of the material in a 2d-planar ``snapshot`` of this problem (m).
 
     The thickness profile h(x) = sum_z alpha dz (m, alpha the material volume fraction summed
-    over the materials) is taken per cell column.  ``runout`` L_f: going out from the wall, the
+    over the materials) is taken per cell column of the finest level, dx (a coarser cell adds
+    its column's thickness to each of the finest columns it spans).  ``runout`` L_f: going out from the wall, the
     right edge of the last column of the continuous deposit (h >= FRONT_THICKNESS_CELLS cell
     sizes) plus dx h_next / (FRONT_THICKNESS_CELLS dx) for the thinner column beyond it
     (at most one cell); detached spray further out is left out.  ``height`` H_f is the largest
@@ -182,14 +201,16 @@ def deposit(snapshot) -> dict:
     """
     lo = snapshot.block_lo
     nx = snapshot.volume_fraction.shape[2]
-    dx = float(snapshot.block_hi[0, 0] - lo[0, 0]) / nx
+    widths = (snapshot.block_hi[:, 0] - lo[:, 0]) / nx
+    dx = float(widths.min())
     fill = snapshot.volume_fraction[:, :, :, :, 0].sum(axis=1)
     first = float(lo[:, 0].min())
     column = np.rint((lo[:, 0] - first) / dx).astype(int)
-    ncols = int(column.max()) + nx
+    span = np.rint(widths / dx).astype(int)
+    ncols = int((column + nx * span).max())
     thickness = np.zeros(ncols)
     for b in range(lo.shape[0]):
-        thickness[column[b]:column[b] + nx] += fill[b].sum(axis=1) * dx
+        thickness[column[b]:column[b] + nx * span[b]] += np.repeat(fill[b].sum(axis=1) * widths[b], span[b])
     x = first + (np.arange(ncols) + 0.5) * dx
     threshold = FRONT_THICKNESS_CELLS * dx
     thin = np.nonzero(thickness < threshold)[0]

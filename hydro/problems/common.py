@@ -1,4 +1,4 @@
-"""Helpers shared by the problem setups: material lists, parameter merging, presets."""
+"""Helpers shared by the problem setups: material lists, parameter merging, presets, the adaptive mesh."""
 
 from __future__ import annotations
 
@@ -6,8 +6,10 @@ from importlib import resources
 
 import yaml
 
+from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
 from impactpipe.hydro.eos import SPECIFIC_HEAT_DEFAULTS, pack_eos
-from impactpipe.hydro.mesh.blocks import BlockMesh
+from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS, BlockMesh
+from impactpipe.hydro.output.snapshot import GEOMETRY_DIMENSIONS
 from impactpipe.hydro.solver import Simulation
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -74,3 +76,59 @@ def check_geometry(problem: str, supported: tuple[str, ...], geometry: str) -> N
     """Raise ValueError unless ``geometry`` is one the problem supports."""
     if geometry not in supported:
         raise ValueError(f"{problem} runs in {', '.join(supported)} (got {geometry})")
+
+
+#: What every problem's ``setup`` takes for its mesh's levels where a call leaves them out: ``levels``
+#: (1: uniform; the config's ``hydro.max_levels``) and ``refinement`` (the ``hydro.refinement`` keys of
+#: :class:`~impactpipe.hydro.amr.regrid.RefinementRule`; None: its defaults).
+ADAPTIVE_DEFAULTS = {"levels": 1, "refinement": None}
+
+
+def root_cell_multiple(block_cells: int, levels: int) -> int:
+    """Finest cells along a root block's edge, block_cells 2^(levels - 1): a multiple of it makes whole root blocks."""
+    return int(block_cells) * 2 ** (int(levels) - 1)
+
+
+def adaptive_mesh(geometry: str, lo, hi, cells, boundaries, block_cells: int | None, levels: int) -> BlockMesh:
+    """The root level of a mesh of ``levels`` levels over the box [``lo``, ``hi``] (m), nothing refined yet.
+
+    ``cells`` (one per used axis) counts cells of the finest level, dx = (hi - lo) / cells, so a
+    problem's resolution keys mean the same with any number of levels; the root level has
+    cells / 2^(levels - 1) cells per axis.  Raises ValueError unless every count is a whole number
+    of root blocks (:func:`root_cell_multiple`).  One level is the uniform mesh of ``cells``.
+    """
+    ndim = GEOMETRY_DIMENSIONS[geometry]
+    bc = int(block_cells or DEFAULT_BLOCK_CELLS[ndim])
+    multiple = root_cell_multiple(bc, levels)
+    scale = multiple // bc
+    cells = [int(n) for n in cells]
+    if any(n % multiple for n in cells):
+        raise ValueError(f"cells: {cells} finest cells per axis are not whole root blocks of {levels} levels; "
+                         f"each must be a multiple of block_cells x 2^(levels - 1) = {bc} x {scale} = {multiple}")
+    return BlockMesh.uniform(geometry, lo, hi, [n // scale for n in cells], boundaries, bc, max_level=int(levels) - 1)
+
+
+def tube_mesh(geometry: str, length: float, cells: int, ends, block_cells: int | None, levels: int) -> BlockMesh:
+    """Root level of the mesh of a tube along x: ``cells`` finest cells over ``length`` (m), ``ends``
+    the (low, high) boundary kinds along x, and in 2d-planar / 3d one root block of periodic cells
+    across (block_cells 2^(levels - 1) finest cells, so the finest cells are cubes)."""
+    ndim = GEOMETRY_DIMENSIONS[geometry]
+    across = root_cell_multiple(block_cells or DEFAULT_BLOCK_CELLS[ndim], levels)
+    dx = length / cells
+    return adaptive_mesh(geometry, [0.0] * ndim, [length] + [across * dx] * (ndim - 1), [cells] + [across] * (ndim - 1),
+                         [ends] + [("periodic", "periodic")] * (ndim - 1), block_cells, levels)
+
+
+def adaptive_simulation(mesh: BlockMesh, initial_state, names: list[str], specs: list[dict], cfl: float,
+                        refinement: dict | None, wanted_level=None, **options) -> Simulation:
+    """The Simulation of a problem on ``mesh`` (:func:`adaptive_mesh`), refined where its initial state asks.
+
+    ``initial_state(mesh)`` sets the problem's :class:`HydroState` on a mesh; ``refinement``
+    is the ``hydro.refinement`` mapping; ``options`` go to :func:`new_simulation`
+    (``tensile_strength``, ``strength``).  The mesh refines from its root level where the
+    refinement rule flags the initial state (and to ``wanted_level``), the state being set
+    again on each finer mesh (:func:`impactpipe.hydro.amr.regrid.refine_initial`).
+    """
+    rule = rule_from_config(refinement)
+    return refine_initial(mesh, lambda m: new_simulation(m, names, specs, initial_state(m), cfl, refinement=rule,
+                                                         **options), wanted_level)

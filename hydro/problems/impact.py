@@ -43,10 +43,13 @@ from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
 from impactpipe.hydro.eos import pack_eos, reference_density
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS, BlockMesh
 from impactpipe.hydro.problems.common import (
+    ADAPTIVE_DEFAULTS,
+    adaptive_mesh,
     check_geometry,
     material_list,
     merged,
     new_simulation,
+    root_cell_multiple,
     strength_specs,
     tensile_strengths,
 )
@@ -95,8 +98,7 @@ DEFAULTS = {
     "margin": PARAMETERS["domain_margin"].default,
     "subsamples": 4,
     "end_time": 1.0,
-    "levels": 1,
-    "refinement": None,
+    **ADAPTIVE_DEFAULTS,
 }
 
 
@@ -121,27 +123,26 @@ def domain(geometry: str, target_radius: float, projectile_radius: float, cells_
 
     Returns a dict with ``cell_size`` dx (the finest), ``lo`` and ``hi`` (one entry per used
     axis), ``cells`` (per used axis at the finest level, multiples of ``block_cells``
-    2^(levels - 1)), ``root_cells`` (per used axis at level 0), ``boundaries`` ((low, high) kind
-    per axis), ``block_cells``, ``symmetry`` (a sentence naming the symmetry used) and
-    ``half_domain`` (True when only y >= 0 of a 3d scene is computed).
+    2^(levels - 1)), ``boundaries`` ((low, high) kind per axis), ``block_cells``, ``symmetry``
+    (a sentence naming the symmetry used) and ``half_domain`` (True when only y >= 0 of a 3d
+    scene is computed).
     """
     check_geometry("impact", GEOMETRIES, geometry)
     ndim = 2 if geometry == "2d-cylindrical" else 3
-    scale = 2 ** (int(levels) - 1)
     bc = int(block_cells or DEFAULT_BLOCK_CELLS[ndim])
+    multiple = root_cell_multiple(bc, levels)
     dx = projectile_radius / cells_per_projectile_radius
     half_width = (1.0 + margin) * target_radius
     z_lo = -half_width
     z_hi = target_radius + 2.0 * projectile_radius + margin * target_radius
 
     def whole_blocks(length: float) -> int:
-        return int(np.ceil(length / dx / (bc * scale))) * bc * scale
+        return int(np.ceil(length / dx / multiple)) * multiple
 
     nz = whole_blocks(z_hi - z_lo)
     n_side = whole_blocks(half_width)
     if geometry == "2d-cylindrical":
         return {"cell_size": dx, "lo": [0.0, z_lo], "hi": [n_side * dx, z_lo + nz * dx], "cells": [n_side, nz],
-                "root_cells": [n_side // scale, nz // scale],
                 "boundaries": [("reflecting", "outflow"), ("outflow", "outflow")], "block_cells": bc,
                 "symmetry": "axisymmetric about z (reflecting axis r = 0)", "half_domain": False}
     nx = whole_blocks(2.0 * half_width)
@@ -153,7 +154,7 @@ def domain(geometry: str, target_radius: float, projectile_radius: float, cells_
         y_lo, ny, y_bc = 0.0, n_side, ("reflecting", "outflow")
         symmetry = "mirror plane y = 0 (reflecting), half domain y >= 0; the hand-off mirrors it"
     return {"cell_size": dx, "lo": [x_lo, y_lo, z_lo], "hi": [x_lo + nx * dx, y_lo + ny * dx, z_lo + nz * dx],
-            "cells": [nx, ny, nz], "root_cells": [nx // scale, ny // scale, nz // scale],
+            "cells": [nx, ny, nz],
             "boundaries": [("outflow", "outflow"), y_bc, ("outflow", "outflow")],
             "block_cells": bc, "symmetry": symmetry, "half_domain": not full_domain}
 
@@ -211,8 +212,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     levels = int(p["levels"])
     box = domain(geometry, tgt["radius"], prj["radius"], p["cells_per_projectile_radius"], p["margin"],
                  block_cells, p["full_domain"], levels)
-    mesh = BlockMesh.uniform(geometry, box["lo"], box["hi"], box["root_cells"], box["boundaries"],
-                             box["block_cells"], max_level=levels - 1)
+    mesh = adaptive_mesh(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"], levels)
     centre, velocity = projectile_start(tgt["radius"], prj["radius"], prj["velocity"], p["angle"])
     if geometry == "2d-cylindrical":  # mesh components (r, z, 0)
         centre, velocity = centre[1:], np.array([0.0, velocity[2], 0.0])

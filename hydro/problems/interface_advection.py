@@ -5,7 +5,10 @@ The slab [slab_lo, slab_hi) (m) holds ``inner`` ({material, density}); the rest 
 moves at ``velocity`` (m/s) at ``pressure`` (Pa) (0 with void: a material next to void is in
 equilibrium only at zero pressure, e.g. Tillotson at its reference state).  The exact
 solution keeps velocity and pressure uniform and shifts the slab; after ``end_time`` =
-length / velocity the slab is back where it started.
+length / velocity the slab is back where it started.  1d-planar, or along x in 2d-planar /
+3d (one periodic root block across).  ``cells`` counts the finest level; with ``levels`` > 1
+the mesh is adaptive (:func:`~impactpipe.hydro.problems.common.adaptive_simulation`: the
+slab's faces refine).
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
-from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_simulation, check_geometry, material_list,
+                                              merged, tube_mesh)
 from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -41,7 +45,7 @@ PARAMETERS = {
 }
 
 #: What :func:`setup` takes for parameters a call leaves out.
-DEFAULTS = setup_defaults(PARAMETERS)
+DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
@@ -51,11 +55,13 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     p = merged(DEFAULTS, params)
     used = [p["inner"]["material"]] + ([p["outer"]["material"]] if p["outer"] is not None else [])
     names, specs, eos = material_list(materials, used)
-    ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
-    bc = block_cells or {1: 8, 2: 16, 3: 8}[ndim]
-    dx = p["length"] / p["cells"]
-    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["length"]] + [bc * dx] * (ndim - 1),
-                             [p["cells"]] + [bc] * (ndim - 1), [("periodic", "periodic")] * ndim, bc)
+    mesh = tube_mesh(geometry, p["length"], p["cells"], ("periodic", "periodic"), block_cells, p["levels"])
+    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos), names, specs, cfl, p["refinement"])
+
+
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState:
+    """``inner`` in the cells whose centre lies in [slab_lo, slab_hi) (m), ``outer`` (or void) in the
+    others, all at ``velocity`` (m/s) and ``pressure`` (Pa)."""
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
     inside = (x >= p["slab_lo"]) & (x < p["slab_hi"])
@@ -65,7 +71,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     if p["outer"] is not None:
         state.set_material(mesh, (~inside).astype(float), names.index(p["outer"]["material"]), eos,
                            p["outer"]["density"], velocity, pressure=p["pressure"])
-    return new_simulation(mesh, names, specs, state, cfl)
+    return state
 
 
 def interface_width(sim, threshold: float = 0.01) -> float:

@@ -3,7 +3,9 @@
 The flyer occupies [-thickness_f, 0) and moves at +velocity (m/s); the target occupies
 [0, thickness_t) at rest; both start at their reference density with e = 0 (p = 0), with
 void margins of ``margin`` times the thicker plate on both sides (free surfaces) and
-outflow ends.  ``cells`` cells span the whole domain.  Until the shocks reach the free
+outflow ends.  ``cells`` cells of the finest level span the whole domain; with ``levels`` > 1
+the mesh is adaptive (:func:`~impactpipe.hydro.problems.common.adaptive_simulation`: the
+plates' faces refine at t = 0, then the shocks).  Until the shocks reach the free
 surfaces, the shocked states on both sides of the contact share the pressure and particle
 velocity of :func:`impactpipe.hydro.exact.impedance.planar_impact_state`.
 """
@@ -14,14 +16,8 @@ import numpy as np
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import BlockMesh
-from impactpipe.hydro.problems.common import (
-    check_geometry,
-    material_list,
-    merged,
-    new_simulation,
-    strength_specs,
-    tensile_strengths,
-)
+from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, adaptive_simulation, check_geometry,
+                                              material_list, merged, strength_specs, tensile_strengths)
 from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -46,7 +42,7 @@ PARAMETERS = {
 }
 
 #: What :func:`setup` takes for parameters a call leaves out.
-DEFAULTS = setup_defaults(PARAMETERS)
+DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def domain(p: dict) -> tuple[float, float]:
@@ -62,10 +58,18 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["flyer"]["material"], p["target"]["material"]])
     lo, hi = domain(p)
-    mesh = BlockMesh.uniform(geometry, [lo], [hi], [p["cells"]], [("outflow", "outflow")], block_cells)
+    mesh = adaptive_mesh(geometry, [lo], [hi], [p["cells"]], [("outflow", "outflow")], block_cells, p["levels"])
+    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos), names, specs, cfl, p["refinement"],
+                               tensile_strength=tensile_strengths(materials, names),
+                               strength=strength_specs(materials, names))
+
+
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState:
+    """Both plates at their reference density (kg/m^3) with e = 0, the flyer at its ``velocity`` (m/s);
+    each cell's volume fractions are the lengths of the plates inside it over its width."""
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
-    dx = mesh.min_cell_size()
+    dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
     edges_lo = x - 0.5 * dx
     edges_hi = x + 0.5 * dx
 
@@ -80,5 +84,4 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         k = names.index(plate["material"])
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         state.set_material(mesh, frac, k, eos, rho0, np.array([speed, 0.0, 0.0]), specific_energy=0.0)
-    return new_simulation(mesh, names, specs, state, cfl, tensile_strengths(materials, names),
-                          strength_specs(materials, names))
+    return state

@@ -3,14 +3,17 @@
 2d-cylindrical (r, z) on [0, extent]^2 with the z = 0 plane reflecting (the domain holds
 half the sphere, energy / 2) or 3d on the octant [0, extent]^3 with reflecting planes
 (energy / 8).  The energy is spread uniformly (per volume) over the cells whose centres lie
-within ``deposit_cells`` cell sizes of the origin, in an ambient ideal gas at ``density``
+within ``deposit_cells`` finest cell sizes of the origin, in an ambient ideal gas at ``density``
 and ``pressure``.  Exact solution: :func:`impactpipe.hydro.exact.sedov.sedov_solution`
 with nu = 3 (a spherical blast in both geometries).
 
-``cells`` is the number of cells per axis at the finest level.  With ``max_level`` L > 0 the
-mesh is adaptive: the root level has cells / 2^L cells per axis, the blocks around the
-source start at level L, and ``refinement`` (the ``hydro.refinement`` keys of
-:class:`~impactpipe.hydro.amr.regrid.RefinementRule`) decides the rest as the blast grows.
+``cells`` is the number of cells per axis at the finest level.  With ``levels`` > 1 the mesh
+is adaptive (:func:`~impactpipe.hydro.problems.common.adaptive_mesh`): the root level has
+cells / 2^(levels - 1) cells per axis, the blocks around the source start at the finest
+level (the deposit may be smaller than a root cell) and the rest refines where
+``refinement`` (the ``hydro.refinement`` keys of
+:class:`~impactpipe.hydro.amr.regrid.RefinementRule`) flags the initial state and, later,
+the blast.
 """
 
 from __future__ import annotations
@@ -18,10 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.eos import energy_from_pressure
-from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
-from impactpipe.hydro.mesh.blocks import BlockMesh
-from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, adaptive_simulation, check_geometry,
+                                              material_list, merged)
 from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
@@ -40,9 +43,9 @@ PARAMETERS = {
     "end_time": Parameter(0.3, gt=0, units="s", description="end of the run"),
 }
 
-#: What :func:`setup` takes for parameters a call leaves out; ``max_level`` and ``refinement``
+#: What :func:`setup` takes for parameters a call leaves out; ``levels`` and ``refinement``
 #: (the adaptive mesh of the module docstring) are parameters of ``setup`` only, not of a scene.
-DEFAULTS = {**setup_defaults(PARAMETERS), "max_level": 0, "refinement": None}
+DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
@@ -50,25 +53,32 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the Sedov :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
     check_geometry("sedov", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
+    names, specs, eos = material_list(materials, [p["ambient"]["material"]])
+    ndim = 2 if geometry == "2d-cylindrical" else 3
+    mesh = adaptive_mesh(geometry, [0.0] * ndim, [p["extent"]] * ndim, [p["cells"]] * ndim,
+                         [("reflecting", "outflow")] * ndim, block_cells, p["levels"])
+    source = (p["deposit_cells"] + 2) * p["extent"] / p["cells"]
+    finest = mesh.max_level
+    return adaptive_simulation(mesh, lambda m: initial_state(m, p, eos), names, specs, cfl, p["refinement"],
+                               lambda m: np.where((m.block_lo[:, :ndim] < source).all(axis=1), finest, 0))
+
+
+def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
+    """The ambient gas at rest with ``energy`` (J, of the whole sphere) in the cells within the deposit.
+
+    The deposit holds the cells whose centres lie within ``deposit_cells`` finest cell sizes
+    (extent / cells, m) of the origin; the domain holds the share 1/2 (2d-cylindrical) or 1/8
+    (3d) of the sphere's energy, spread uniformly per volume over them.
+    """
+    ndim = mesh.ndim
     amb = p["ambient"]
-    names, specs, eos = material_list(materials, [amb["material"]])
-    ndim, share = (2, 0.5) if geometry == "2d-cylindrical" else (3, 0.125)
-    n = p["cells"]
-    levels = int(p["max_level"])
-    if n % 2 ** levels:
-        raise ValueError(f"sedov: cells = {n} must be divisible by 2^max_level = {2 ** levels}")
-    mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [p["extent"]] * ndim, [n // 2 ** levels] * ndim,
-                             [("reflecting", "outflow")] * ndim, block_cells, max_level=levels)
-    finest = p["extent"] / n
-    source = (p["deposit_cells"] + 2) * finest
-    mesh = refine_to(mesh, lambda m: np.where((m.block_lo[:, :ndim] < source).all(axis=1), levels, 0))
-    centers = mesh.cell_centers()
-    radius = np.sqrt((centers[:, :ndim] ** 2).sum(axis=1))
-    hot = radius < p["deposit_cells"] * mesh.min_cell_size()
+    share = 0.5 if mesh.geometry == "2d-cylindrical" else 0.125
+    radius = np.sqrt((mesh.cell_centers()[:, :ndim] ** 2).sum(axis=1))
+    hot = radius < p["deposit_cells"] * p["extent"] / p["cells"]
     vol = mesh.cell_volumes()
     e_amb = energy_from_pressure(eos.kind[0], eos.params[0], eos.table, amb["density"], amb["pressure"])
     e_hot = e_amb + share * p["energy"] / (amb["density"] * vol[hot].sum())
     state = HydroState.empty(mesh, 1)
     state.set_material(mesh, 1.0, 0, eos, amb["density"], np.zeros(3),
                        specific_energy=np.where(hot, e_hot, e_amb))
-    return new_simulation(mesh, names, specs, state, cfl, refinement=rule_from_config(p["refinement"]))
+    return state

@@ -1,8 +1,11 @@
 """Riemann problem (Sod's shock tube by default) along x.
 
 Two uniform states meet at ``interface`` (m) in a tube of ``length`` (m) with ``cells``
-cells along x and outflow ends.  1d-planar, or along x in 2d-planar / 3d with one block
-of periodic cells across (the solution must not depend on y, z).  Exact solution:
+cells along x and outflow ends.  1d-planar, or along x in 2d-planar / 3d with one root block
+of periodic cells across (the solution must not depend on y, z).  ``cells`` counts the
+finest level; with ``levels`` > 1 the mesh is adaptive
+(:func:`~impactpipe.hydro.problems.common.adaptive_simulation`: refined where ``refinement``
+flags the diaphragm at t = 0, then where the waves go).  Exact solution:
 :func:`impactpipe.hydro.exact.riemann.exact_riemann` (ideal gas, one material or two
 materials with the same gamma).
 """
@@ -12,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.mesh.blocks import BlockMesh
-from impactpipe.hydro.problems.common import check_geometry, material_list, merged, new_simulation
+from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_simulation, check_geometry, material_list,
+                                              merged, tube_mesh)
 from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -38,8 +42,8 @@ PARAMETERS = {
     "end_time": Parameter(gt=0, units="s", description="end of the run", example=0.2),
 }
 
-#: What :func:`setup` takes for parameters a call leaves out: Sod's shock tube.
-DEFAULTS = setup_defaults(PARAMETERS)
+#: What :func:`setup` takes for parameters a call leaves out: Sod's shock tube on a uniform mesh.
+DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def check_parameters(p: dict) -> list[str]:
@@ -58,20 +62,17 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     if errors:
         raise ValueError("; ".join(errors))
     names, specs, eos = material_list(materials, [p["left"]["material"], p["right"]["material"]])
-    ndim = {"1d-planar": 1, "2d-planar": 2, "3d": 3}[geometry]
-    if ndim == 1:
-        mesh = BlockMesh.uniform(geometry, [0.0], [p["length"]], [p["cells"]], [("outflow", "outflow")], block_cells)
-    else:
-        bc = block_cells or (16 if ndim == 2 else 8)
-        dx = p["length"] / p["cells"]
-        lo = [0.0] + [0.0] * (ndim - 1)
-        hi = [p["length"]] + [bc * dx] * (ndim - 1)
-        mesh = BlockMesh.uniform(geometry, lo, hi, [p["cells"]] + [bc] * (ndim - 1),
-                                 [("outflow", "outflow")] + [("periodic", "periodic")] * (ndim - 1), bc)
+    mesh = tube_mesh(geometry, p["length"], p["cells"], ("outflow", "outflow"), block_cells, p["levels"])
+    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos), names, specs, cfl, p["refinement"])
+
+
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState:
+    """The ``left`` state (density kg/m^3, velocity m/s, pressure Pa) in the cells whose centre lies
+    left of ``interface`` (m), the ``right`` state in the others."""
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
     for side, sel in (("left", x < p["interface"]), ("right", x >= p["interface"])):
         s = p[side]
         state.set_material(mesh, sel.astype(float), names.index(s["material"]), eos, s["density"],
                            np.array([s["velocity"], 0.0, 0.0]), pressure=s["pressure"])
-    return new_simulation(mesh, names, specs, state, cfl)
+    return state
