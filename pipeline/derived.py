@@ -15,6 +15,7 @@ import numpy as np
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS
 from impactpipe.hydro.problems import PROBLEMS, impact
+from impactpipe.hydro.problems.common import root_cell_multiple
 from impactpipe.hydro.output.snapshot import GEOMETRY_DIMENSIONS
 from impactpipe.nbody.simulation import dynamical_time
 
@@ -150,14 +151,16 @@ def mesh_levels(config: Config, geom: str) -> tuple[int, str]:
     finest cell (R_P / cells_per_projectile_radius) and n_b the cells per block edge, so a
     root block is at most one target radius wide; the finest level then holds the bodies'
     surfaces and the shocks, the coarsest the quiet interior and the void.  Other scenes run
-    one level (their own resolution keys set the mesh).
+    one level on auto (a verification scene's resolution keys give the uniform mesh it is
+    checked at); any scene refines adaptively with an integer, its resolution keys then
+    counting cells of the finest level.
     """
     chosen = config.hydro.max_levels
-    if config.scene.problem != "impact":
-        return (1, "one level: only impact scenes refine adaptively") if chosen == "auto" else \
-            (int(chosen), "set in the config")
     if chosen != "auto":
         return int(chosen), "set in the config"
+    if config.scene.problem != "impact":
+        return 1, (f"auto: one level for the {config.scene.problem} scene (uniform at its resolution keys); "
+                   f"set hydro.max_levels to refine adaptively")
     scene = config.scene
     block = config.hydro.block_cells or DEFAULT_BLOCK_CELLS[GEOMETRY_DIMENSIONS.get(geom, 2)]
     dx = scene.projectile.radius / config.hydro.cells_per_projectile_radius
@@ -337,12 +340,11 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
     if problem is not None and config.scene.problem != "impact" and values["geometry"] not in problem.GEOMETRIES:
         errors.append(f"scene.geometry: the {config.scene.problem} problem runs in {', '.join(problem.GEOMETRIES)} "
                       f"(got {values['geometry']})")
+    levels = values.get("levels", 1)
     cells = getattr(config.scene, "cells", None)
     if cells is not None and values["geometry"] in GEOMETRY_DIMENSIONS:
         block = config.hydro.block_cells or DEFAULT_BLOCK_CELLS[GEOMETRY_DIMENSIONS[values["geometry"]]]
-        if cells % block:
-            errors.append(f"scene.cells: {cells} is not a multiple of the block size {block} "
-                          f"(hydro.block_cells); use a multiple of {block}")
+        errors.extend(_cells_errors(cells, block, levels))
     if config.scene.problem == "impact":
         errors.extend(_impact_geometry_errors(config.scene, values["geometry"]))
     t_handoff = config.handoff.time
@@ -353,10 +355,6 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
                           f"{', '.join(f'{t:.6g}' for t in times)} s (hydro.output_times, hydro.output_interval "
                           f"or, by default, {DEFAULT_SNAPSHOTS} evenly spaced up to the end time)")
     errors.extend(_particle_resolution_errors(config, values))
-    if config.hydro.max_levels not in ("auto", 1) and config.scene.problem != "impact":
-        errors.append(f"hydro.max_levels: {config.hydro.max_levels} levels; only impact scenes refine adaptively "
-                      f"in this version (scene.problem is {config.scene.problem}); use 'auto' or 1")
-    levels = values.get("levels", 1)
     if levels > 1:
         block = config.hydro.block_cells or DEFAULT_BLOCK_CELLS[GEOMETRY_DIMENSIONS.get(values["geometry"], 2)]
         if block % 4:
@@ -374,6 +372,20 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
                       f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")
     return errors
+
+
+def _cells_errors(cells: int, block: int, levels: int) -> list[str]:
+    """``scene.cells`` (finest cells along an axis) that is not a whole number of root blocks, as a
+    ``key: message`` line: a multiple of ``block`` cells times 2^(levels - 1)."""
+    multiple = root_cell_multiple(block, levels)
+    if cells % multiple == 0:
+        return []
+    if levels == 1:
+        return [f"scene.cells: {cells} is not a multiple of the block size {block} (hydro.block_cells); "
+                f"use a multiple of {block}"]
+    return [f"scene.cells: {cells} is not a multiple of {multiple}, the block size {block} (hydro.block_cells) "
+            f"times 2^({levels} - 1): scene.cells counts cells of the finest of {levels} levels (hydro.max_levels) "
+            f"and the root level holds whole blocks; use a multiple of {multiple} or fewer levels"]
 
 
 def _particle_resolution_errors(config: Config, values: dict[str, Any]) -> list[str]:

@@ -3,11 +3,13 @@ nothing (issue 11, "model only what a scene requires")."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from impactpipe.hydro.output.io import read_snapshot
 from impactpipe.pipeline.adapters.hydro import build_simulation
-from impactpipe.pipeline import derived
+from impactpipe.pipeline import derived, run
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config, parse_config
 
@@ -86,3 +88,25 @@ def test_an_under_resolved_projectile_is_warned_about_before_any_work(tmp_path):
             in result.output)
     assert derived.resolution_warnings(load_config(QUICKSTART)) == []
     assert derived.resolution_warnings(parse_config(SOD)) == []
+
+
+def test_a_verification_scene_refines_adaptively_through_the_pipeline(tmp_path):
+    """Sod (1d-planar, 128 finest cells) with ``hydro.max_levels: 2``: validate states the adaptive
+    mesh, the hydro stage runs on it (finest cells 1/128 m, root cells twice that, both levels at
+    the start and the end, the mass and energy budget closed) and auto keeps a verification scene
+    on one level."""
+    auto = derived.derive(parse_config(SOD))
+    assert auto["levels"] == 1 and auto["levels_rule"].startswith("auto: one level")
+    path = tmp_path / "sod.yaml"
+    path.write_text(SOD.replace("cells: 64", "cells: 128") + "hydro:\n  max_levels: 2\n")
+    result = CliRunner().invoke(main, ["validate", str(path)])
+    assert result.exit_code == 0 and "adaptive, 2 levels" in result.output, result.output
+    summary = run(load_config(path), tmp_path / "run", show_progress=False)
+    assert list(summary["stages"]) == ["hydro"]
+    budget = summary["hydro_budget"]
+    assert abs(budget["mass_error"]) < 1e-13 and abs(budget["energy_error"]) < 1e-13
+    first, last = (read_snapshot(tmp_path / "run" / "hydro.h5", index) for index in (0, -1))
+    for snap in (first, last):
+        cell_width = (snap.block_hi[:, 0] - snap.block_lo[:, 0]) / 8
+        assert np.allclose(cell_width, np.where(snap.block_level == 1, 1 / 128, 2 / 128), rtol=1e-14, atol=0.0)
+        assert set(np.unique(snap.block_level)) == {0, 1}

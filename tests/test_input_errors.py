@@ -22,6 +22,7 @@ scene:
   problem: sedov
   energy: 1.0
   ambient: {material: gas, density: 1.0, pressure: 1.0e-5}
+  cells: 96
 materials:
   gas: {eos: {model: ideal_gas, gamma: 1.4}}
 hydro:
@@ -58,14 +59,20 @@ def test_hydro_end_time_of_a_verification_scene_is_an_error(tmp_path):
 
 
 def test_python_run_applies_the_checks_of_validate(tmp_path):
-    """A Sedov config with three levels (which validate refuses) and mesh cells the block size does
-    not divide raise the located ConfigError from ``run()``, before anything is written."""
+    """A Sedov config with three levels whose root level would not hold whole blocks, and mesh cells
+    the block size does not divide, raise the located ConfigError from ``run()`` (as validate does),
+    before anything is written; with a cell count it divides, validate accepts the three levels."""
     path = tmp_path / "sedov.yaml"
     path.write_text(SEDOV)
     with pytest.raises(ConfigError) as info:
         stages.run(load_config(path), tmp_path / "run", show_progress=False)
-    assert info.value.messages == [f"{path}:9: hydro.max_levels: 3 levels; only impact scenes refine adaptively in "
-                                   "this version (scene.problem is sedov); use 'auto' or 1"]
+    assert info.value.messages == [f"{path}:6: scene.cells: 96 is not a multiple of 64, the block size 16 "
+                                   "(hydro.block_cells) times 2^(3 - 1): scene.cells counts cells of the finest of 3 "
+                                   "levels (hydro.max_levels) and the root level holds whole blocks; use a multiple "
+                                   "of 64 or fewer levels"]
+    path.write_text(SEDOV.replace("cells: 96", "cells: 128"))
+    result = CliRunner().invoke(main, ["validate", str(path)])
+    assert result.exit_code == 0 and "adaptive, 3 levels" in result.output, result.output
     path.write_text(SOD.replace("cells: 64", "cells: 100"))
     with pytest.raises(ConfigError) as info:
         stages.run(load_config(path), tmp_path / "run", show_progress=False)

@@ -42,9 +42,11 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
     """The scene as the parameters of its problem module's ``setup``.
 
     A verification problem's scene keys are its ``setup``'s (both are the module's
-    ``PARAMETERS``); the impact scene's are translated, with the resolved mesh values.
+    ``PARAMETERS``); the impact scene's are translated, with the resolved mesh values.  Every
+    scene gets the mesh's ``levels`` (resolved ``hydro.max_levels``) and ``refinement``.
     """
     scene = config.scene
+    mesh = {"levels": values["levels"], "refinement": config.hydro.refinement.model_dump()}
     if scene.problem == "impact":
         return {
             "target": {"material": scene.target.material, "radius": scene.target.radius},
@@ -55,10 +57,9 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
             "cells_per_projectile_radius": config.hydro.cells_per_projectile_radius,
             "margin": values["domain"]["margin"],
             "end_time": values["end_time"],
-            "levels": values["levels"],
-            "refinement": config.hydro.refinement.model_dump(),
+            **mesh,
         }
-    return scene.model_dump(exclude={"problem", "geometry"})
+    return {**scene.model_dump(exclude={"problem", "geometry"}), **mesh}
 
 
 def build_simulation(config, values: dict[str, Any]) -> Simulation:
