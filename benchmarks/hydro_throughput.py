@@ -10,6 +10,10 @@ Cases:
                      reported as strength_cost_ratio)
   3d-two-material    3d periodic box, two ideal gases (a dense sphere), 128^3 (--quick 48^3)
 
+The box cases take a uniform mesh's default blocks (64^2 and 16^3 at full size, 32^2 and 8^3
+with --quick; --block-cells sets another edge); the impacts keep 16^2 blocks, their hand-off
+particles.
+
 Each case runs with 1 and 2 numba threads after a warm-up step (kernels come from the
 numba cache).  Memory: peak bytes of traced allocations (tracemalloc, numpy arrays of the
 state, its last-good copy, scratch and snapshots) per interior cell: ``peak_bytes_per_cell``
@@ -67,11 +71,12 @@ def _smooth_box(geometry, cells, block_cells, nmat):
 
 
 def build(case: str, quick: bool, block_cells: int | None = None) -> Simulation:
-    """The Simulation of a benchmark case; ``block_cells`` replaces the box cases' block edge
-    (16 cells in 2D, 8 in 3D)."""
+    """The Simulation of a benchmark case; ``block_cells`` replaces the box cases' block edge (by
+    default the mesh's own, :func:`impactpipe.hydro.mesh.blocks.uniform_block_cells`: 64 for the 2D
+    box at 512^2 and 32 at 256^2, 16 for the 3D box at 128^3 and 8 at 48^3)."""
     if case == "2d-ideal-gas":
         n = 256 if quick else 512
-        return _smooth_box("2d-planar", [n, n], block_cells or 16, 1)
+        return _smooth_box("2d-planar", [n, n], block_cells, 1)
     if case in ("2d-cyl-tillotson", "2d-cyl-strength"):
         materials = {"basalt": preset_material("basalt")}
         if case == "2d-cyl-strength":
@@ -82,7 +87,7 @@ def build(case: str, quick: bool, block_cells: int | None = None) -> Simulation:
         return PROBLEMS["impact"].setup(params, materials)
     if case == "3d-two-material":
         n = 48 if quick else 128
-        return _smooth_box("3d", [n, n, n], block_cells or 8, 2)
+        return _smooth_box("3d", [n, n, n], block_cells, 2)
     raise ValueError(f"unknown case {case!r}")
 
 
@@ -134,7 +139,7 @@ def main() -> None:
                         default=["2d-ideal-gas", "2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material"])
     parser.add_argument("--reference", metavar="SCRIPT", help="reference kernel run before each measurement")
     parser.add_argument("--reference-size", type=int, default=512, help="its mesh size N (default 512)")
-    parser.add_argument("--block-cells", type=int, help="block edge of the box cases (default 16 in 2D, 8 in 3D)")
+    parser.add_argument("--block-cells", type=int, help="block edge of the box cases (default: the uniform mesh's own)")
     args = parser.parse_args()
     results = []
     for case in args.cases:

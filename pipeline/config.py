@@ -277,7 +277,7 @@ class Tracers(Strict):
 
 class Hydro(Strict):
     cells_per_projectile_radius: float = Field(20.0, gt=0)
-    block_cells: int | None = Field(None, ge=4, le=64, description="cells per block edge; default 16 in 2D, 8 in 3D")
+    block_cells: int | None = Field(None, ge=4, le=64, description="cells per block edge; default: impacts and adaptive meshes 16 in 2D, 8 in 3D, uniform meshes up to 64 in 2D and 16 in 3D")
     max_levels: int | Literal["auto"] = "auto"
     refinement: Refinement = Field(default_factory=Refinement)
     cfl: float = Field(0.4, gt=0, le=1)

@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro.mesh.boundary import fill_ghosts
-from impactpipe.hydro.mesh.blocks import GHOST, OUTFLOW, REFLECTING, BlockMesh
+from impactpipe.hydro import HydroState, Simulation
+from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.mesh.blocks import GHOST, OUTFLOW, REFLECTING, BlockMesh, uniform_block_cells
+
+GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 
 
 def test_neighbour_table_2d_periodic_and_walls():
@@ -47,3 +51,44 @@ def test_bad_mesh_inputs_raise():
         BlockMesh.uniform("1d-planar", [0], [1], [16], [("periodic", "outflow")], 8)
     with pytest.raises(ValueError, match="axis"):
         BlockMesh.uniform("2d-cylindrical", [0, 0], [1, 1], [16, 16], [("outflow", "outflow")] * 2, 16)
+
+
+def test_uniform_block_cells_rule():
+    """Largest edge that divides the cells and leaves 64 blocks; adaptive meshes keep the default."""
+    assert uniform_block_cells(2, [512, 512]) == 64
+    assert uniform_block_cells(2, [256, 256]) == 32
+    assert uniform_block_cells(2, [128, 128]) == 16
+    assert uniform_block_cells(2, [544, 784]) == 16
+    assert uniform_block_cells(3, [128, 128, 128]) == 16
+    assert uniform_block_cells(3, [48, 48, 48]) == 8
+    bc = [("periodic", "periodic")] * 2
+    assert BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [256, 256], bc).block_cells == 32
+    assert BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [256, 256], bc, max_level=1).block_cells == 16
+    assert BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [256, 256], bc, block_cells=8).block_cells == 8
+
+
+def test_block_edge_leaves_the_answer_unchanged():
+    """The same periodic gas box on 16^2, 32^2 and 64^2 blocks: bit for bit the same state after 6 steps."""
+    n = 64
+    eos = pack_eos([GAS])
+    results = []
+    for edge in (16, 32, 64):
+        mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [n, n], [("periodic", "periodic")] * 2, edge)
+        c = mesh.cell_centers()
+        state = HydroState.empty(mesh, 1)
+        rho = 1.0 + 0.3 * np.sin(2 * np.pi * c[:, 0]) * np.cos(2 * np.pi * c[:, 1])
+        zero = np.zeros_like(c[:, 0])
+        vel = np.stack([0.3 + 0.2 * np.sin(2 * np.pi * c[:, 1]), zero, zero], axis=1)
+        state.set_material(mesh, 1.0, 0, eos, rho, vel, pressure=1.0 + 0.1 * np.cos(2 * np.pi * c[:, 0]))
+        sim = Simulation(mesh, ["gas"], [GAS], state)
+        for _ in range(6):
+            sim.step()
+        results.append((sim.time, sim.snapshot()))
+    t0, s0 = results[0]
+    key0 = np.lexsort(s0.centers.T)
+    for t, s in results[1:]:
+        assert t == t0
+        key = np.lexsort(s.centers.T)
+        np.testing.assert_array_equal(s.centers[key], s0.centers[key0])
+        for name in ("density", "pressure", "velocity", "specific_internal_energy"):
+            np.testing.assert_array_equal(s.fields[name][key], s0.fields[name][key0])

@@ -39,12 +39,36 @@ GHOST = 2
 OUTFLOW = -1
 REFLECTING = -2
 BOUNDARY_KINDS = ("outflow", "reflecting", "periodic")
+#: Cells per block edge of an adaptive mesh, and of a uniform one whose cells no larger edge divides.
 DEFAULT_BLOCK_CELLS = {1: 8, 2: 16, 3: 8}
+#: Block edges a uniform mesh may take by default, largest first (:func:`uniform_block_cells`).
+UNIFORM_BLOCK_CELLS = {1: (8,), 2: (64, 32, 16), 3: (16, 8)}
+#: Fewest blocks a uniform mesh's default edge leaves, so that threads have blocks to share.
+MIN_UNIFORM_BLOCKS = 64
 
 GEOMETRY_CODES = {"1d-planar": 0, "2d-planar": 1, "2d-cylindrical": 2, "3d": 3}
 CYLINDRICAL = 2
 #: Bits per axis of a block key (:func:`block_keys`): up to 2^18 blocks along an axis at any level.
 KEY_BITS = 18
+
+
+def uniform_block_cells(ndim: int, cells) -> int:
+    """Default cells per block edge of a uniform mesh with ``cells`` cells per used axis.
+
+    The largest edge of :data:`UNIFORM_BLOCK_CELLS` that divides every axis and still leaves
+    :data:`MIN_UNIFORM_BLOCKS` blocks, else :data:`DEFAULT_BLOCK_CELLS`.  Larger blocks carry
+    fewer ghost cells per interior cell ((n + 4)^d / n^d: 1.56 for 16^2, 1.27 for 32^2,
+    1.13 for 64^2) and split each sweep into fewer pencils, so a step costs less per cell
+    (docs/performance.md).  The rule depends on the mesh alone, never on the thread count,
+    so a run's blocks, and its answer, are the same on every machine.  Adaptive meshes and
+    impacts keep :data:`DEFAULT_BLOCK_CELLS`: there the block edge is the refinement's
+    granularity and the hand-off's particle size.
+    """
+    cells = [int(c) for c in np.atleast_1d(cells)]
+    for edge in UNIFORM_BLOCK_CELLS[ndim]:
+        if all(c % edge == 0 for c in cells) and int(np.prod([c // edge for c in cells])) >= MIN_UNIFORM_BLOCKS:
+            return edge
+    return DEFAULT_BLOCK_CELLS[ndim]
 
 
 def block_keys(level, index) -> np.ndarray:
@@ -106,16 +130,20 @@ class BlockMesh:
         """Tile the box ``[domain_lo, domain_hi]`` with ``cells`` cells per used axis (all at level 0).
 
         ``cells`` (one int per used axis) must be a multiple of ``block_cells`` along each
-        axis.  ``boundaries`` gives a (low, high) pair of kinds per used axis; periodic must
-        be set on both sides.  In 2d-cylindrical the low r boundary is the symmetry axis and
+        axis; without ``block_cells`` a uniform mesh (``max_level`` 0) takes
+        :func:`uniform_block_cells`, an adaptive one :data:`DEFAULT_BLOCK_CELLS`.
+        ``boundaries`` gives a (low, high) pair of kinds per used axis; periodic must be set
+        on both sides.  In 2d-cylindrical the low r boundary is the symmetry axis and
         must be "reflecting" with ``domain_lo[0] == 0``.  ``max_level`` is the finest level
         adaptive refinement may later reach (cell size dx / 2^max_level).
         """
         if geometry not in GEOMETRIES:
             raise ValueError(f"unknown geometry {geometry!r}; choose one of {GEOMETRIES}")
         ndim = GEOMETRY_DIMENSIONS[geometry]
-        block_cells = int(block_cells or DEFAULT_BLOCK_CELLS[ndim])
         cells = list(np.atleast_1d(cells).astype(int))
+        if not block_cells:
+            block_cells = DEFAULT_BLOCK_CELLS[ndim] if max_level else uniform_block_cells(ndim, cells)
+        block_cells = int(block_cells)
         if len(cells) != ndim or len(boundaries) != ndim:
             raise ValueError(f"{geometry} needs {ndim} entries in cells and boundaries")
         if not 0 <= int(max_level) < 2 ** KEY_BITS:

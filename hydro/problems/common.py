@@ -95,7 +95,8 @@ def adaptive_mesh(geometry: str, lo, hi, cells, boundaries, block_cells: int | N
     ``cells`` (one per used axis) counts cells of the finest level, dx = (hi - lo) / cells, so a
     problem's resolution keys mean the same with any number of levels; the root level has
     cells / 2^(levels - 1) cells per axis.  Raises ValueError unless every count is a whole number
-    of root blocks (:func:`root_cell_multiple`).  One level is the uniform mesh of ``cells``.
+    of root blocks (:func:`root_cell_multiple`).  One level is the uniform mesh of ``cells``, whose
+    block edge without ``block_cells`` is :func:`impactpipe.hydro.mesh.blocks.uniform_block_cells`.
     """
     ndim = GEOMETRY_DIMENSIONS[geometry]
     bc = int(block_cells or DEFAULT_BLOCK_CELLS[ndim])
@@ -105,7 +106,9 @@ def adaptive_mesh(geometry: str, lo, hi, cells, boundaries, block_cells: int | N
     if any(n % multiple for n in cells):
         raise ValueError(f"cells: {cells} finest cells per axis are not whole root blocks of {levels} levels; "
                          f"each must be a multiple of block_cells x 2^(levels - 1) = {bc} x {scale} = {multiple}")
-    return BlockMesh.uniform(geometry, lo, hi, [n // scale for n in cells], boundaries, bc, max_level=int(levels) - 1)
+    # one level without a block size: the uniform mesh's own default (blocks.uniform_block_cells)
+    edge = bc if block_cells or levels > 1 else None
+    return BlockMesh.uniform(geometry, lo, hi, [n // scale for n in cells], boundaries, edge, max_level=int(levels) - 1)
 
 
 def tube_mesh(geometry: str, length: float, cells: int, ends, block_cells: int | None, levels: int) -> BlockMesh:
