@@ -10,7 +10,8 @@ Rooms, one job each: ``solver`` (the :class:`Simulation` driver: step, CFL, regr
 checkpoints), ``scheme/`` (the directional sweep kernels, reconstruction, the HLLC face
 solver, the time step), ``mesh/`` (blocks, the conserved state, ghost layers), ``amr/``
 (refinement criteria, regrid, transfers between levels), ``eos/``, ``strength/``,
-``gravity``, ``tracers/`` (placement, block lookup, sampling, motion), ``output/``
+``gravity``, ``tracers/`` (placement, block lookup, sampling, motion), ``parallel/`` (one run's
+blocks shared between MPI ranks), ``output/``
 (snapshot files and the snapshot contract, VTKHDF export, figures, yt), ``budget`` (the
 conservation budget), ``problems/`` (each scene with its parameters) and ``exact/`` (exact
 solutions of the verification problems).

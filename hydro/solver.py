@@ -30,6 +30,7 @@ from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
+from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.hydro.mesh.state import FIELDS, HydroState, copy_interior
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
 from impactpipe.hydro.scheme.directional import sweep
@@ -152,6 +153,9 @@ class Simulation:
         #: a sweep's ghosts are filled, "sweep" and "reflux" after them, "sources" after the
         #: strength and gravity sources (axis -1 where none applies).  None: no calls.
         self.observer: Callable[[str, int], None] | None = None
+        #: Which blocks this process advances and how it combines with the others
+        #: (:mod:`impactpipe.hydro.parallel.distributed`); every block by default.
+        self.partition = WholeMesh()
         nb = mesh.nblocks
         self.boundary = np.zeros((nb, BND_MATERIAL + state.nmat))
         self.floors = np.zeros((nb, NFLOOR), dtype=np.int64)
@@ -184,12 +188,16 @@ class Simulation:
     def stable_dt(self) -> float:
         """CFL time step of the current state (s)."""
         st = self.state
-        max_signal_rate(st.alpha, st.arho, st.arhoe, st.momentum, self.mesh.block_dx, self.eos.kind, self.eos.params,
-                        self.eos.table, self.shear_modulus, self.mesh.ndim, self._rate_work, self._rate)
-        rate = float(self._rate.max())
-        if not np.isfinite(rate):
-            raise HydroFailure("non-finite signal speed", self.time, int(np.argmax(~np.isfinite(self._rate))),
-                               None, {})
+        own = self.partition.blocks
+        rates = self._rate[own]
+        max_signal_rate(st.alpha[own], st.arho[own], st.arhoe[own], st.momentum[own], self.mesh.block_dx[own],
+                        self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim,
+                        self._rate_work, rates)
+        bad = np.flatnonzero(~np.isfinite(rates))
+        rate, first_bad = self.partition.combine_rate(float(rates.max()), (own.start or 0) + int(bad[0]) if bad.size
+                                                      else -1)
+        if first_bad >= 0:
+            raise HydroFailure("non-finite signal speed", self.time, first_bad, None, {})
         if rate <= 0.0:
             raise HydroFailure("no signal speed anywhere (empty or cold mesh)", self.time, -1, None, {})
         return self.cfl / rate
@@ -213,15 +221,18 @@ class Simulation:
         if self.step_count % 2:
             axes.reverse()
         st = self.state
+        own = self.partition.blocks
         for axis in axes:
-            fill_state_ghosts(st, self.mesh, axis)
+            self.partition.fill_ghosts(st, self.mesh, axis)
             self._observe("ghosts", axis)
-            sweep(axis, dt, self.mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
-                  self.mesh.block_lo, self.mesh.block_dx, self.mesh.neighbor, self.mesh.neighbor_level,
-                  self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary, self.floors, self.amounts, self._failure,
-                  self._face_flux, self.plain_pencils)
-            if self._failure[:, 0].any():
-                self._raise_sweep_failure()
+            sweep(axis, dt, self.mesh.geometry_code, st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own],
+                  st.momentum[own], st.energy[own], self.mesh.block_lo[own], self.mesh.block_dx[own],
+                  self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
+                  self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
+                  self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils)
+            failed = self.partition.first_failure(self._failure)
+            if failed >= 0:
+                self._raise_sweep_failure(failed)
             self._observe("sweep", axis)
             if self.mesh.adaptive:
                 plans = axis_plans(self.mesh, axis)
@@ -356,25 +367,28 @@ class Simulation:
         10-15 % faster than the kernel."""
         gx, gy, gz = (int(g) for g in self.mesh.ghost)
         threads = numba.get_num_threads()
+        own = self.partition.blocks
         for name, arr in self.state.arrays().items():
             interior = self.mesh.interior(arr)
             if self._good[name].shape != interior.shape:
                 self._good[name] = interior.copy()
             elif threads > 1:
-                copy_interior(arr, self._good[name], gx, gy, gz)
+                copy_interior(arr[own], self._good[name][own], gx, gy, gz)
             else:
-                np.copyto(self._good[name], interior)
+                np.copyto(self._good[name][own], interior[own])
         for dst, src in zip(self._good_counters, self._counter_arrays()):
             np.copyto(dst, src)
         self._good_clock = (self.time, self.step_count, self.cell_updates)
 
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step: the
-        interior cells as they were, the ghosts filled from them."""
+        interior cells as they were, the ghosts filled from them (collective on several ranks:
+        each restores its own blocks)."""
+        own = self.partition.blocks
         for name, arr in self.state.arrays().items():
-            np.copyto(self.mesh.interior(arr), self._good[name])
+            np.copyto(self.mesh.interior(arr)[own], self._good[name][own])
         for axis in range(self.mesh.ndim):
-            fill_state_ghosts(self.state, self.mesh, axis)
+            self.partition.fill_ghosts(self.state, self.mesh, axis)
         for dst, src in zip(self._counter_arrays(), self._good_counters):
             np.copyto(dst, src)
         self.time, self.step_count, self.cell_updates = self._good_clock
@@ -393,15 +407,20 @@ class Simulation:
             arrays += (self.strength.counts, self.strength.amounts)
         return arrays
 
-    def _raise_sweep_failure(self) -> None:
-        b = int(np.argmax(self._failure[:, 0] != 0))
+    def _raise_sweep_failure(self, b: int) -> None:
+        """Raise the HydroFailure of block ``b``, the first whose sweep failed (on every process,
+        with the values of the process that owns it)."""
+        code, cell, values = self.partition.from_owner(b, lambda: self._failure_record(b))
+        what = {1: "NaN in the updated state", 2: "negative density"}.get(code, "sweep failure")
+        raise HydroFailure(what, self._good_clock[0], b, cell, values)
+
+    def _failure_record(self, b: int) -> tuple[int, tuple[int, int, int], dict]:
+        """(failure code, padded cell, the cell's values after and before the step) of block ``b``."""
         code, ix, iy, iz = (int(v) for v in self._failure[b])
-        cell = (ix, iy, iz)
         values = {name: getattr(self.state, name)[b, :, ix, iy, iz].tolist() for name in FIELDS}
         g = self.mesh.ghost
         values["before"] = {name: self._good[name][b, :, ix - g[0], iy - g[1], iz - g[2]].tolist() for name in FIELDS}
-        what = {1: "NaN in the updated state", 2: "negative density"}.get(code, "sweep failure")
-        raise HydroFailure(what, self._good_clock[0], b, cell, values)
+        return code, (ix, iy, iz), values
 
     # ------------------------------------------------------------------ diagnostics
 
@@ -429,8 +448,10 @@ class Simulation:
         ``mass`` (kg), ``material_mass`` (M,), ``momentum`` (3,) (kg m/s; in 2d-cylindrical
         only the z component is a conserved total), ``energy`` (J); ``outflow_*`` the
         amounts that left through domain faces (wall impulse included for momentum);
-        ``*_with_outflow`` the sums, constant in time up to the floor amounts.
+        ``*_with_outflow`` the sums, constant in time up to the floor amounts.  Collective on
+        several ranks (every block is shared first).
         """
+        self.partition.share(self)
         mesh = self.mesh
         vol = mesh.cell_volumes()
         arho = mesh.interior(self.state.arho)
@@ -454,7 +475,9 @@ class Simulation:
         return out
 
     def snapshot(self) -> Snapshot:
-        """The interior cells at the current time as a :class:`Snapshot` (copies)."""
+        """The interior cells at the current time as a :class:`Snapshot` (copies); collective
+        on several ranks (every block is shared first)."""
+        self.partition.share(self)
         mesh = self.mesh
         st = self.state
         shape = (mesh.nblocks,) + mesh.interior_shape
@@ -489,7 +512,13 @@ class Simulation:
     # ------------------------------------------------------------------ checkpoints
 
     def save_checkpoint(self, path: str | Path) -> None:
-        """Write the full state (ghosts included), mesh, materials and counters to HDF5, atomically."""
+        """Write the full state (ghosts included), mesh, materials and counters to HDF5, atomically.
+
+        Collective on several ranks: every block is shared, rank 0 writes.
+        """
+        self.partition.share(self)
+        if not self.partition.is_root:
+            return
         with atomic_path(path) as tmp:
             with h5py.File(tmp, "w") as fh:
                 fh.attrs["time"] = self.time

@@ -51,6 +51,20 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
         _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
 
 
+@njit(cache=True, parallel=True)
+def fill_state_ghost_slabs_range(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
+                                 hi):
+    """:func:`fill_state_ghost_slabs` for the blocks ``lo .. hi - 1`` only (a rank's owned range,
+    :mod:`impactpipe.hydro.parallel`); they read any block's interior cells."""
+    for b in prange(lo, hi):
+        _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arho, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arhoe, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(mom, b, neighbor, neighbor_level, axis, ghost, axis)
+        _fill_block_ghosts(energy, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
+
+
 @njit(cache=True)
 def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component):
     """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring)."""

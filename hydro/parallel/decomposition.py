@@ -1,0 +1,142 @@
+"""Which rank advances which blocks, and which cells the ranks exchange before a ghost fill.
+
+Rank r owns the blocks ``cuts[r] .. cuts[r + 1] - 1`` of the mesh's block order.  The cuts
+balance an estimated cost per block (:func:`block_costs`): a cell that holds material costs
+:data:`MATERIAL_CELL_COST`, a void cell :data:`VOID_CELL_COST` (the sweep skips the Riemann
+solver and the EOS in void; the ratio is an estimate, not a measurement).
+
+Exchange plan: a ghost slab of block b along axis d copies the ``GHOST`` interior cells of
+its neighbour next to the shared face (:mod:`impactpipe.hydro.mesh.boundary`).  Where the
+neighbour belongs to another rank, its owner sends that strip (the neighbour's interior
+cells within ``GHOST`` of the face, over the interior of the other axes) before the fill.
+The plan lists, per axis and per peer rank, the strips in one deterministic order (by block,
+then low face before high face), computed with numpy from the mesh alone, the same on every
+rank.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from impactpipe.hydro.scheme.timestep import PHI_VOID
+
+#: Estimated cost of one sweep of a cell holding material / a void cell (arbitrary units).
+MATERIAL_CELL_COST = 10
+VOID_CELL_COST = 1
+
+
+def block_costs(mesh, alpha: np.ndarray) -> np.ndarray:
+    """(NB,) int64 estimated cost per block from the volume fractions ``alpha`` (NB, M, NX, NY, NZ):
+    :data:`MATERIAL_CELL_COST` per interior cell whose summed volume fraction is >= PHI_VOID,
+    :data:`VOID_CELL_COST` per other interior cell."""
+    phi = mesh.interior(alpha).sum(axis=1).reshape(mesh.nblocks, -1)
+    material = (phi >= PHI_VOID).sum(axis=1).astype(np.int64)
+    return MATERIAL_CELL_COST * material + VOID_CELL_COST * (phi.shape[1] - material)
+
+
+def owned_ranges(costs: np.ndarray, nranks: int) -> np.ndarray:
+    """(nranks + 1,) cut points: rank r owns blocks ``cuts[r] .. cuts[r + 1] - 1``.
+
+    Each cut is the block boundary whose summed cost lies nearest to r / nranks of the total
+    (exact integer arithmetic, ties to the lower boundary), so every range's cost is within
+    one block's cost of the mean; every rank owns at least one block.  Raises ValueError
+    when there are more ranks than blocks.
+    """
+    costs = np.asarray(costs, dtype=np.int64)
+    nblocks = len(costs)
+    if nranks > nblocks:
+        raise ValueError(f"{nranks} MPI ranks but the mesh has only {nblocks} blocks: every rank needs at "
+                         f"least one block (fewer ranks, or smaller hydro.block_cells)")
+    scaled = np.concatenate([[0], np.cumsum(costs)]) * nranks
+    total = int(scaled[-1]) // nranks
+    cuts = [0]
+    for r in range(1, nranks):
+        target = total * r
+        i = int(np.searchsorted(scaled, target, side="left"))
+        if i > 0 and target - scaled[i - 1] <= scaled[i] - target:
+            i -= 1
+        cuts.append(min(max(i, cuts[-1] + 1), nblocks - (nranks - r)))
+    cuts.append(nblocks)
+    return np.array(cuts, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class Strips:
+    """Interior strips of blocks as cells: ``blocks[i]`` and the flat padded cell index
+    ``cells[i]`` (ix * NY * NZ + iy * NZ + iz), in exchange order."""
+
+    blocks: np.ndarray
+    cells: np.ndarray
+
+    def indices(self, field: np.ndarray) -> np.ndarray:
+        """Flat indices into ``field.reshape(-1)`` (field (NB, C, NX, NY, NZ)) of every cell of
+        the strips, component by component: (C, ncells) raveled."""
+        ncomp = field.shape[1]
+        per_block = int(np.prod(field.shape[2:]))
+        base = self.blocks * (ncomp * per_block) + self.cells
+        return (base[None, :] + (np.arange(ncomp) * per_block)[:, None]).ravel()
+
+    def values(self, field: np.ndarray) -> int:
+        """Number of values of ``field`` the strips hold."""
+        return field.shape[1] * len(self.cells)
+
+
+@dataclass(frozen=True)
+class Route:
+    """What one rank exchanges with one peer before a ghost fill along one axis."""
+
+    peer: int
+    send: Strips
+    receive: Strips
+
+
+def owners(cuts: np.ndarray) -> np.ndarray:
+    """(NB,) the rank that owns each block."""
+    return np.repeat(np.arange(len(cuts) - 1), np.diff(cuts))
+
+
+def exchange_routes(mesh, cuts: np.ndarray, rank: int) -> list[list[Route]]:
+    """Per axis (0, 1, 2) the routes of ``rank``, by peer rank (empty on unused axes)."""
+    owner = owners(cuts)
+    routes: list[list[Route]] = []
+    for axis in range(3):
+        if mesh.ghost[axis] == 0:
+            routes.append([])
+            continue
+        strips = _face_strips(mesh, axis, owner)
+        peers = sorted({q for (s, q) in strips if s == rank} | {s for (s, q) in strips if q == rank})
+        routes.append([Route(q, _strips(mesh, axis, strips.get((rank, q), [])),
+                             _strips(mesh, axis, strips.get((q, rank), []))) for q in peers])
+    return routes
+
+
+def _face_strips(mesh, axis: int, owner: np.ndarray) -> dict[tuple[int, int], list[tuple[int, int]]]:
+    """(sender, receiver) -> [(block, side)]: the faces along ``axis`` whose neighbour another rank owns."""
+    out: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for block in range(mesh.nblocks):
+        for side in range(2):
+            nbr = int(mesh.neighbor[block, axis, side])
+            if nbr >= 0 and owner[nbr] != owner[block]:
+                out.setdefault((int(owner[block]), int(owner[nbr])), []).append((block, side))
+    return out
+
+
+def _strips(mesh, axis: int, faces: list[tuple[int, int]]) -> Strips:
+    """The interior cells within GHOST of each (block, side) face along ``axis``."""
+    g = mesh.ghost
+    n = mesh.interior_shape
+    padded = mesh.padded_shape
+    blocks, cells = [], []
+    for block, side in faces:
+        ranges = [np.arange(g[d], g[d] + n[d]) for d in range(3)]
+        start = g[axis] if side == 0 else n[axis]
+        ranges[axis] = np.arange(start, start + g[axis])
+        ix, iy, iz = np.meshgrid(*ranges, indexing="ij")
+        flat = ((ix * padded[1] + iy) * padded[2] + iz).ravel()
+        cells.append(flat)
+        blocks.append(np.full(flat.size, block, dtype=np.int64))
+    if not faces:
+        return Strips(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    return Strips(np.concatenate(blocks), np.concatenate(cells).astype(np.int64))

@@ -1,0 +1,150 @@
+"""How a :class:`~impactpipe.hydro.solver.Simulation` shares its blocks between processes.
+
+The Simulation asks its ``partition`` which blocks to advance (``blocks``, a slice of the
+block order), to fill their ghosts, to combine the time step and the failure checks over
+every process, and to bring every block up to date before an output.  :class:`WholeMesh`
+is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
+of one run (:func:`distribute` attaches it, :func:`collect` ends it).
+
+The last-good copy of a step (:meth:`Simulation.restore_last_good`) is kept by each rank
+over its own blocks only: only those are advanced, and a restore on every rank followed by
+the exchange before the next ghost fill rebuilds exactly the serial state.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs_range, fill_state_ghosts
+
+from .decomposition import block_costs, exchange_routes, owned_ranges
+from .exchange import broadcast_arrays, exchange_strips, share_owned_blocks
+
+log = logging.getLogger(__name__)
+
+
+class WholeMesh:
+    """One process advances every block."""
+
+    blocks = slice(None)
+    is_root = True
+
+    def fill_ghosts(self, state, mesh, axis: int) -> None:
+        """Fill the ghosts of every block along ``axis``."""
+        fill_state_ghosts(state, mesh, axis)
+
+    def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
+        """(largest signal rate (1/s), first block with a non-finite rate or -1) over every process."""
+        return rate, first_bad
+
+    def first_failure(self, failure: np.ndarray) -> int:
+        """The first block whose sweep failed (``failure[:, 0]`` != 0), or -1."""
+        return int(np.argmax(failure[:, 0] != 0)) if failure[:, 0].any() else -1
+
+    def from_owner(self, block: int, make: Callable[[], Any]) -> Any:
+        """``make()`` evaluated by the process that owns ``block``, returned on every process."""
+        return make()
+
+    def share(self, sim) -> None:
+        """Bring every block of ``sim`` up to date in this process (nothing to do)."""
+
+    def agree(self, value: Any) -> Any:
+        """Rank 0's ``value`` on every process."""
+        return value
+
+
+class BlockRanges(WholeMesh):
+    """This rank advances the blocks ``cuts[rank] .. cuts[rank + 1] - 1`` (see :mod:`.decomposition`)."""
+
+    def __init__(self, comm, mesh, cuts: np.ndarray):
+        self.comm = comm
+        self.cuts = cuts
+        self.lo, self.hi = int(cuts[comm.rank]), int(cuts[comm.rank + 1])
+        self.blocks = slice(self.lo, self.hi)
+        self.is_root = comm.rank == 0
+        self.nblocks = mesh.nblocks
+        self.routes = exchange_routes(mesh, cuts, comm.rank)
+
+    def fill_ghosts(self, state, mesh, axis: int) -> None:
+        """Receive the neighbours' strips along ``axis`` from their owners, then fill the owned
+        blocks' ghosts (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghost_slabs_range`)."""
+        g = int(mesh.ghost[axis])
+        if g == 0:
+            return
+        fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+        exchange_strips(self.comm, self.routes[axis], fields, axis)
+        fill_state_ghost_slabs_range(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
+
+    def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
+        """One Allreduce (MAX) of (rate, -first bad block): the serial run's values exactly."""
+        from mpi4py import MPI
+
+        values = np.array([rate if first_bad < 0 else 0.0, -float(first_bad if first_bad >= 0 else self.nblocks)])
+        self.comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
+        bad = int(-values[1])
+        return float(values[0]), bad if bad < self.nblocks else -1
+
+    def first_failure(self, failure: np.ndarray) -> int:
+        """The first failed block over every rank (one allreduce, MIN), or -1."""
+        from mpi4py import MPI
+
+        local = super().first_failure(failure[self.blocks])
+        first = self.comm.allreduce(self.lo + local if local >= 0 else self.nblocks, op=MPI.MIN)
+        return first if first < self.nblocks else -1
+
+    def from_owner(self, block: int, make: Callable[[], Any]) -> Any:
+        owner = int(np.searchsorted(self.cuts, block, side="right")) - 1
+        return self.comm.bcast(make() if self.comm.rank == owner else None, root=owner)
+
+    def share(self, sim) -> None:
+        """Every rank receives every rank's owned blocks: state (ghosts included) and per-block counters."""
+        share_owned_blocks(self.comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()), self.cuts)
+
+    def agree(self, value: Any) -> Any:
+        return self.comm.bcast(value, root=0)
+
+
+def unsupported(sim, nranks: int) -> list[str]:
+    """Why ``sim`` cannot run on ``nranks`` ranks in this version (empty when it can)."""
+    reasons = []
+    if sim.mesh.adaptive:
+        reasons.append("an adaptive mesh (hydro.max_levels > 1)")
+    if sim.strength is not None:
+        reasons.append("material strength")
+    if sim.tracers is not None:
+        reasons.append("tracers")
+    if sim.gravity is not None:
+        reasons.append("external gravity")
+    if nranks > sim.mesh.nblocks:
+        reasons.append(f"more ranks ({nranks}) than blocks ({sim.mesh.nblocks})")
+    return reasons
+
+
+def distribute(sim, comm) -> None:
+    """Share ``sim`` between the ranks of ``comm`` (collective; every rank built the same run).
+
+    Rank 0's state and counters are broadcast, the blocks cut by estimated cost
+    (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  Raises ValueError
+    for what this version does not distribute (:func:`unsupported`) before anything moves.
+    """
+    reasons = unsupported(sim, comm.size)
+    if reasons:
+        raise ValueError(f"several MPI ranks: not supported in this version: {'; '.join(reasons)} "
+                         f"(run with one rank)")
+    broadcast_arrays(comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()))
+    cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size)
+    sim.partition = BlockRanges(comm, sim.mesh, cuts)
+    sim._keep_good()
+    if comm.rank == 0:
+        log.info("hydro on %d MPI ranks: blocks %s", comm.size,
+                 ", ".join(f"{lo}-{hi - 1}" for lo, hi in zip(cuts[:-1], cuts[1:])))
+
+
+def collect(sim) -> None:
+    """End the sharing: every rank receives every block, then runs as a single process again."""
+    sim.partition.share(sim)
+    sim.partition = WholeMesh()

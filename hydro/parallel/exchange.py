@@ -1,0 +1,65 @@
+"""The messages between ranks: strips before a ghost fill, owned blocks before an output.
+
+All fields are float64 arrays (NB, C, NX, NY, NZ), C-contiguous, so a block's values are one
+contiguous run and a strip is a fixed set of flat indices (:class:`~.decomposition.Strips`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .decomposition import Route
+
+#: Message tag of the strips before a ghost fill along axis d: STRIP_TAG + d.
+STRIP_TAG = 100
+
+
+def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], axis: int) -> None:
+    """Send this rank's strips and receive its peers' into ``fields``, one message per peer
+    (every field packed into one float64 buffer), non-blocking both ways, then unpack."""
+    from mpi4py import MPI
+
+    flats = [_flat(field) for field in fields]
+    requests, received, sent = [], [], []
+    for route in routes:
+        buffer = np.empty(sum(route.receive.values(field) for field in fields))
+        requests.append(comm.Irecv(buffer, source=route.peer, tag=STRIP_TAG + axis))
+        received.append((buffer, route.receive))
+    for route in routes:
+        buffer = np.concatenate([flat[route.send.indices(field)] for flat, field in zip(flats, fields)])
+        requests.append(comm.Isend(buffer, dest=route.peer, tag=STRIP_TAG + axis))
+        sent.append(buffer)
+    MPI.Request.Waitall(requests)
+    for buffer, strips in received:
+        start = 0
+        for flat, field in zip(flats, fields):
+            size = strips.values(field)
+            flat[strips.indices(field)] = buffer[start:start + size]
+            start += size
+
+
+def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray) -> None:
+    """Every rank receives every rank's owned blocks (rows ``cuts[r] .. cuts[r + 1] - 1`` of
+    each array, in place): one Allgatherv per array."""
+    from mpi4py import MPI
+    from mpi4py.util.dtlib import from_numpy_dtype
+
+    for array in arrays:
+        flat = _flat(array)
+        row = int(np.prod(array.shape[1:], dtype=np.int64))
+        counts = (np.diff(cuts) * row).tolist()
+        displacements = (cuts[:-1] * row).tolist()
+        comm.Allgatherv(MPI.IN_PLACE, [flat, (counts, displacements), from_numpy_dtype(array.dtype)])
+
+
+def broadcast_arrays(comm, arrays: list[np.ndarray]) -> None:
+    """Rank 0's values of ``arrays`` on every rank (in place)."""
+    for array in arrays:
+        comm.Bcast(_flat(array), root=0)
+
+
+def _flat(array: np.ndarray) -> np.ndarray:
+    """A flat view (no copy) of a C-contiguous array."""
+    if not array.flags.c_contiguous:
+        raise ValueError("the arrays exchanged between ranks must be C-contiguous")
+    return array.reshape(-1)

@@ -1,0 +1,65 @@
+"""The cut of the block order into owned ranges and the exchange plan between ranks
+(:mod:`impactpipe.hydro.parallel.decomposition`); numpy only, no MPI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from impactpipe.hydro.parallel.decomposition import exchange_routes, owned_ranges, owners
+from impactpipe.hydro.problems.common import adaptive_mesh
+
+
+@pytest.mark.parametrize("nranks", [1, 2, 3, 4, 7])
+def test_owned_ranges_cover_every_block_once_in_balanced_contiguous_ranges(nranks):
+    costs = np.random.default_rng(27).choice([16, 160, 40], size=50)
+    cuts = owned_ranges(costs, nranks)
+    assert cuts[0] == 0 and cuts[-1] == len(costs) and len(cuts) == nranks + 1
+    assert (np.diff(cuts) >= 1).all()  # contiguous, every block once, every rank at least one
+    sums = np.add.reduceat(costs, cuts[:-1])
+    assert sums.sum() == costs.sum()
+    assert np.abs(sums - costs.sum() / nranks).max() <= costs.max()
+    assert np.array_equal(cuts, owned_ranges(costs.copy(), nranks))
+
+
+def test_void_blocks_are_cheap_so_a_rank_takes_more_of_them():
+    costs = np.array([1] * 8 + [10] * 4)
+    assert owned_ranges(costs, 2).tolist() == [0, 10, 12]
+
+
+def test_more_ranks_than_blocks_is_an_error():
+    with pytest.raises(ValueError, match="3 MPI ranks but the mesh has only 2 blocks"):
+        owned_ranges(np.ones(2, dtype=np.int64), 3)
+
+
+def test_the_exchange_plan_delivers_every_ghost_source_from_another_rank():
+    """2d-planar, 4 x 3 blocks, periodic along x: the strips a rank receives are exactly the
+    interior cells its owned blocks' ghosts copy from blocks of other ranks, and what one rank
+    sends another is what that one receives."""
+    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 0.75], [16, 12], [("periodic", "periodic"),
+                                                                           ("outflow", "reflecting")], 4, 1)
+    g, n, (px, py, pz) = int(mesh.ghost[0]), mesh.interior_shape[0], mesh.padded_shape
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    owner = owners(cuts)
+    plans = {rank: exchange_routes(mesh, cuts, rank) for rank in range(3)}
+    for rank in range(3):
+        for axis in range(2):
+            expected = set()
+            for b in range(cuts[rank], cuts[rank + 1]):
+                for side in range(2):
+                    nbr = int(mesh.neighbor[b, axis, side])
+                    if nbr < 0 or owner[nbr] == rank:
+                        continue
+                    strip = range(n, n + g) if side == 0 else range(g, 2 * g)
+                    for i in strip:
+                        for j in range(g, g + n):
+                            ix, iy = (i, j) if axis == 0 else (j, i)
+                            expected.add((nbr, (ix * py + iy) * pz))
+            received = {(int(b), int(c)) for route in plans[rank][axis]
+                        for b, c in zip(route.receive.blocks, route.receive.cells)}
+            assert received == expected
+            for route in plans[rank][axis]:
+                back = next(r for r in plans[route.peer][axis] if r.peer == rank)
+                assert np.array_equal(route.send.blocks, back.receive.blocks)
+                assert np.array_equal(route.send.cells, back.receive.cells)
+    assert plans[0][2] == []
