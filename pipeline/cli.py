@@ -17,7 +17,7 @@ from pathlib import Path
 import click
 import yaml
 
-from . import checks, derived, runstore
+from . import checks, derived, ranks, runstore
 from .config import STAGES, ConfigError, load_config
 from .lock import RunDirError, run_lock
 from .stages import StageInterrupted, resolved_dict, run
@@ -71,11 +71,70 @@ def validate_cmd(config_path: str) -> None:
 @click.option("--force", is_flag=True, help="Rerun every stage.")
 @click.option("-v", "--verbose", count=True, help="More log output.")
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bars.")
+@click.option("--ranks", "nranks", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Run the hydro stage on N MPI ranks (launches `mpiexec -n N` with this command; needs "
+                   f'{ranks.INSTALL_HINT}).  This version: uniform meshes (hydro.max_levels 1) without '
+                   "strength, tracers or gravity; docs/runs.md.")
 def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
-            force: bool, verbose: int, quiet: bool) -> None:
+            force: bool, verbose: int, quiet: bool, nranks: int) -> None:
     """Run the pipeline for CONFIG, resuming finished stages."""
+    if nranks > 1:
+        _setup_logging(verbose, quiet)
+        _exit_if_not_shared(*_load_or_exit(config_path), nranks)
+        arguments = ["run", config_path, *(["--out", out_dir] if out_dir else []),
+                     *(["--from", from_stage] if from_stage else []), *(f"--stage={s}" for s in stages),
+                     *(["--force"] if force else []), *(["-v"] * verbose), *(["--quiet"] if quiet else [])]
+        try:
+            sys.exit(ranks.launch(nranks, arguments))
+        except ranks.RanksUnavailable as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
+    comm = ranks.join_world()
+    if comm is not None and comm.rank != 0:
+        sys.exit(_follow_rank_zero(config_path, comm))
+    try:
+        _run_pipeline(config_path, out_dir, from_stage, stages, force, verbose, quiet)
+    finally:
+        ranks.release()
+
+
+def _exit_if_not_shared(config, values, nranks: int) -> None:
+    """Exit 2 with one line when the run cannot be shared between ``nranks`` ranks in this version."""
+    reasons = ranks.unsupported(config, values)
+    if reasons:
+        click.echo(f"error: --ranks {nranks}: this version shares only uniform meshes without strength, tracers "
+                   f"or gravity between MPI ranks; the config has {'; '.join(reasons)}", err=True)
+        sys.exit(2)
+
+
+def _follow_rank_zero(config_path: str, comm) -> int:
+    """A rank other than 0 under mpiexec: the hydro stage's share of the work, nothing else
+    (rank 0 reports every error and owns the run directory); returns the exit status."""
+    import signal
+
+    from .adapters.hydro import follow_hydro_stage
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # rank 0 decides when the run stops
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        config = load_config(config_path)
+    except ConfigError:
+        ranks.wait_for_order(comm)
+        return 2
+    try:
+        return follow_hydro_stage(config, derived.derive(config), comm)
+    except Exception as exc:  # rank 0 waits for this rank in a step
+        ranks.abort(comm, f"the hydro stage failed: {type(exc).__name__}: {exc}")
+        raise
+
+
+def _run_pipeline(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
+                  force: bool, verbose: int, quiet: bool) -> None:
+    """``impactpipe run`` in this process (rank 0 of several)."""
     _setup_logging(verbose, quiet)
-    config, _ = _load_or_exit(config_path)
+    config, values = _load_or_exit(config_path)
+    if ranks.world() is not None:
+        _exit_if_not_shared(config, values, ranks.world().size)
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     try:
         with run_lock(run_dir), runstore.run_log(run_dir):
@@ -599,3 +658,7 @@ def convergence_cmd(config_path: str, varies: tuple[str, ...], depths: str, tole
         click.echo(f"rung {rung.ladder}={rung.value} failed: {rung.error}", err=True)
     if failed:
         sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()

@@ -6,6 +6,11 @@ At the end the working file gets its provenance and is renamed to ``hydro.h5``, 
 ``hydro.h5`` that exists is always complete.  A run that is interrupted resumes from the
 checkpoint when its config hash is unchanged.  A run that fails (NaN, negative density,
 time-step collapse) writes its last good state to the checkpoint and raises.
+
+On several MPI ranks (:mod:`impactpipe.pipeline.ranks`) rank 0 runs this stage as above and
+sends the other ranks its order; they build the same simulation (:func:`follow_hydro_stage`)
+and the run is shared between them (:mod:`impactpipe.hydro.parallel`).  Rank 0 decides after
+every step whether a checkpoint is due or a stop was asked for, and the others follow.
 """
 
 from __future__ import annotations
@@ -23,11 +28,12 @@ import numpy as np
 from impactpipe import storage
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.output.io import append_snapshot, write_tracers
+from impactpipe.hydro.parallel.distributed import collect, distribute
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.solver import HydroFailure, Simulation
 from impactpipe.hydro.tracers.motion import Tracers
 
-from .. import derived
+from .. import derived, ranks
 from ..stages import StageContext
 
 log = logging.getLogger(__name__)
@@ -35,6 +41,11 @@ log = logging.getLogger(__name__)
 
 class HydroStageFailure(RuntimeError):
     """The hydro run failed; the message says where and when and where the last good state is."""
+
+
+class _StoppedByRankZero(Exception):
+    """Rank 0 stopped the shared hydro run at the end of a step (a signal asked it to)."""
+
 
 WORK_FILE = ".hydro.work.h5"
 CHECKPOINT_FILE = "hydro.checkpoint.h5"
@@ -100,19 +111,28 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     times = [t for t in derived.snapshot_times(config, end_time) if t > sim.time]
     if sim.time == 0.0 and sim.step_count == 0:
         _append(work, sim.snapshot())
+    comm = ranks.world()
+    if comm is not None:
+        ranks.send_order({"resume": checkpoint.is_file(), "checkpoint": str(checkpoint), "end_time": end_time,
+                          "times": times})
+        distribute(sim, comm)
     progress = ctx.progress("hydro", end_time)
     last_checkpoint = [time.perf_counter()]
+    stopped = []
 
     def on_progress(t: float) -> None:
         """After every step (a whole state): progress, periodic checkpoints, a requested stop."""
         progress(t)
         stop = ctx.stop_requested()
-        if stop is not None or time.perf_counter() - last_checkpoint[0] >= config.hydro.checkpoint_wall_seconds:
+        due = stop is not None or time.perf_counter() - last_checkpoint[0] >= config.hydro.checkpoint_wall_seconds
+        due, stop = sim.partition.agree((due, stop))
+        if due:
             sim.save_checkpoint(checkpoint)
             last_checkpoint[0] = time.perf_counter()
         if stop is not None:
             log.info("hydro: stopped by %s at t = %.6g s (step %d); checkpoint kept for the resume", stop, sim.time,
                      sim.step_count)
+            stopped.append(stop)
             raise ctx.interrupted()
 
     try:
@@ -123,8 +143,14 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         sim.save_checkpoint(checkpoint)
         log.error("hydro failure: %s; cell state: %s", exc, exc.state)
         raise HydroStageFailure(f"{exc}; the last good state (t = {sim.time:.6g} s) is kept in {checkpoint}") from exc
+    except BaseException as exc:
+        if comm is not None and not stopped:  # the other ranks wait in a step for rank 0
+            ranks.abort(comm, f"the hydro stage failed: {type(exc).__name__}: {exc}")
+        raise
     finally:
         progress.close()
+    if comm is not None:
+        collect(sim)
     wall = time.perf_counter() - t_wall
     budget = conservation_budget(initial, sim.totals(), sim.floor_amounts,
                                  sim.gravity.work if sim.gravity is not None else 0.0)
@@ -154,6 +180,43 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         "hydro_budget": budget,
         "stage": {"steps": sim.step_count, "cell_updates": sim.cell_updates, "floors": sim.floor_counts},
     }
+
+
+def follow_hydro_stage(config, values: dict[str, Any], comm) -> int:
+    """A rank other than 0: take part in rank 0's hydro stage, if it runs one; returns the exit status.
+
+    The simulation is built as rank 0 built it (from the checkpoint it resumes, or new) and
+    runs to the same times; snapshots, checkpoints and totals are collective, and rank 0
+    alone writes.  0 when the stage finished (or did not run), 1 after a hydro failure, 2
+    when the run cannot be shared, 130 when rank 0 stopped it.
+    """
+    order = ranks.wait_for_order(comm)
+    if order is None:
+        return 0
+    checkpoint = Path(order["checkpoint"])
+    sim = Simulation.from_checkpoint(checkpoint) if order["resume"] else build_simulation(config, values)
+    try:
+        distribute(sim, comm)
+    except ValueError:
+        return 2
+
+    def follow(t: float) -> None:
+        due, stop = sim.partition.agree(None)
+        if due:
+            sim.save_checkpoint(checkpoint)
+        if stop is not None:
+            raise _StoppedByRankZero(stop)
+
+    try:
+        sim.run(order["end_time"], output_times=order["times"], on_output=lambda snapshot: None, progress=follow)
+    except HydroFailure:
+        sim.restore_last_good()
+        sim.save_checkpoint(checkpoint)
+        return 1
+    except _StoppedByRankZero:
+        return 130
+    collect(sim)
+    return 0
 
 
 def _append(work: Path, snapshot) -> None:

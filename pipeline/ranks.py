@@ -1,0 +1,142 @@
+"""Several MPI ranks for one run: launching them, and what rank 0 tells the others.
+
+``impactpipe run CONFIG --ranks N`` starts ``mpiexec -n N python -m impactpipe.pipeline.cli
+run CONFIG ...`` (:func:`launch`).  Under ``mpiexec`` (:func:`join_world`) rank 0 runs the
+pipeline as a single process would: the run store, its lock, the logs, every stage other
+than hydro and all files.  The other ranks only take part in the hydro stage: they wait for
+rank 0's order (:func:`wait_for_order`, sleeping rather than polling), build the same
+simulation, advance their blocks, and exit after the hydro stage; an order of None (the
+hydro stage does not run, or rank 0 stopped before it) lets them exit at once.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import sysconfig
+import time
+from pathlib import Path
+from typing import Any
+
+#: Environment variables that MPI launchers set in the processes they start (MPICH / Hydra and
+#: Slurm's PMI, Open MPI, PMIx); without any of them mpi4py is not imported at all.
+LAUNCHER_VARIABLES = ("PMI_SIZE", "PMI_RANK", "OMPI_COMM_WORLD_SIZE", "PMIX_RANK")
+INSTALL_HINT = 'pip install "impactpipe[mpi]"'
+#: Seconds between the checks of a rank waiting for rank 0's order.
+ORDER_POLL = 0.05
+
+_world: dict[str, Any] = {"comm": None, "ordered": False}
+
+
+class RanksUnavailable(RuntimeError):
+    """Several ranks were asked for but mpi4py or ``mpiexec`` is missing."""
+
+
+def unsupported(config, values: dict[str, Any]) -> list[str]:
+    """What in ``config`` this version cannot share between ranks, as config keys (empty when
+    nothing).  External gravity and more ranks than blocks are found when the hydro stage
+    starts (:func:`impactpipe.hydro.parallel.distributed.unsupported`)."""
+    reasons = []
+    if values["levels"] > 1:
+        reasons.append(f"an adaptive mesh (hydro.max_levels = {values['levels']}; set 1)")
+    strong = sorted(name for name, spec in config.resolved_materials().items()
+                    if (spec.get("strength") or {}).get("model", "none") != "none")
+    if strong:
+        reasons.append(f"material strength ({', '.join(f'materials.{n}.strength' for n in strong)})")
+    if values["tracers"]:
+        reasons.append("tracers (hydro.tracers.enabled)")
+    return reasons
+
+
+def mpi_installed() -> bool:
+    """Whether mpi4py can be imported (the ``mpi`` extra is installed)."""
+    return importlib.util.find_spec("mpi4py") is not None
+
+
+def mpiexec_path() -> str:
+    """The ``mpiexec`` beside this Python (the mpich wheel installs it there), else the one on PATH."""
+    beside = Path(sysconfig.get_path("scripts")) / "mpiexec"
+    if beside.is_file():
+        return str(beside)
+    found = shutil.which("mpiexec")
+    if found is None:
+        raise RanksUnavailable(f"no mpiexec found beside {sys.executable} or on PATH ({INSTALL_HINT} brings one)")
+    return found
+
+
+def launch_command(nranks: int, arguments: list[str]) -> list[str]:
+    """``mpiexec -n N <this python> -m impactpipe.pipeline.cli <arguments>``."""
+    if not mpi_installed():
+        raise RanksUnavailable(f"--ranks {nranks} needs mpi4py and an MPI library: {INSTALL_HINT}")
+    return [mpiexec_path(), "-n", str(nranks), sys.executable, "-m", "impactpipe.pipeline.cli", *arguments]
+
+
+def launch(nranks: int, arguments: list[str]) -> int:
+    """Run ``arguments`` of the command line on ``nranks`` MPI ranks; returns the exit status.
+
+    Each rank gets ``NUMBA_NUM_THREADS`` = cores / ranks (at least 1) unless it is set.  While
+    ``mpiexec`` runs, Ctrl-C reaches it from the terminal (this process ignores it) and a
+    SIGTERM sent to this process is passed on, so rank 0 stops the run at the end of a step.
+    """
+    command = launch_command(nranks, arguments)
+    env = dict(os.environ)
+    env.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // nranks)))
+    process = subprocess.Popen(command, env=env)
+    previous = {signal.SIGINT: signal.signal(signal.SIGINT, signal.SIG_IGN),
+                signal.SIGTERM: signal.signal(signal.SIGTERM, lambda signum, frame: process.send_signal(signum))}
+    try:
+        return process.wait()
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def join_world():
+    """The world communicator when this process is one of several MPI ranks, else None."""
+    if not any(name in os.environ for name in LAUNCHER_VARIABLES) or not mpi_installed():
+        return None
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    _world["comm"] = comm if comm.size > 1 else None
+    return _world["comm"]
+
+
+def world():
+    """The communicator :func:`join_world` found (None for a single process)."""
+    return _world["comm"]
+
+
+def send_order(order: dict | None) -> None:
+    """Rank 0: tell the other ranks what to do (the hydro stage's order, or None: exit)."""
+    comm = _world["comm"]
+    if comm is None or _world["ordered"]:
+        return
+    _world["ordered"] = True
+    comm.Ibarrier().Wait()  # matches the others' Ibarrier (a blocking Barrier would not)
+    comm.bcast(order, root=0)
+
+
+def abort(comm, reason: str) -> None:
+    """End every rank of ``comm`` at once, exit status 1: one rank failed where the others wait
+    for it (mpiexec does not end them when one rank exits with an error)."""
+    sys.stderr.write(f"rank {comm.rank}: {reason}; ending every MPI rank\n")
+    sys.stderr.flush()
+    comm.Abort(1)
+
+
+def release() -> None:
+    """Rank 0 at the end of the run: let ranks still waiting for an order exit."""
+    send_order(None)
+
+
+def wait_for_order(comm) -> dict | None:
+    """Ranks other than 0: sleep until rank 0 sends its order, then return it."""
+    request = comm.Ibarrier()
+    while not request.Test():
+        time.sleep(ORDER_POLL)
+    return comm.bcast(None, root=0)
