@@ -45,6 +45,34 @@ sys.argv = ["impactpipe", *sys.argv[1:]]
 main()
 """
 
+#: Three steps of the advection scene through the Python API, then a NaN in one cell's energy:
+#: the next sweep fails (from the failing block's owner on several ranks); the last good state
+#: is restored and checkpointed.  Writes the failure as each rank raised it to CHECKPOINT.rankR.json.
+FAIL_IN_A_SWEEP = """
+import json, sys
+import numpy as np
+from impactpipe.hydro.parallel.distributed import distribute
+from impactpipe.hydro.solver import HydroFailure
+from impactpipe.pipeline import derived, load_config, ranks
+from impactpipe.pipeline.adapters.hydro import build_simulation
+config = load_config(sys.argv[1])
+sim = build_simulation(config, derived.derive(config))
+comm = ranks.join_world()
+if comm is not None:
+    distribute(sim, comm)
+for _ in range(3):
+    sim.step()
+sim.state.energy[6, 0, 3, 3, 0] = np.nan
+try:
+    sim.step()
+except HydroFailure as exc:
+    sim.restore_last_good()
+    sim.save_checkpoint(sys.argv[2])
+    rank = 0 if comm is None else comm.rank
+    with open(f"{sys.argv[2]}.rank{rank}.json", "w") as out:
+        out.write(json.dumps([str(exc), exc.block, exc.cell, exc.state]))
+"""
+
 
 def impactpipe_run(config: Path, out: Path, *options: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "impactpipe.pipeline.cli", "run", str(config), "--out", str(out),
@@ -99,6 +127,24 @@ def test_a_run_checkpointed_on_two_ranks_resumes_on_three_to_the_same_answer(ser
     assert resumed.returncode == 0, resumed.stderr
     assert "resuming from checkpoint at" in (tmp_path / "run.log").read_text()
     assert_same_answer(tmp_path, serial["advection"])
+
+
+@pytest.mark.parametrize("nranks", [2, 3])
+def test_a_sweep_failure_stops_every_rank_with_the_single_process_failure_and_checkpoint(nranks, tmp_path):
+    serial = subprocess.run([sys.executable, "-c", FAIL_IN_A_SWEEP, str(SCENES["advection"]),
+                             str(tmp_path / "serial.h5")], env=ENV, capture_output=True, text=True, timeout=300)
+    shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", FAIL_IN_A_SWEEP,
+                             str(SCENES["advection"]), str(tmp_path / "shared.h5")],
+                            env=ENV, capture_output=True, text=True, timeout=300)
+    assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
+    failure = (tmp_path / "serial.h5.rank0.json").read_text()
+    assert "NaN in the updated state" in failure
+    for rank in range(nranks):
+        assert (tmp_path / f"shared.h5.rank{rank}.json").read_text() == failure
+    with h5py.File(tmp_path / "serial.h5", "r") as want, h5py.File(tmp_path / "shared.h5", "r") as got:
+        assert want.attrs["step_count"] == got.attrs["step_count"] == 3
+        for name in want["state"]:
+            assert np.array_equal(got["state"][name][()], want["state"][name][()], equal_nan=True), name
 
 
 def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
