@@ -8,6 +8,8 @@ adaptive mesh, followed by refluxing the coarse cells beside finer blocks
 (:func:`impactpipe.hydro.amr.transfer.reflux`); the sweep order alternates every step
 (x y z, then z y x), which makes the splitting second order over a pair of steps (Strang).  The state at the start of the step is kept, so a
 failing step leaves the last good state available (:meth:`Simulation.restore_last_good`).
+On several MPI ranks each process advances its share of the blocks (``Simulation.partition``,
+:mod:`impactpipe.hydro.parallel`).
 """
 
 from __future__ import annotations
@@ -194,8 +196,8 @@ class Simulation:
                         self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim,
                         self._rate_work, rates)
         bad = np.flatnonzero(~np.isfinite(rates))
-        rate, first_bad = self.partition.combine_rate(float(rates.max()), (own.start or 0) + int(bad[0]) if bad.size
-                                                      else -1)
+        first_bad = (own.start or 0) + int(bad[0]) if bad.size else -1
+        rate, first_bad = self.partition.combine_rate(float(rates.max()), first_bad)
         if first_bad >= 0:
             raise HydroFailure("non-finite signal speed", self.time, first_bad, None, {})
         if rate <= 0.0:
