@@ -33,7 +33,7 @@ from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.hydro.parallel.distributed import WholeMesh
-from impactpipe.hydro.mesh.state import FIELDS, HydroState, copy_interior
+from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
 from impactpipe.hydro.scheme.directional import sweep
 from impactpipe.hydro.scheme.pencil_layout import (
@@ -364,18 +364,14 @@ class Simulation:
     def _save_good(self) -> None:
         """Copy the interior cells of the state (the ghosts are refilled before every use, so a
         restore refills them instead of keeping a copy: 35 % less memory in 3D with 8^3 blocks),
-        the counters and the clock into the last-good copies.  With several numba threads the
-        blocks are copied in parallel (:func:`copy_interior`); on one, numpy's strided copy is
-        10-15 % faster than the kernel."""
-        gx, gy, gz = (int(g) for g in self.mesh.ghost)
-        threads = numba.get_num_threads()
+        the counters and the clock into the last-good copies.  numpy's strided copy, with any
+        number of threads: on the machines measured it copies at 4-5 ns per 2D gas-box cell on
+        one thread, where a parallel numba kernel took 7 ns on two (docs/performance.md)."""
         own = self.partition.blocks
         for name, arr in self.state.arrays().items():
             interior = self.mesh.interior(arr)
             if self._good[name].shape != interior.shape:
                 self._good[name] = interior.copy()
-            elif threads > 1:
-                copy_interior(arr[own], self._good[name][own], gx, gy, gz)
             else:
                 np.copyto(self._good[name][own], interior[own])
         for dst, src in zip(self._good_counters, self._counter_arrays()):

@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
 
 from impactpipe.hydro.eos import energy_from_pressure
 from impactpipe.hydro.mesh.blocks import BlockMesh
@@ -121,19 +120,3 @@ class HydroState:
         kinetic = 0.5 * rho * (velocity**2).sum(axis=1)
         energy = mesh.interior(self.energy)
         energy[:, 0] = np.where(sel, arhoe.sum(axis=1) + kinetic, energy[:, 0])
-
-
-@njit(cache=True, parallel=True)
-def copy_interior(src, dst, gx, gy, gz):
-    """dst[b, c] = the interior cells of src[b, c] for every block b in parallel.
-
-    ``src`` is a padded field ``(NB, C, NX, NY, NZ)``, ``dst`` its interior
-    ``(NB, C, NX - 2 gx, NY - 2 gy, NZ - 2 gz)`` (gx, gy, gz the ghost widths, 0 on unused axes).
-    """
-    nb, nc, nx, ny, nz = dst.shape
-    for b in prange(nb):
-        for c in range(nc):
-            for ix in range(nx):
-                for iy in range(ny):
-                    for iz in range(nz):
-                        dst[b, c, ix, iy, iz] = src[b, c, ix + gx, iy + gy, iz + gz]
