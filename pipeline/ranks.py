@@ -22,6 +22,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from impactpipe.hydro import PROBLEMS
+
 #: Environment variables that MPI launchers set in the processes they start (MPICH / Hydra and
 #: Slurm's PMI, Open MPI, PMIx); without any of them mpi4py is not imported at all.
 LAUNCHER_VARIABLES = ("PMI_SIZE", "PMI_RANK", "OMPI_COMM_WORLD_SIZE", "PMIX_RANK")
@@ -38,9 +40,11 @@ class RanksUnavailable(RuntimeError):
 
 def unsupported(config, values: dict[str, Any]) -> list[str]:
     """What in ``config`` this version cannot share between ranks, as config keys (empty when
-    nothing).  External gravity and more ranks than blocks are found when the hydro stage
-    starts (:func:`impactpipe.hydro.parallel.distributed.unsupported`)."""
+    nothing).  More ranks than blocks is found when the hydro stage starts
+    (:func:`impactpipe.hydro.parallel.distributed.unsupported`)."""
     reasons = []
+    if getattr(PROBLEMS.get(config.scene.problem), "EXTERNAL_GRAVITY", False):
+        reasons.append(f"external gravity (scene.gravity of the {config.scene.problem} problem)")
     if values["levels"] > 1:
         reasons.append(f"an adaptive mesh (hydro.max_levels = {values['levels']}; set 1)")
     strong = sorted(name for name, spec in config.resolved_materials().items()

@@ -170,6 +170,15 @@ def test_strength_an_adaptive_mesh_and_tracers_are_refused_before_mpiexec_starts
     assert not (tmp_path / "run").exists()
 
 
+def test_external_gravity_is_refused_before_mpiexec_starts(tmp_path):
+    """The column collapse's gravity (and its strength) named before anything is written."""
+    config = Path(__file__).resolve().parents[1] / "configs" / "column_collapse.yaml"
+    result = impactpipe_run(config, tmp_path / "run", "--ranks", "2")
+    assert result.returncode == 2
+    assert "external gravity (scene.gravity of the column_collapse problem)" in result.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_ranks_without_mpi4py_name_the_extra_to_install(monkeypatch, tmp_path):
     from click.testing import CliRunner
 
