@@ -40,21 +40,10 @@ def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component):
 
 
 @njit(cache=True, parallel=True)
-def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost):
-    """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the blocks."""
-    for b in prange(alpha.shape[0]):
-        _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arho, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arhoe, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(mom, b, neighbor, neighbor_level, axis, ghost, axis)
-        _fill_block_ghosts(energy, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
-
-
-@njit(cache=True, parallel=True)
-def fill_state_ghost_slabs_range(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
-                                 hi):
-    """:func:`fill_state_ghost_slabs` for the blocks ``lo .. hi - 1`` only (a rank's owned range,
+def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
+                           hi):
+    """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the
+    blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range,
     :mod:`impactpipe.hydro.parallel`); they read any block's interior cells."""
     for b in prange(lo, hi):
         _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
@@ -148,7 +137,7 @@ def fill_state_ghosts(state, mesh, axis: int) -> None:
     if g == 0:
         return
     fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g)
+    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks)
     if not mesh.adaptive:
         return
     plans = axis_plans(mesh, axis)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs_range, fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs, fill_state_ghosts
 
 from .decomposition import block_costs, exchange_routes, owned_ranges
 from .exchange import broadcast_arrays, exchange_strips, share_owned_blocks
@@ -71,13 +71,13 @@ class BlockRanges(WholeMesh):
 
     def fill_ghosts(self, state, mesh, axis: int) -> None:
         """Receive the neighbours' strips along ``axis`` from their owners, then fill the owned
-        blocks' ghosts (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghost_slabs_range`)."""
+        blocks' ghosts (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghost_slabs`)."""
         g = int(mesh.ghost[axis])
         if g == 0:
             return
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         exchange_strips(self.comm, self.routes[axis], fields, axis)
-        fill_state_ghost_slabs_range(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
+        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """One Allreduce (MAX) of (rate, -first bad block): the serial run's values exactly."""
