@@ -16,7 +16,7 @@ rank.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,18 +69,23 @@ class Strips:
 
     blocks: np.ndarray
     cells: np.ndarray
+    #: The flat indices of :meth:`indices` per field shape, computed once (an exchange runs every sweep).
+    _indices: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def indices(self, field: np.ndarray) -> np.ndarray:
-        """Flat indices into ``field.reshape(-1)`` (field (NB, C, NX, NY, NZ)) of every cell of
+    def indices(self, values: np.ndarray) -> np.ndarray:
+        """Flat indices into ``values.reshape(-1)`` (a field (NB, C, NX, NY, NZ)) of every cell of
         the strips, component by component: (C, ncells) raveled."""
-        ncomp = field.shape[1]
-        per_block = int(np.prod(field.shape[2:]))
-        base = self.blocks * (ncomp * per_block) + self.cells
-        return (base[None, :] + (np.arange(ncomp) * per_block)[:, None]).ravel()
+        shape = values.shape
+        if shape not in self._indices:
+            ncomp = shape[1]
+            per_block = int(np.prod(shape[2:]))
+            base = self.blocks * (ncomp * per_block) + self.cells
+            self._indices[shape] = (base[None, :] + (np.arange(ncomp) * per_block)[:, None]).ravel()
+        return self._indices[shape]
 
-    def values(self, field: np.ndarray) -> int:
-        """Number of values of ``field`` the strips hold."""
-        return field.shape[1] * len(self.cells)
+    def values(self, values: np.ndarray) -> int:
+        """Number of values of the field ``values`` the strips hold."""
+        return values.shape[1] * len(self.cells)
 
 
 @dataclass(frozen=True)
