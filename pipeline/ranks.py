@@ -47,10 +47,6 @@ def unsupported(config, values: dict[str, Any]) -> list[str]:
         reasons.append(f"external gravity (scene.gravity of the {config.scene.problem} problem)")
     if values["levels"] > 1:
         reasons.append(f"an adaptive mesh (hydro.max_levels = {values['levels']}; set 1)")
-    strong = sorted(name for name, spec in config.resolved_materials().items()
-                    if (spec.get("strength") or {}).get("model", "none") != "none")
-    if strong:
-        reasons.append(f"material strength ({', '.join(f'materials.{n}.strength' for n in strong)})")
     if values["tracers"]:
         reasons.append("tracers (hydro.tracers.enabled)")
     return reasons

@@ -33,7 +33,7 @@ def test_ghost_fill_kinds_along_x():
     interior = mesh.interior(field)
     interior[:, 0, :, 0, 0] = np.arange(16).reshape(2, 8) + 1.0
     interior[:, 1] = interior[:, 0]
-    fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, 0, GHOST, 1)
+    fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, 0, GHOST, 1, 0, mesh.nblocks)
     g = GHOST
     # block 0 low side: mirror with the flipped component negated
     assert field[0, 0, g - 1, 0, 0] == 1.0 and field[0, 0, g - 2, 0, 0] == 2.0

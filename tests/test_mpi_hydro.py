@@ -27,7 +27,8 @@ pytest.importorskip("mpi4py")
 from impactpipe.pipeline import cli, ranks  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parent / "configs" / "mpi"
-SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml"}
+SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml",
+          "impact-strength": CONFIGS / "impact_strength.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 #: Stops rank 0's hydro stage at the end of its 4th step, as a first SIGINT would (the run
@@ -157,21 +158,20 @@ def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
     assert "more ranks (3) than blocks (2)" in result.stderr
 
 
-def test_strength_an_adaptive_mesh_and_tracers_are_refused_before_mpiexec_starts(tmp_path):
+def test_an_adaptive_mesh_and_tracers_are_refused_before_mpiexec_starts(tmp_path):
     config = yaml.safe_load(SCENES["impact"].read_text())
-    config["materials"]["basalt"]["strength"] = {"model": "geo", "preset": "weak"}
     config["hydro"].update(max_levels=2, tracers={"enabled": True})
     path = tmp_path / "unshared.yaml"
     path.write_text(yaml.safe_dump(config))
     result = impactpipe_run(path, tmp_path / "run", "--ranks", "2")
     assert result.returncode == 2
-    for what in ("hydro.max_levels = 2", "materials.basalt.strength", "hydro.tracers.enabled"):
+    for what in ("hydro.max_levels = 2", "hydro.tracers.enabled"):
         assert what in result.stderr
     assert not (tmp_path / "run").exists()
 
 
 def test_external_gravity_is_refused_before_mpiexec_starts(tmp_path):
-    """The column collapse's gravity (and its strength) named before anything is written."""
+    """The column collapse's gravity named before anything is written."""
     config = Path(__file__).resolve().parents[1] / "configs" / "column_collapse.yaml"
     result = impactpipe_run(config, tmp_path / "run", "--ranks", "2")
     assert result.returncode == 2

@@ -111,7 +111,8 @@ def test_failed_material_at_zero_pressure_keeps_its_cohesion():
         update_stress(1e-6, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
                       mesh.block_dx, eos.kind, eos.params, eos.table, reference_densities(eos),
                       arrays.model, arrays.params, arrays.shear,
-                      arrays.tensile_strength, strength.work, strength.counts, strength.amounts)
+                      arrays.tensile_strength, strength.work, strength.counts, strength.amounts, 0,
+                      mesh.nblocks)
     s = mesh.interior(state.arhoq)[0, :4, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
     von_mises = np.sqrt(1.5 * (s[0] ** 2 + s[1] ** 2 + s[2] ** 2 + 2.0 * s[3] ** 2))
     t = temperature(eos.kind[0], eos.params[0], eos.table, spec["rho0"] * (1.0 - 1e-6), 0.0)

@@ -78,7 +78,8 @@ def _rotation_kernel_run(steps_per_revolution):
         update_stress(dt, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
                       mesh.block_dx, eos.kind, eos.params, eos.table, reference_densities(eos),
                       arrays.model, arrays.params, arrays.shear,
-                      arrays.tensile_strength, strength.work, strength.counts, strength.amounts)
+                      arrays.tensile_strength, strength.work, strength.counts, strength.amounts, 0,
+                      mesh.nblocks)
     cell = mesh.interior(state.arhoq)[0, :4, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
     return s0, cell
 

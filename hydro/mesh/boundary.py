@@ -27,15 +27,16 @@ from impactpipe.hydro.mesh.blocks import REFLECTING
 
 
 @njit(cache=True, parallel=True)
-def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component):
-    """Fill the same-level and domain-face ghost slabs of ``field[NB, C, NX, NY, NZ]`` along ``axis``.
+def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component, lo, hi):
+    """Fill the same-level and domain-face ghost slabs of ``field[NB, C, NX, NY, NZ]`` along
+    ``axis`` for the blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range).
 
     ``flip_component`` is the component index whose sign flips at a reflecting boundary
     (the normal momentum, ``axis``) or -1 for scalar fields.  Coarse/fine faces are left
     alone.  Blocks in parallel: a block writes only its own ghosts and reads only interior
     cells.
     """
-    for b in prange(field.shape[0]):
+    for b in prange(lo, hi):
         _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component)
 
 
@@ -120,7 +121,7 @@ def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = 
     g = int(mesh.ghost[axis])
     if g == 0:
         return
-    fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, axis, g, flip_component)
+    fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, axis, g, flip_component, 0, mesh.nblocks)
     if mesh.adaptive:
         plans = axis_plans(mesh, axis)
         restrict_ghosts(field, plans["restrict"], plans["restrict_weight"])

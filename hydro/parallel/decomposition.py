@@ -69,23 +69,25 @@ class Strips:
 
     blocks: np.ndarray
     cells: np.ndarray
-    #: The flat indices of :meth:`indices` per field shape, computed once (an exchange runs every sweep).
+    #: The flat indices of :meth:`indices` per field shape and components, computed once (an
+    #: exchange runs before every ghost fill).
     _indices: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def indices(self, values: np.ndarray) -> np.ndarray:
+    def indices(self, values: np.ndarray, components: slice = slice(None)) -> np.ndarray:
         """Flat indices into ``values.reshape(-1)`` (a field (NB, C, NX, NY, NZ)) of every cell of
-        the strips, component by component: (C, ncells) raveled."""
-        shape = values.shape
-        if shape not in self._indices:
-            ncomp = shape[1]
-            per_block = int(np.prod(shape[2:]))
+        the strips, for each of the ``components`` in turn: (ncomponents, ncells) raveled."""
+        key = (values.shape, components.indices(values.shape[1]))
+        if key not in self._indices:
+            ncomp = values.shape[1]
+            per_block = int(np.prod(values.shape[2:]))
             base = self.blocks * (ncomp * per_block) + self.cells
-            self._indices[shape] = (base[None, :] + (np.arange(ncomp) * per_block)[:, None]).ravel()
-        return self._indices[shape]
+            chosen = np.arange(*key[1])
+            self._indices[key] = (base[None, :] + (chosen * per_block)[:, None]).ravel()
+        return self._indices[key]
 
-    def values(self, values: np.ndarray) -> int:
-        """Number of values of the field ``values`` the strips hold."""
-        return values.shape[1] * len(self.cells)
+    def values(self, values: np.ndarray, components: slice = slice(None)) -> int:
+        """Number of values of the ``components`` of the field ``values`` the strips hold."""
+        return len(range(*components.indices(values.shape[1]))) * len(self.cells)
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs, fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts, fill_state_ghost_slabs, fill_state_ghosts
 
 from .decomposition import block_costs, exchange_routes, owned_ranges
 from .exchange import broadcast_arrays, exchange_strips, share_owned_blocks
@@ -37,9 +37,19 @@ class WholeMesh:
         """Fill the ghosts of every block along ``axis``."""
         fill_state_ghosts(state, mesh, axis)
 
+    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice) -> None:
+        """Fill the ghosts of the ``components`` of a derived field (velocities, stresses) of
+        every block along ``axis``, without sign flips
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`)."""
+        fill_field_ghosts(field[:, components], mesh, axis)
+
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """(largest signal rate (1/s), first block with a non-finite rate or -1) over every process."""
         return rate, first_bad
+
+    def any(self, flag: bool) -> bool:
+        """Whether ``flag`` holds on some process."""
+        return flag
 
     def first_failure(self, failure: np.ndarray) -> int:
         """The first block whose sweep failed (``failure[:, 0]`` != 0), or -1."""
@@ -79,6 +89,21 @@ class BlockRanges(WholeMesh):
         exchange_strips(self.comm, self.routes[axis], fields, axis)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
 
+    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice) -> None:
+        """Receive the neighbours' strips of the ``components`` of ``field`` along ``axis``, then
+        fill the owned blocks' ghosts of those components."""
+        g = int(mesh.ghost[axis])
+        if g == 0:
+            return
+        exchange_strips(self.comm, self.routes[axis], (field,), axis, components)
+        fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
+
+    def any(self, flag: bool) -> bool:
+        """Whether ``flag`` holds on some rank (one allreduce, LOR)."""
+        from mpi4py import MPI
+
+        return bool(self.comm.allreduce(bool(flag), op=MPI.LOR))
+
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """One Allreduce (MAX) of (rate, -first bad block): the serial run's values exactly."""
         from mpi4py import MPI
@@ -113,8 +138,6 @@ def unsupported(sim, nranks: int) -> list[str]:
     reasons = []
     if sim.mesh.adaptive:
         reasons.append("an adaptive mesh (hydro.max_levels > 1)")
-    if sim.strength is not None:
-        reasons.append("material strength")
     if sim.tracers is not None:
         reasons.append("tracers")
     if sim.gravity is not None:

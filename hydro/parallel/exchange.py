@@ -14,27 +14,29 @@ from .decomposition import Route
 STRIP_TAG = 100
 
 
-def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], axis: int) -> None:
-    """Send this rank's strips and receive its peers' into ``fields``, one message per peer
-    (every field packed into one float64 buffer), non-blocking both ways, then unpack."""
+def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], axis: int,
+                    components: slice = slice(None)) -> None:
+    """Send this rank's strips and receive its peers' into the ``components`` of ``fields``, one
+    message per peer (every field packed into one float64 buffer), non-blocking both ways,
+    then unpack."""
     from mpi4py import MPI
 
     flats = [_flat(field) for field in fields]
     requests, received, sent = [], [], []
     for route in routes:
-        buffer = np.empty(sum(route.receive.values(field) for field in fields))
+        buffer = np.empty(sum(route.receive.values(field, components) for field in fields))
         requests.append(comm.Irecv(buffer, source=route.peer, tag=STRIP_TAG + axis))
         received.append((buffer, route.receive))
     for route in routes:
-        buffer = np.concatenate([flat[route.send.indices(field)] for flat, field in zip(flats, fields)])
+        buffer = np.concatenate([flat[route.send.indices(field, components)] for flat, field in zip(flats, fields)])
         requests.append(comm.Isend(buffer, dest=route.peer, tag=STRIP_TAG + axis))
         sent.append(buffer)
     MPI.Request.Waitall(requests)
     for buffer, strips in received:
         start = 0
         for flat, field in zip(flats, fields):
-            size = strips.values(field)
-            flat[strips.indices(field)] = buffer[start:start + size]
+            size = strips.values(field, components)
+            flat[strips.indices(field, components)] = buffer[start:start + size]
             start += size
 
 

@@ -53,15 +53,16 @@ def stress_slot(i, j):
 
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
-                            boundary, face_flux, col0):
-    """Add the deviatoric stress fluxes over dt (s) to momentum and total energy; see the module docstring."""
+                            boundary, face_flux, col0, lo, hi):
+    """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the
+    blocks ``lo .. hi - 1``; see the module docstring."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
     pi = 3.141592653589793
-    for b in prange(nb):
+    for b in prange(lo, hi):
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0

@@ -5,18 +5,20 @@ sweeps (which transport the stress with the material, ``arhoq``), the solver int
 momentum sources with a kick - update - kick splitting (velocity Verlet; docs/strength.md,
 "Time integration"):
 
-1. :meth:`~MaterialStrength.load_stress`: ghosts of alpha, partial densities and momentum;
-   cell velocities v^n; the transported mixture stress S^n;
+1. :meth:`~MaterialStrength.load_stress`: cell velocities v^n, fills and the transported
+   mixture stress S^n of the interior cells, then their ghosts;
 2. :meth:`~MaterialStrength.kick` over dt / 2 with S^n
    (:func:`impactpipe.hydro.strength.divergence.apply_stress_divergence`, conservative
    fluxes), then gravity over dt / 2 when the scene has it;
 3. :meth:`~MaterialStrength.update` over dt with the half-step velocities v^(n+1/2)
-   (:func:`impactpipe.hydro.strength.update.update_stress`: Jaumann update, tensile failure,
+   (:func:`impactpipe.hydro.strength.update.cell_velocities`, then
+   :func:`impactpipe.hydro.strength.update.update_stress`: Jaumann update, tensile failure,
    yield, damage, stress power);
 4. :meth:`~MaterialStrength.kick` over dt / 2 with S^(n+1), then gravity over dt / 2.
 
-The stress ghosts are filled after steps 1 and 3 (reflecting walls mirror the stress: shear
-components with one index normal to the wall change sign).  Updating the stress between two
+The work arrays' ghosts are filled after each of steps 1 to 3, for the slots that step wrote
+(reflecting walls mirror them: the normal velocity and the shear components with one index
+normal to the wall change sign).  The state's ghosts are not used.  Updating the stress between two
 half kicks is neutral for elastic waves up to the CFL limit; updating it before one full kick
 (the scheme this replaced) amplified them by 2 % per step at cfl 0.4 (docs/strength.md).
 
@@ -42,14 +44,13 @@ from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.eos import reference_densities
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
 from impactpipe.hydro.strength.parameters import DAMAGE0, StrengthArrays
 from impactpipe.hydro.strength.update import (
-    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, mixture_stress, stress_slots,
-    update_stress,
+    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, cell_velocity_and_stress,
+    stress_slots, update_stress,
 )
 
 #: Work slots whose sign flips in a reflecting ghost, per wall-normal axis (velocity and shear stress).
@@ -114,31 +115,37 @@ class MaterialStrength:
         for k in range(self.nmat):
             state.arhoq[:, k * self.nq + self.ns + 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
 
-    def load_stress(self, state: HydroState, eos) -> None:
-        """Cell velocities and the transported mixture stress S^n (from ``arhoq``) into the work
-        arrays, ghosts included: what the first half kick (:meth:`kick`) uses."""
-        self._velocities(state, eos, all_fields=True)
-        mixture_stress(state.alpha, state.arho, state.arhoq, self.arrays.model, self.work)
+    def load_stress(self, state: HydroState, eos, partition) -> None:
+        """Cell velocities, fills and the transported mixture stress S^n (from ``arhoq``) of the
+        blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`) into the
+        work arrays, then their ghosts: what the first half kick (:meth:`kick`) uses."""
+        lo, hi = self._range(partition)
+        cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._reference_densities(eos),
+                                 self.arrays.model, self.work, lo, hi)
         for axis in range(self.mesh.ndim):
-            self._fill_work_ghosts(axis)
+            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns))
 
-    def update(self, state: HydroState, dt: float, eos) -> None:
-        """Advance the stress over ``dt`` (s) with the current velocities (the half-step ones
-        after the first kick): Jaumann update, failure, yield, damage and stress power; the new
-        mixture stress S^(n+1) goes to the work arrays, ghosts included."""
-        self._velocities(state, eos, all_fields=False)
+    def update(self, state: HydroState, dt: float, eos, partition) -> None:
+        """Advance the stress of the ``partition``'s blocks over ``dt`` (s) with the current velocities (the
+        half-step ones after the first kick, into the work arrays with their ghosts first):
+        Jaumann update, failure, yield, damage and stress power; the new mixture stress
+        S^(n+1) goes to the work arrays, ghosts included."""
         a = self.arrays
         mesh = self.mesh
+        lo, hi = self._range(partition)
+        cell_velocities(state.arho, state.momentum, self.work, lo, hi)
+        for axis in range(mesh.ndim):
+            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_V + 3))
         update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                       mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table, self._reference_densities(eos),
-                      a.model, a.params, a.shear,
-                      a.tensile_strength, self.work, self.counts, self.amounts)
+                      a.model, a.params, a.shear, a.tensile_strength, self.work, self.counts, self.amounts, lo, hi)
         for axis in range(mesh.ndim):
-            self._fill_work_ghosts(axis)
+            self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns))
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
-             amounts: np.ndarray) -> None:
-        """Add the divergence of the work arrays' stress over ``dt`` (s) to momentum and energy.
+             amounts: np.ndarray, partition) -> None:
+        """Add the divergence of the work arrays' stress over ``dt`` (s) to the momentum and
+        energy of the ``partition``'s blocks.
 
         Domain-face fluxes go to ``boundary``.  On an adaptive mesh the coarse cells beside
         finer blocks are refluxed with the fine blocks' stress fluxes (momentum and energy only;
@@ -146,29 +153,23 @@ class MaterialStrength:
         since no mass moves).
         """
         mesh = self.mesh
+        lo, hi = self._range(partition)
         self.face_flux[...] = 0.0
         apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                 mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                self.face_flux, 3 * self.nmat)
+                                self.face_flux, 3 * self.nmat, lo, hi)
         if mesh.adaptive:
             for axis in range(mesh.ndim):
                 plans = axis_plans(mesh, axis)
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self.face_flux[axis], state.alpha, state.arho,
                        state.arhoe, state.arhoq, state.momentum, state.energy, floors, amounts)
 
-    def _velocities(self, state: HydroState, eos, all_fields: bool) -> None:
-        """Ghosts of momentum (and, with ``all_fields``, of alpha and the partial densities),
-        rough-wall ghosts, then the cell velocities and fills of every padded cell."""
-        mesh = self.mesh
-        for axis in range(mesh.ndim):
-            if all_fields:
-                fill_field_ghosts(state.alpha, mesh, axis, -1)
-                fill_field_ghosts(state.arho, mesh, axis, -1)
-            fill_field_ghosts(state.momentum, mesh, axis, axis)
-            for wall_axis, side in self.rough_walls:
-                if wall_axis == axis:
-                    self._flip_wall_ghosts(state.momentum, axis, side, [c for c in range(3) if c != axis])
-        cell_velocities(state.alpha, state.arho, state.momentum, self._reference_densities(eos), self.work)
+    def _range(self, partition) -> tuple[int, int]:
+        """(first, one past the last) block of the contiguous range the ``partition`` advances."""
+        lo, hi, step = partition.blocks.indices(self.mesh.nblocks)
+        if step != 1:
+            raise ValueError("the strength kernels take a contiguous range of blocks")
+        return lo, hi
 
     def _reference_densities(self, eos) -> np.ndarray:
         """The materials' reference densities (kg/m^3) of the packed EOS ``eos``, computed once per EOS."""
@@ -176,22 +177,16 @@ class MaterialStrength:
             self._rho0 = (eos, reference_densities(eos))
         return self._rho0[1]
 
-    def _fill_work_ghosts(self, axis: int) -> None:
-        """Ghosts of the work arrays along ``axis``.  On a uniform mesh only the stress slots:
-        :func:`cell_velocities` already computed the velocities and fills of the ghost cells
-        from the conserved ghosts, with the values the copies and wall flips would give.  On an
-        adaptive mesh every slot (coarse/fine ghosts of velocity are restricted velocities)."""
-        mesh = self.mesh
-        if mesh.adaptive:
-            fill_field_ghosts(self.work, mesh, axis)
-            slots = range(NWORK)
-        else:
-            fill_ghosts(self.work[:, WK_S:WK_S + self.ns], mesh.neighbor, mesh.neighbor_level, axis,
-                        int(mesh.ghost[axis]), -1)
-            slots = range(WK_S, WK_S + self.ns)
+    def _fill_work_ghosts(self, partition, axis: int, slots: slice) -> None:
+        """Ghosts of the work arrays' ``slots`` along ``axis``: copies of the neighbours' cells
+        (coarse/fine faces: restriction and copies; neighbours of another MPI rank: received
+        strips; ``partition.fill_field_ghosts``), then the wall sign flips.  A copied velocity
+        or fill equals the one computed from copied conserved ghosts, so the work arrays never
+        need the state's ghosts."""
+        partition.fill_field_ghosts(self.work, self.mesh, axis, slots)
         for side in (0, 1):
             flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-            self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if c in slots])
+            self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if slots.start <= c < slots.stop])
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components) -> None:
         """Negate ``components`` of ``array`` in the ghost slabs of the reflecting faces on ``side`` of ``axis``."""

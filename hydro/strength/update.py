@@ -76,19 +76,33 @@ def stress_slots(ndim: int) -> int:
 
 
 @njit(cache=True, parallel=True)
-def cell_velocities(alpha, arho, mom, rho0, work):
-    """Velocity and material fill of every padded cell (ghosts filled beforehand) into ``work``.
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, work, lo, hi):
+    """Velocity, material fill and mixture deviatoric stress of the interior cells of the
+    blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards).
 
-    The fill is min(phi, sum_k alpha_k rho_k / rho0_k) (``rho0[M]`` the materials' reference
-    densities, kg/m^3; materials without one, rho0 = 0, count by volume): material expanded
-    far below rho0 fills a cell by volume but is as light as a spray, and the stress
-    tractions scale with it.
+    A cell holds material when rho = sum_k alpha_k rho_k > 0 and phi = sum_k alpha_k >=
+    PHI_VOID; its velocity is v = (rho v) / rho (m/s) and its fill min(phi, sum_k alpha_k
+    rho_k / rho0_k) (``rho0[M]`` the materials' reference densities, kg/m^3; materials
+    without one, rho0 = 0, count by volume): material expanded far below rho0 fills a cell
+    by volume but is as light as a spray, and the stress tractions scale with it.  Other
+    cells get velocity, fill and stress 0.
+
+    Mixture stress S = sum_k alpha_k S_k (Pa), S_k = (alpha_k rho_k S_k) / (alpha_k rho_k)
+    from the transported amounts ``arhoq``; cells without the material and strengthless
+    materials add nothing.  This is the stress the first half of the momentum kick uses.
     """
     nb, nmat, nx, ny, nz = alpha.shape
-    for b in prange(nb):
-        for ix in range(nx):
-            for iy in range(ny):
-                for iz in range(nz):
+    nq = arhoq.shape[1] // nmat
+    ns = nq - 2
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(lo, hi):
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    for c in range(6):
+                        work[b, WK_S + c, ix, iy, iz] = 0.0
                     rho = 0.0
                     phi = 0.0
                     solid = 0.0
@@ -98,39 +112,14 @@ def cell_velocities(alpha, arho, mom, rho0, work):
                         phi += alpha[b, k, ix, iy, iz]
                         r0 = rho0[k]
                         solid += ar / r0 if r0 > 0.0 else alpha[b, k, ix, iy, iz]
-                    if rho > 0.0 and phi >= PHI_VOID:
-                        for d in range(3):
-                            work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
-                        work[b, WK_PHI, ix, iy, iz] = max(min(phi, solid), PHI_VOID)
-                    else:
+                    if not (rho > 0.0 and phi >= PHI_VOID):
                         for d in range(3):
                             work[b, WK_V + d, ix, iy, iz] = 0.0
                         work[b, WK_PHI, ix, iy, iz] = 0.0
-
-
-@njit(cache=True, parallel=True)
-def mixture_stress(alpha, arho, arhoq, model, work):
-    """Mixture deviatoric stress S = sum_k alpha_k S_k (Pa) of every interior cell into ``work``.
-
-    S_k = (alpha_k rho_k S_k) / (alpha_k rho_k) from the transported amounts ``arhoq``;
-    void cells (``work`` fill 0, from :func:`cell_velocities`), cells without the material
-    and strengthless materials add nothing.  This is the stress the first half of the
-    momentum kick uses (:meth:`impactpipe.hydro.strength.model.MaterialStrength.advance`).
-    """
-    nb, nmat, nx, ny, nz = alpha.shape
-    nq = arhoq.shape[1] // nmat
-    ns = nq - 2
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
-    for b in prange(nb):
-        for ix in range(gx, nx - gx):
-            for iy in range(gy, ny - gy):
-                for iz in range(gz, nz - gz):
-                    for c in range(6):
-                        work[b, WK_S + c, ix, iy, iz] = 0.0
-                    if work[b, WK_PHI, ix, iy, iz] <= 0.0:
                         continue
+                    for d in range(3):
+                        work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
+                    work[b, WK_PHI, ix, iy, iz] = max(min(phi, solid), PHI_VOID)
                     for k in range(nmat):
                         ar = arho[b, k, ix, iy, iz]
                         a = alpha[b, k, ix, iy, iz]
@@ -139,6 +128,28 @@ def mixture_stress(alpha, arho, arhoq, model, work):
                         scale = a / ar
                         for c in range(ns):
                             work[b, WK_S + c, ix, iy, iz] += scale * arhoq[b, k * nq + c, ix, iy, iz]
+
+
+@njit(cache=True, parallel=True)
+def cell_velocities(arho, mom, work, lo, hi):
+    """New velocities v = (rho v) / rho (m/s), rho = sum_k alpha_k rho_k, of the interior cells
+    of the blocks ``lo .. hi - 1`` that hold material (``work`` fill > 0, set by
+    :func:`cell_velocity_and_stress`; the momentum kicks move no mass, so the fills stay)."""
+    nb, nmat, nx, ny, nz = arho.shape
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(lo, hi):
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    if work[b, WK_PHI, ix, iy, iz] <= 0.0:
+                        continue
+                    rho = 0.0
+                    for k in range(nmat):
+                        rho += arho[b, k, ix, iy, iz]
+                    for d in range(3):
+                        work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
 
 
 @njit(cache=True, inline="always")
@@ -168,12 +179,13 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
 
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
-                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts):
-    """One strength step of ``dt`` (s) for every interior cell; see the module docstring.
+                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi):
+    """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``;
+    see the module docstring.
     ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
     reference_densities`).
 
-    ``work`` holds the velocities and fills with ghosts (:func:`cell_velocities`);
+    ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its stress slots are written for the interior cells.  Counters accumulate per block.
     """
     nb, nmat, nx, ny, nz = alpha.shape
@@ -183,7 +195,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    for b in prange(nb):
+    for b in prange(lo, hi):
         dxs = (block_dx[b, 0], block_dx[b, 1], block_dx[b, 2])
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
