@@ -249,6 +249,7 @@ class Simulation:
         self.cell_updates += self.mesh.ncells
         self.last_dt = dt
         if self.tracers is not None:
+            self.partition.share_neighbourhood(st)
             self.tracers.after_step(self, dt)
         return dt
 
@@ -382,7 +383,8 @@ class Simulation:
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step: the
         interior cells as they were, the ghosts filled from them (collective on several ranks:
-        each restores its own blocks)."""
+        each restores its own blocks, and with tracers the cells around them that the tracers
+        read)."""
         own = self.partition.blocks
         for name, arr in self.state.arrays().items():
             np.copyto(self.mesh.interior(arr)[own], self._good[name][own])
@@ -393,6 +395,7 @@ class Simulation:
         self.time, self.step_count, self.cell_updates = self._good_clock
         self._failure[:] = 0
         if self.tracers is not None:
+            self.partition.share_neighbourhood(self.state)
             self.tracers.restore_good()
 
     def _strength_counters(self) -> tuple:

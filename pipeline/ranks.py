@@ -47,8 +47,6 @@ def unsupported(config, values: dict[str, Any]) -> list[str]:
         reasons.append(f"external gravity (scene.gravity of the {config.scene.problem} problem)")
     if values["levels"] > 1:
         reasons.append(f"an adaptive mesh (hydro.max_levels = {values['levels']}; set 1)")
-    if values["tracers"]:
-        reasons.append("tracers (hydro.tracers.enabled)")
     return reasons
 
 

@@ -1,12 +1,20 @@
-"""The cut of the block order into owned ranges and the exchange plan between ranks
-(:mod:`impactpipe.hydro.parallel.decomposition`); numpy only, no MPI."""
+"""The cut of the block order into owned ranges, the exchange plan between ranks and the
+tracers' neighbourhood (:mod:`impactpipe.hydro.parallel.decomposition`); numpy only, no MPI."""
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 import pytest
 
-from impactpipe.hydro.parallel.decomposition import exchange_routes, owned_ranges, owners
+from impactpipe.hydro.parallel.decomposition import (
+    TRACER_REACH,
+    exchange_routes,
+    neighbourhood_routes,
+    owned_ranges,
+    owners,
+)
 from impactpipe.hydro.problems.common import adaptive_mesh
 
 
@@ -63,3 +71,43 @@ def test_the_exchange_plan_delivers_every_ghost_source_from_another_rank():
                 assert np.array_equal(route.send.blocks, back.receive.blocks)
                 assert np.array_equal(route.send.cells, back.receive.cells)
     assert plans[0][2] == []
+
+
+@pytest.mark.parametrize("geometry", ["2d-planar", "3d"])
+def test_the_tracers_neighbourhood_is_every_foreign_cell_within_reach_of_a_rank_s_blocks(geometry):
+    """Periodic along x, outflow / reflecting elsewhere: the cells a rank receives are exactly the
+    interior cells of other ranks' blocks within TRACER_REACH (across faces, edges, corners and
+    the periodic faces) of a cell of its own blocks, and what one rank sends another is what
+    that one receives."""
+    ndim = 2 if geometry == "2d-planar" else 3
+    cells = [16, 12, 8][:ndim]
+    boundaries = [("periodic", "periodic"), ("outflow", "reflecting"), ("outflow", "outflow")][:ndim]
+    mesh = adaptive_mesh(geometry, [0.0] * ndim, [c / 16 for c in cells], cells, boundaries, 4, 1)
+    n, g, (px, py, pz) = 4, mesh.ghost, mesh.padded_shape
+    block_at = {tuple(int(i) for i in mesh.block_index[b]): b for b in range(mesh.nblocks)}
+    nranks = 3
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), nranks)
+    owner = owners(cuts)
+    plans = {rank: neighbourhood_routes(mesh, cuts, rank) for rank in range(nranks)}
+    for rank in range(nranks):
+        expected = set()
+        for b in range(cuts[rank], cuts[rank + 1]):
+            for local in itertools.product(range(n), repeat=ndim):
+                cell = [int(mesh.block_index[b, d]) * n + local[d] for d in range(ndim)]
+                for step in itertools.product(range(-TRACER_REACH, TRACER_REACH + 1), repeat=ndim):
+                    near = [cell[d] + step[d] for d in range(ndim)]
+                    near[0] %= cells[0]
+                    if any(not 0 <= near[d] < cells[d] for d in range(ndim)):
+                        continue
+                    nb = block_at[tuple(c // n for c in near) + (0,) * (3 - ndim)]
+                    if owner[nb] != rank:
+                        i = [near[d] % n + g[d] for d in range(ndim)] + [0] * (3 - ndim)
+                        expected.add((nb, (i[0] * py + i[1]) * pz + i[2]))
+        received = [(int(b), int(c)) for route in plans[rank]
+                    for b, c in zip(route.receive.blocks, route.receive.cells)]
+        assert len(received) == len(set(received))
+        assert set(received) == expected
+        for route in plans[rank]:
+            back = next(r for r in plans[route.peer] if r.peer == rank)
+            assert np.array_equal(route.send.blocks, back.receive.blocks)
+            assert np.array_equal(route.send.cells, back.receive.cells)

@@ -1,7 +1,8 @@
 """The hydro stage shared between 2, 3 and 4 MPI ranks (oversubscribed) gives the single-process
-answer bit for bit: every dataset of hydro.h5 (the snapshots), the hydro budget and the stage's
-counters; a run checkpointed on 2 ranks resumes on 3; what this version does not share is a
-clear error (docs/runs.md, "Several MPI ranks").
+answer bit for bit: every dataset of hydro.h5 (the snapshots, the tracers and their history),
+the hydro budget, the stage's counters and the summary's tracer counts; tracers that move into
+another rank's blocks keep their records; a run checkpointed on 2 ranks resumes on 3 or on
+one; what this version does not share is a clear error (docs/runs.md, "Several MPI ranks").
 
 The runs go through the command line (``impactpipe run --ranks N``, which launches ``mpiexec``),
 each a few steps on a mesh of a few blocks per rank.  The scenes place their snapshots
@@ -28,7 +29,7 @@ from impactpipe.pipeline import cli, ranks  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parent / "configs" / "mpi"
 SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml",
-          "impact-strength": CONFIGS / "impact_strength.yaml"}
+          "impact-strength": CONFIGS / "impact_strength.yaml", "impact_tracers": CONFIGS / "impact_tracers.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 #: Stops rank 0's hydro stage at the end of its 4th step, as a first SIGINT would (the run
@@ -46,21 +47,32 @@ sys.argv = ["impactpipe", *sys.argv[1:]]
 main()
 """
 
-#: Three steps of the advection scene through the Python API, then a NaN in one cell's energy:
-#: the next sweep fails (from the failing block's owner on several ranks); the last good state
-#: is restored and checkpointed.  Writes the failure as each rank raised it to CHECKPOINT.rankR.json.
-FAIL_IN_A_SWEEP = """
+#: The advection scene through the Python API (argument 1: its config) with 120 tracers on a
+#: lattice over the periodic box, shared between the ranks when run under mpiexec.
+ADVECTION_WITH_TRACERS = """
 import json, sys
 import numpy as np
-from impactpipe.hydro.parallel.distributed import distribute
+from impactpipe.hydro.parallel.distributed import collect, distribute
 from impactpipe.hydro.solver import HydroFailure
+from impactpipe.hydro.tracers.motion import TRACER_UNITS, Tracers
 from impactpipe.pipeline import derived, load_config, ranks
 from impactpipe.pipeline.adapters.hydro import build_simulation
 config = load_config(sys.argv[1])
 sim = build_simulation(config, derived.derive(config))
+lo, hi = sim.mesh.domain_lo, sim.mesh.domain_hi
+x, y = np.meshgrid(lo[0] + (hi[0] - lo[0]) * (np.arange(40) + 0.3) / 40,
+                   lo[1] + (hi[1] - lo[1]) * (np.arange(3) + 0.5) / 3, indexing="ij")
+sim.tracers = Tracers(np.column_stack([x.ravel(), y.ravel()]), np.zeros(x.size, dtype=int), history_interval=0.02)
 comm = ranks.join_world()
 if comm is not None:
     distribute(sim, comm)
+"""
+
+#: Three steps of the advection scene with tracers, then a NaN in one cell's energy: the next
+#: sweep fails (from the failing block's owner on several ranks); the last good state is
+#: restored and checkpointed (argument 2).  Writes the failure as each rank raised it to
+#: CHECKPOINT.rankR.json.
+FAIL_IN_A_SWEEP = ADVECTION_WITH_TRACERS + """
 for _ in range(3):
     sim.step()
 sim.state.energy[6, 0, 3, 3, 0] = np.nan
@@ -72,6 +84,26 @@ except HydroFailure as exc:
     rank = 0 if comm is None else comm.rank
     with open(f"{sys.argv[2]}.rank{rank}.json", "w") as out:
         out.write(json.dumps([str(exc), exc.block, exc.cell, exc.state]))
+"""
+
+#: 24 steps of the advection scene with tracers (the wave moves 4 cells, one block, so many
+#: tracers move into another rank's blocks), then the tracers' records and history to the
+#: file of argument 2 (.npz), with how many tracers the last step found in another rank's
+#: blocks than the first.
+TRACERS_ACROSS_RANKS = ADVECTION_WITH_TRACERS + """
+owners = []
+for _ in range(24):
+    sim.step()
+    owner = np.empty(len(sim.tracers), dtype=np.int64)
+    sim.partition.block_owners(sim.tracers.owning_block, owner)
+    owners.append(owner)
+crossed = int((owners[0] != owners[-1]).sum())
+if comm is not None:
+    collect(sim)
+if comm is None or comm.rank == 0:
+    times, positions = sim.tracers.history
+    np.savez(sys.argv[2], crossed=crossed, history_time=times, history_position=positions,
+             **{name: getattr(sim.tracers, name) for name in TRACER_UNITS})
 """
 
 
@@ -87,15 +119,20 @@ def hydro_answer(run_dir: Path) -> dict:
         f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
         out.update({f"budget/{k}": v for k, v in f["budget"].attrs.items()})
         out.update({k: f.attrs[k] for k in ("cell_updates", "steps", "floor_counts")})
-    out["summary/hydro_budget"] = json.dumps(json.loads((run_dir / "summary.json").read_text())["hydro_budget"])
+    summary = json.loads((run_dir / "summary.json").read_text())
+    out["summary/hydro_budget"] = json.dumps(summary["hydro_budget"])
+    out["summary/tracers"] = json.dumps(summary["tracers"])
     return out
 
 
 def assert_same_answer(run_dir: Path, reference: Path) -> None:
+    """Every value bit for bit (NaN records included)."""
     got, want = hydro_answer(run_dir), hydro_answer(reference)
     assert sorted(got) == sorted(want)
     for key, value in want.items():
-        assert np.array_equal(np.asarray(got[key]), np.asarray(value)), key
+        got_value, value = np.asarray(got[key]), np.asarray(value)
+        assert (got_value.dtype, got_value.shape) == (value.dtype, value.shape), key
+        assert got_value.tobytes() == value.tobytes(), key
 
 
 @pytest.fixture(scope="module")
@@ -117,21 +154,50 @@ def test_a_run_on_several_ranks_gives_the_single_process_answer_bit_for_bit(scen
     assert_same_answer(tmp_path, serial[scene])
 
 
-def test_a_run_checkpointed_on_two_ranks_resumes_on_three_to_the_same_answer(serial, tmp_path):
+def test_the_tracer_scene_samples_tracers_and_records_their_peaks(serial):
+    """The tracers that the shared runs must reproduce moved, recorded peaks and a history."""
+    answer = hydro_answer(serial["impact_tracers"])
+    assert answer["tracers/position"].shape == (len(answer["tracers/id"]), 3)
+    assert not np.array_equal(answer["tracers/position"], answer["tracers/initial_position"])
+    assert np.isfinite(answer["tracers/peak_pressure"]).all()
+    assert len(answer["tracers/history_time"]) >= 5
+
+
+@pytest.mark.parametrize("nranks", [2, 3])
+def test_tracers_moving_into_other_ranks_blocks_keep_the_single_process_records(nranks, tmp_path):
+    serial = subprocess.run([sys.executable, "-c", TRACERS_ACROSS_RANKS, str(SCENES["advection"]),
+                             str(tmp_path / "serial.npz")], env=ENV, capture_output=True, text=True, timeout=300)
+    shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", TRACERS_ACROSS_RANKS,
+                             str(SCENES["advection"]), str(tmp_path / "shared.npz")],
+                            env=ENV, capture_output=True, text=True, timeout=300)
+    assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
+    want, got = np.load(tmp_path / "serial.npz"), np.load(tmp_path / "shared.npz")
+    assert got["crossed"] > 10
+    assert len(want["history_time"]) >= 3
+    for name in want.files:
+        if name != "crossed":
+            assert (got[name].dtype, got[name].shape) == (want[name].dtype, want[name].shape), name
+            assert got[name].tobytes() == want[name].tobytes(), name
+
+
+@pytest.mark.parametrize(("scene", "resume_ranks"), [("advection", 3), ("impact_tracers", 1)])
+def test_a_run_checkpointed_on_two_ranks_resumes_on_another_number_to_the_same_answer(scene, resume_ranks, serial,
+                                                                                       tmp_path):
     command = [ranks.mpiexec_path(), "-n", "2", sys.executable, "-c", STOP_AFTER_FOUR_STEPS, "run",
-               str(SCENES["advection"]), "--out", str(tmp_path), "--stage", "hydro", "-q"]
+               str(SCENES[scene]), "--out", str(tmp_path), "--stage", "hydro", "-q"]
     stopped = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=300)
     assert stopped.returncode == 130, stopped.stderr
     with h5py.File(tmp_path / "hydro.checkpoint.h5", "r") as f:
         assert f.attrs["step_count"] == 4
-    resumed = impactpipe_run(SCENES["advection"], tmp_path, "--ranks", "3")
+    resumed = impactpipe_run(SCENES[scene], tmp_path, "--ranks", str(resume_ranks))
     assert resumed.returncode == 0, resumed.stderr
     assert "resuming from checkpoint at" in (tmp_path / "run.log").read_text()
-    assert_same_answer(tmp_path, serial["advection"])
+    assert_same_answer(tmp_path, serial[scene])
 
 
 @pytest.mark.parametrize("nranks", [2, 3])
 def test_a_sweep_failure_stops_every_rank_with_the_single_process_failure_and_checkpoint(nranks, tmp_path):
+    """The failure, and the last good state and tracers that every rank restores."""
     serial = subprocess.run([sys.executable, "-c", FAIL_IN_A_SWEEP, str(SCENES["advection"]),
                              str(tmp_path / "serial.h5")], env=ENV, capture_output=True, text=True, timeout=300)
     shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", FAIL_IN_A_SWEEP,
@@ -146,6 +212,8 @@ def test_a_sweep_failure_stops_every_rank_with_the_single_process_failure_and_ch
         assert want.attrs["step_count"] == got.attrs["step_count"] == 3
         for name in want["state"]:
             assert np.array_equal(got["state"][name][()], want["state"][name][()], equal_nan=True), name
+        for name in want["tracers"]:
+            assert got["tracers"][name][()].tobytes() == want["tracers"][name][()].tobytes(), name
 
 
 def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
@@ -158,15 +226,16 @@ def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
     assert "more ranks (3) than blocks (2)" in result.stderr
 
 
-def test_an_adaptive_mesh_and_tracers_are_refused_before_mpiexec_starts(tmp_path):
-    config = yaml.safe_load(SCENES["impact"].read_text())
-    config["hydro"].update(max_levels=2, tracers={"enabled": True})
+def test_an_adaptive_mesh_is_refused_before_mpiexec_starts_and_strength_and_tracers_are_not(tmp_path):
+    config = yaml.safe_load(SCENES["impact_tracers"].read_text())
+    config["materials"]["basalt"]["strength"] = {"model": "geo", "preset": "weak"}
+    config["hydro"].update(max_levels=2)
     path = tmp_path / "unshared.yaml"
     path.write_text(yaml.safe_dump(config))
     result = impactpipe_run(path, tmp_path / "run", "--ranks", "2")
     assert result.returncode == 2
-    for what in ("hydro.max_levels = 2", "hydro.tracers.enabled"):
-        assert what in result.stderr
+    assert "hydro.max_levels = 2" in result.stderr
+    assert "tracers" not in result.stderr and "strength" not in result.stderr
     assert not (tmp_path / "run").exists()
 
 

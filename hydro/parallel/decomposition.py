@@ -12,16 +12,26 @@ cells within ``GHOST`` of the face, over the interior of the other axes) before 
 The plan lists, per axis and per peer rank, the strips in one deterministic order (by block,
 then low face before high face), computed with numpy from the mesh alone, the same on every
 rank.
+
+Tracers' neighbourhood: a tracer's velocity and peak-pressure stencil around a point in block
+b reads interior cells of b and of the blocks beside it across faces, edges and corners, at
+most :data:`TRACER_REACH` cells from b (the multilinear stencil's corner cells lie within one
+cell of the point, docs/hydro.md "Tracers").  :func:`neighbourhood_routes` lists, per peer
+rank, the interior cells of the peer's blocks within that reach of this rank's blocks, and
+of this rank's blocks within the reach of the peer's, in one order (by block, then cell).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
+#: Cells beyond a block's faces, edges and corners that the stencil of a tracer in the block reads.
+TRACER_REACH = 1
 #: Estimated cost of one sweep of a cell holding material / a void cell (arbitrary units).
 MATERIAL_CELL_COST = 10
 VOID_CELL_COST = 1
@@ -147,3 +157,55 @@ def _strips(mesh, axis: int, faces: list[tuple[int, int]]) -> Strips:
     if not faces:
         return Strips(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
     return Strips(np.concatenate(blocks), np.concatenate(cells).astype(np.int64))
+
+
+def neighbourhood_routes(mesh, cuts: np.ndarray, rank: int, reach: int = TRACER_REACH) -> list[Route]:
+    """The routes of ``rank``, by peer rank, that bring the interior cells of other ranks' blocks
+    within ``reach`` cells of this rank's blocks (across faces, edges and corners, periodic
+    faces included) up to date; a cell is listed once per route, in (block, flat cell) order."""
+    owner = owners(cuts)
+    per_block = int(np.prod(mesh.padded_shape))
+    senders, receivers, keys = [], [], []
+    for offset in itertools.product((-1, 0, 1), repeat=mesh.ndim):
+        if not any(offset):
+            continue
+        near = _block_at_offset(mesh, offset)
+        blocks = np.flatnonzero(near >= 0)
+        blocks = blocks[owner[near[blocks]] != owner[blocks]]
+        cells = _facing_cells(mesh, offset, reach)
+        keys.append((near[blocks][:, None] * per_block + cells[None, :]).ravel())
+        senders.append(np.repeat(owner[near[blocks]], cells.size))
+        receivers.append(np.repeat(owner[blocks], cells.size))
+    keys, senders, receivers = (np.concatenate(a) for a in (keys, senders, receivers))
+    peers = np.unique(np.concatenate([receivers[senders == rank], senders[receivers == rank]]))
+
+    def strips(sender: int, receiver: int) -> Strips:
+        cells = np.unique(keys[(senders == sender) & (receivers == receiver)])
+        return Strips(cells // per_block, cells % per_block)
+
+    return [Route(int(q), strips(rank, q), strips(q, rank)) for q in peers]
+
+
+def _block_at_offset(mesh, offset: tuple[int, ...]) -> np.ndarray:
+    """(NB,) the block ``offset`` (-1, 0 or +1 per used axis) blocks away from each block through
+    the neighbour table (a single-level mesh), < 0 where a domain face is crossed."""
+    near = np.arange(mesh.nblocks)
+    for axis, step in enumerate(offset):
+        if step:
+            near = np.where(near >= 0, mesh.neighbor[np.maximum(near, 0), axis, (step + 1) // 2], -1)
+    return near
+
+
+def _facing_cells(mesh, offset: tuple[int, ...], reach: int) -> np.ndarray:
+    """Flat padded indices of a block's interior cells within ``reach`` of its face, edge or corner
+    that faces the block at -``offset`` (along axis d: the low cells when offset_d = +1, the high
+    cells when -1, every interior cell when 0)."""
+    g = mesh.ghost
+    n = mesh.interior_shape
+    padded = mesh.padded_shape
+    ranges = [np.arange(g[d], g[d] + n[d]) for d in range(3)]
+    for axis, step in enumerate(offset):
+        if step:
+            ranges[axis] = ranges[axis][:reach] if step > 0 else ranges[axis][-reach:]
+    ix, iy, iz = np.meshgrid(*ranges, indexing="ij")
+    return ((ix * padded[1] + iy) * padded[2] + iz).ravel().astype(np.int64)

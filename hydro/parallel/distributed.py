@@ -6,6 +6,12 @@ every process, and to bring every block up to date before an output.  :class:`Wh
 is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
 of one run (:func:`distribute` attaches it, :func:`collect` ends it).
 
+Tracers (:class:`~impactpipe.hydro.tracers.motion.Tracers`) ask the partition which process
+samples each tracer (the owner of the block holding the point, :meth:`WholeMesh.block_owners`),
+to bring the cells around its blocks up to date before they sample
+(:meth:`WholeMesh.share_neighbourhood`) and to give every process the sampled rows
+(:meth:`WholeMesh.gather_tracers`), so every process holds every tracer's records.
+
 The last-good copy of a step (:meth:`Simulation.restore_last_good`) is kept by each rank
 over its own blocks only: only those are advanced, and a restore on every rank followed by
 the exchange before the next ghost fill rebuilds exactly the serial state.
@@ -21,8 +27,8 @@ import numpy as np
 
 from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts, fill_state_ghost_slabs, fill_state_ghosts
 
-from .decomposition import block_costs, exchange_routes, owned_ranges
-from .exchange import broadcast_arrays, exchange_strips, share_owned_blocks
+from .decomposition import block_costs, exchange_routes, neighbourhood_routes, owned_ranges
+from .exchange import NEIGHBOURHOOD_TAG, STRIP_TAG, broadcast_arrays, exchange_strips, gather_rows, share_owned_blocks
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +38,7 @@ class WholeMesh:
 
     blocks = slice(None)
     is_root = True
+    rank = 0
 
     def fill_ghosts(self, state, mesh, axis: int) -> None:
         """Fill the ghosts of every block along ``axis``."""
@@ -66,6 +73,17 @@ class WholeMesh:
         """Rank 0's ``value`` on every process."""
         return value
 
+    def block_owners(self, blocks: np.ndarray, out: np.ndarray) -> None:
+        """``out[t]``: the process that owns block ``blocks[t]`` (this one), -1 where ``blocks[t]`` is -1."""
+        np.minimum(blocks, 0, out=out)
+
+    def share_neighbourhood(self, state) -> None:
+        """Bring the cells within :data:`~.decomposition.TRACER_REACH` of this process's blocks up
+        to date (they are)."""
+
+    def gather_tracers(self, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
+        """Row t of each of ``arrays`` from process ``owner[t]`` on every process (this one holds them)."""
+
 
 class BlockRanges(WholeMesh):
     """This rank advances the blocks ``cuts[rank] .. cuts[rank + 1] - 1`` (see :mod:`.decomposition`)."""
@@ -76,8 +94,10 @@ class BlockRanges(WholeMesh):
         self.lo, self.hi = int(cuts[comm.rank]), int(cuts[comm.rank + 1])
         self.blocks = slice(self.lo, self.hi)
         self.is_root = comm.rank == 0
+        self.rank = comm.rank
         self.nblocks = mesh.nblocks
         self.routes = exchange_routes(mesh, cuts, comm.rank)
+        self.neighbourhood = neighbourhood_routes(mesh, cuts, comm.rank)
 
     def fill_ghosts(self, state, mesh, axis: int) -> None:
         """Receive the neighbours' strips along ``axis`` from their owners, then fill the owned
@@ -86,7 +106,7 @@ class BlockRanges(WholeMesh):
         if g == 0:
             return
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        exchange_strips(self.comm, self.routes[axis], fields, axis)
+        exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice) -> None:
@@ -95,7 +115,7 @@ class BlockRanges(WholeMesh):
         g = int(mesh.ghost[axis])
         if g == 0:
             return
-        exchange_strips(self.comm, self.routes[axis], (field,), axis, components)
+        exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, components)
         fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
 
     def any(self, flag: bool) -> bool:
@@ -132,14 +152,28 @@ class BlockRanges(WholeMesh):
     def agree(self, value: Any) -> Any:
         return self.comm.bcast(value, root=0)
 
+    def block_owners(self, blocks: np.ndarray, out: np.ndarray) -> None:
+        """``out[t]``: the rank whose range holds block ``blocks[t]``, -1 where ``blocks[t]`` is -1."""
+        np.subtract(np.searchsorted(self.cuts, blocks, side="right"), 1, out=out)
+
+    def share_neighbourhood(self, state) -> None:
+        """Receive the interior cells of other ranks' blocks within TRACER_REACH of this rank's
+        blocks (faces, edges, corners; :func:`~.decomposition.neighbourhood_routes`): the fields
+        the tracers read (volume fractions, partial densities and internal energies, momentum)."""
+        exchange_strips(self.comm, self.neighbourhood, (state.alpha, state.arho, state.arhoe, state.momentum),
+                        NEIGHBOURHOOD_TAG)
+
+    def gather_tracers(self, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
+        """Row t of each of ``arrays`` from rank ``owner[t]`` on every rank (one Allgatherv,
+        :func:`~.exchange.gather_rows`)."""
+        gather_rows(self.comm, owner, arrays)
+
 
 def unsupported(sim, nranks: int) -> list[str]:
     """Why ``sim`` cannot run on ``nranks`` ranks in this version (empty when it can)."""
     reasons = []
     if sim.mesh.adaptive:
         reasons.append("an adaptive mesh (hydro.max_levels > 1)")
-    if sim.tracers is not None:
-        reasons.append("tracers")
     if sim.gravity is not None:
         reasons.append("external gravity")
     if nranks > sim.mesh.nblocks:
@@ -150,7 +184,7 @@ def unsupported(sim, nranks: int) -> list[str]:
 def distribute(sim, comm) -> None:
     """Share ``sim`` between the ranks of ``comm`` (collective; every rank built the same run).
 
-    Rank 0's state and counters are broadcast, the blocks cut by estimated cost
+    Rank 0's state, counters and tracers are broadcast, the blocks cut by estimated cost
     (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  Raises ValueError
     for what this version does not distribute (:func:`unsupported`) before anything moves.
     """
@@ -159,6 +193,7 @@ def distribute(sim, comm) -> None:
         raise ValueError(f"several MPI ranks: not supported in this version: {'; '.join(reasons)} "
                          f"(run with one rank)")
     broadcast_arrays(comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()))
+    sim.tracers = comm.bcast(sim.tracers, root=0)
     cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size)
     sim.partition = BlockRanges(comm, sim.mesh, cuts)
     sim._keep_good()

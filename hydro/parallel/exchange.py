@@ -1,4 +1,5 @@
-"""The messages between ranks: strips before a ghost fill, owned blocks before an output.
+"""The messages between ranks: strips before a ghost fill or a tracer sample, owned blocks
+before an output, tracer rows after a tracer sample.
 
 All fields are float64 arrays (NB, C, NX, NY, NZ), C-contiguous, so a block's values are one
 contiguous run and a strip is a fixed set of flat indices (:class:`~.decomposition.Strips`).
@@ -12,24 +13,26 @@ from .decomposition import Route
 
 #: Message tag of the strips before a ghost fill along axis d: STRIP_TAG + d.
 STRIP_TAG = 100
+#: Message tag of the cells around the blocks before the tracers sample the state.
+NEIGHBOURHOOD_TAG = 200
 
 
-def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], axis: int,
+def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int,
                     components: slice = slice(None)) -> None:
     """Send this rank's strips and receive its peers' into the ``components`` of ``fields``, one
-    message per peer (every field packed into one float64 buffer), non-blocking both ways,
-    then unpack."""
+    message per peer (every field packed into one float64 buffer, message tag ``tag``),
+    non-blocking both ways, then unpack."""
     from mpi4py import MPI
 
     flats = [_flat(field) for field in fields]
     requests, received, sent = [], [], []
     for route in routes:
         buffer = np.empty(sum(route.receive.values(field, components) for field in fields))
-        requests.append(comm.Irecv(buffer, source=route.peer, tag=STRIP_TAG + axis))
+        requests.append(comm.Irecv(buffer, source=route.peer, tag=tag))
         received.append((buffer, route.receive))
     for route in routes:
         buffer = np.concatenate([flat[route.send.indices(field, components)] for flat, field in zip(flats, fields)])
-        requests.append(comm.Isend(buffer, dest=route.peer, tag=STRIP_TAG + axis))
+        requests.append(comm.Isend(buffer, dest=route.peer, tag=tag))
         sent.append(buffer)
     MPI.Request.Waitall(requests)
     for buffer, strips in received:
@@ -52,6 +55,28 @@ def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray) -> None
         counts = (np.diff(cuts) * row).tolist()
         displacements = (cuts[:-1] * row).tolist()
         comm.Allgatherv(MPI.IN_PLACE, [flat, (counts, displacements), from_numpy_dtype(array.dtype)])
+
+
+def gather_rows(comm, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
+    """Row t of every float64 array in ``arrays`` (each (N, ...), C-contiguous) from rank
+    ``owner[t]`` on every rank, in place; rows with ``owner`` -1 stay as they are.  One
+    Allgatherv of each rank's rows side by side, by rank, then by row (the values are copied,
+    NaN and -0.0 included)."""
+    from mpi4py import MPI
+
+    n = len(owner)
+    rows = [_flat(array).reshape(n, -1) for array in arrays]
+    width = sum(row.shape[1] for row in rows)
+    sent = np.concatenate([row[owner == comm.rank] for row in rows], axis=1)
+    counts = np.bincount(owner[owner >= 0], minlength=comm.size) * width
+    order = np.argsort(owner, kind="stable")[n - int(counts.sum()) // width:]
+    received = np.empty((len(order), width))
+    displacements = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    comm.Allgatherv([sent, MPI.DOUBLE], [received, (counts.tolist(), displacements.tolist()), MPI.DOUBLE])
+    start = 0
+    for row in rows:
+        row[order] = received[:, start:start + row.shape[1]]
+        start += row.shape[1]
 
 
 def broadcast_arrays(comm, arrays: list[np.ndarray]) -> None:

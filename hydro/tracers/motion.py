@@ -56,6 +56,13 @@ T_k = T_k(rho_k, e_k) with rho_k = arho_k / alpha_k and e_k = arhoe_k / arho_k
 The peak pressure (Pa), its time (s) and the peak temperature (K) are the running maxima
 (NaN until the first record).
 
+**Several processes** (MPI ranks, :mod:`impactpipe.hydro.parallel`): each sample (v_n at x_n,
+v_{n+1} at x*, the peaks at x_{n+1}) is taken by the rank that owns the block holding the
+point, whose stencil then reads only its own blocks and the cells within one cell of them
+(brought up to date after the sweeps); every rank then receives every sampled row, and the
+corrector, exits and history run on every rank for every tracer.  Each tracer's arithmetic
+is the single process's, so the records are the same bit for bit on any number of ranks.
+
 **History** (optional): every ``history_interval`` seconds of simulated time the first step
 that reaches k * history_interval appends (time, all positions) to arrays preallocated for
 ``end_time`` and doubled when full; 24 bytes per tracer and sample.
@@ -241,8 +248,10 @@ class Tracers:
         self._trial = np.zeros((n, 3))
         self._sign = np.ones((n, 3))
         self._block = np.full(n, -1, dtype=np.int64)
+        self._owner = np.full(n, -1, dtype=np.int64)
+        self._skip = np.ones(n, dtype=np.bool_)
         self._t_start = 0.0
-        self._missing = n  # tracers on the mesh without a peak record (a hint: recounted by each record)
+        self._missing = n  # tracers on the mesh without a peak record (recounted after each step)
         self._good = {name: getattr(self, name).copy() for name in self._MUTABLE}
         self._good_counts = (0, 0.0, n)
         self._mesh = None
@@ -301,29 +310,40 @@ class Tracers:
         by the last step or :meth:`mesh_changed` (a copy)."""
         return self._block.copy()
 
-    def _sample(self, sim, dt: float, out: np.ndarray) -> None:
-        """Sample the velocity at x_n + dt v_n (folded into the domain, into ``self._trial``; blocks
-        into ``self._block``) into ``out``."""
+    def _fold_and_locate(self, sim, dt: float) -> None:
+        """The points x_n + dt v_n of the tracers on the mesh, folded into the domain (into
+        ``self._trial``, velocity signs ``self._sign``), their blocks (``self._block``) and the
+        process that samples each (``self._owner``, the owner of its block; -1 once exited)."""
+        mesh = sim.mesh
+        _fold(self.position, self._v_start, dt, self.exited, mesh.domain_lo, mesh.domain_hi, self._codes, mesh.ndim,
+              self._trial, self._sign)
+        self._locate(self._trial, self.exited, self._block)
+        self._assign(sim.partition)
+
+    def _assign(self, partition) -> None:
+        """``self._owner`` from ``self._block``; ``self._skip``: the tracers this process does not sample."""
+        partition.block_owners(self._block, self._owner)
+        np.not_equal(self._owner, partition.rank, out=self._skip)
+
+    def _sample(self, sim, out: np.ndarray) -> None:
+        """Velocity at the points ``self._trial`` of the tracers this process samples into ``out``."""
         mesh = sim.mesh
         loc = self._locate
-        _fold(self.position, self._v_start, dt, self.exited, mesh.domain_lo, mesh.domain_hi, self._codes,
-              mesh.ndim, self._trial, self._sign)
-        loc(self._trial, self.exited, self._block)
-        sample_velocity(self._trial, self._sign, self.material, self.exited, self._block, mesh.block_lo,
+        sample_velocity(self._trial, self._sign, self.material, self._skip, self._block, mesh.block_lo,
                          mesh.block_dx, mesh.block_index, mesh.block_level, mesh.block_cells, self._ncell, mesh.ndim,
                          self._codes, self._cells, loc.root, loc.children, sim.state.arho, sim.state.momentum, out)
 
     def _record(self, sim, unrecorded_only: bool) -> None:
-        """Peak pressure / temperature at the current positions (``self._block`` must be current)."""
+        """Peak pressure / temperature at the current positions of the tracers this process samples
+        (``self._block`` and ``self._skip`` must be current)."""
         mesh = sim.mesh
         st = sim.state
         eos = sim.eos
         loc = self._locate
-        self._missing = record_peaks(self.position, self.material, self.exited, self._block, unrecorded_only,
-                                      sim.time, mesh.block_lo, mesh.block_dx, mesh.block_index, mesh.block_level,
-                                      mesh.block_cells, self._ncell, mesh.ndim, self._codes, self._cells, loc.root,
-                                      loc.children, st.alpha, st.arho, st.arhoe, eos.kind, eos.params, eos.table,
-                                      self.peak_pressure, self.peak_pressure_time, self.peak_temperature)
+        record_peaks(self.position, self.material, self._skip, self._block, unrecorded_only, sim.time, mesh.block_lo,
+                      mesh.block_dx, mesh.block_index, mesh.block_level, mesh.block_cells, self._ncell, mesh.ndim,
+                      self._codes, self._cells, loc.root, loc.children, st.alpha, st.arho, st.arhoe, eos.kind,
+                      eos.params, eos.table, self.peak_pressure, self.peak_pressure_time, self.peak_temperature)
 
     def _sample_history(self, time: float) -> None:
         if self.history_count == self.history_time.shape[0]:
@@ -345,23 +365,42 @@ class Tracers:
             np.copyto(self._good[name], getattr(self, name))
         self._good_counts = (self.history_count, self.history_next, self._missing)
         self._t_start = sim.time
-        self._sample(sim, 0.0, self._v_start)
+        self._fold_and_locate(sim, 0.0)
+        self._sample(sim, self._v_start)
+        sampled = [self._v_start]
         if self._missing:
             self._record(sim, unrecorded_only=True)  # self._block holds the blocks of the positions
+            sampled += self._peaks()
+        sim.partition.gather_tracers(self._owner, sampled)
         if self.history_interval is not None and self.history_count == 0:
             self._sample_history(sim.time)
 
     def after_step(self, sim, dt: float) -> None:
-        """Heun step over ``dt`` (s) with the field after the sweeps; faces, exits and peak records."""
+        """Heun step over ``dt`` (s) with the field after the sweeps; faces, exits and peak records.
+
+        On several processes each samples the tracers whose point lies in its blocks, and every
+        process receives every sample before the next use (:meth:`WholeMesh.gather_tracers
+        <impactpipe.hydro.parallel.distributed.WholeMesh.gather_tracers>`); the corrector and
+        the exits run on every process for every tracer.
+        """
         mesh = sim.mesh
-        self._sample(sim, dt, self._v_end)
+        self._fold_and_locate(sim, dt)
+        self._sample(sim, self._v_end)
+        sim.partition.gather_tracers(self._owner, [self._v_end])
         _correct(self.position, self._v_start, self._v_end, self.exited, dt, self._t_start, mesh.domain_lo,
                  mesh.domain_hi, self._codes, mesh.ndim, mesh.geometry == "2d-cylindrical", self.velocity,
                  self.exit_time)
         self._locate(self.position, self.exited, self._block)
+        self._assign(sim.partition)
         self._record(sim, unrecorded_only=False)
+        sim.partition.gather_tracers(self._owner, self._peaks())
+        self._missing = int(np.count_nonzero(np.isnan(self.peak_pressure_time) & ~self.exited))
         if self.history_interval is not None and sim.time >= self.history_next * (1.0 - 1e-12):
             self._sample_history(sim.time)
+
+    def _peaks(self) -> list[np.ndarray]:
+        """The running peak records (pressure, its time, temperature)."""
+        return [self.peak_pressure, self.peak_pressure_time, self.peak_temperature]
 
     def restore_good(self) -> None:
         """Put back the records from the start of the last step (after a failed step)."""
@@ -416,11 +455,13 @@ class Tracers:
 
 def interpolate_velocity(sim, positions, materials) -> np.ndarray:
     """(N, 3) tracer velocity (m/s) at ``positions`` (inside the domain) for tracers of ``materials``,
-    from the current state of ``sim`` (the field a tracer sees; module docstring)."""
+    from the current state of ``sim`` (the field a tracer sees; module docstring), a simulation
+    run by one process (on several MPI ranks a rank samples only the points in its blocks)."""
     probe = Tracers(positions, materials)
     probe._bind(sim.mesh, sim.state.nmat)
     out = np.zeros((len(probe), 3))
-    probe._sample(sim, 0.0, out)
+    probe._fold_and_locate(sim, 0.0)
+    probe._sample(sim, out)
     return out
 
 

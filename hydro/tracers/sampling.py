@@ -338,9 +338,7 @@ def record_peaks(position, material, skip, block, unrecorded_only, time, block_l
     none (material absent from the stencil) means no record this time.  There
     rho_k = arho_k / alpha_k, e_k = arhoe_k / arho_k, p_k = P_k(rho_k, e_k), T_k = T_k(rho_k, e_k).
     With ``unrecorded_only`` only tracers without a record yet (NaN peak time) are sampled.
-    Returns the number of tracers on the mesh still without a record.
     """
-    missing = 0
     for t in prange(position.shape[0]):
         if skip[t] or (unrecorded_only and not math.isnan(peak_pressure_time[t])):
             continue
@@ -370,8 +368,6 @@ def record_peaks(position, material, skip, block, unrecorded_only, time, block_l
                     best = score
                     cb, cx, cy, cz = blk, ix, iy, iz
             if cb < 0:
-                if math.isnan(peak_pressure_time[t]):
-                    missing += 1
                 continue
         a = alpha[cb, k, cx, cy, cz]
         ar = arho[cb, k, cx, cy, cz]
@@ -384,6 +380,3 @@ def record_peaks(position, material, skip, block, unrecorded_only, time, block_l
             peak_pressure_time[t] = time
         if math.isfinite(temp) and not temp <= peak_temperature[t]:
             peak_temperature[t] = temp
-        if math.isnan(peak_pressure_time[t]):
-            missing += 1
-    return missing
