@@ -25,7 +25,6 @@ import h5py
 import numba
 import numpy as np
 
-from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import fill_state_ghosts
@@ -237,7 +236,8 @@ class Simulation:
                 self._raise_sweep_failure(failed)
             self._observe("sweep", axis)
             if self.mesh.adaptive:
-                plans = axis_plans(self.mesh, axis)
+                plans = self.partition.plans(self.mesh, axis)
+                self.partition.share_face_flux(self._face_flux, axis)
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self._face_flux, st.alpha, st.arho, st.arhoe,
                        st.arhoq, st.momentum, st.energy, self.floors, self.amounts)
                 self._observe("reflux", axis)
@@ -336,6 +336,7 @@ class Simulation:
         return refine, coarsen
 
     def _regrid(self) -> bool:
+        self.partition.share(self)
         mesh, st = self.mesh, self.state
         refine, coarsen = self.refinement_flags()
         plan = plan_leaves(mesh, refine, coarsen)
@@ -358,6 +359,7 @@ class Simulation:
         self.regrids += 1
         self.blocks_refined += len(plan["children"]) // 2 ** new_mesh.ndim
         self.blocks_coarsened += len(plan["parents"]) // 2 ** new_mesh.ndim
+        self.partition = self.partition.remeshed(self)
         self._keep_good()
         return True
 

@@ -73,8 +73,7 @@ def validate_cmd(config_path: str) -> None:
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bars.")
 @click.option("--ranks", "nranks", type=click.IntRange(min=1), default=1, show_default=True,
               help="Run the hydro stage on N MPI ranks (launches `mpiexec -n N` with this command; needs "
-                   f'{ranks.INSTALL_HINT}).  This version: uniform meshes (hydro.max_levels 1) without '
-                   "gravity; docs/runs.md.")
+                   f'{ranks.INSTALL_HINT}).  This version: scenes without external gravity; docs/runs.md.')
 def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
             force: bool, verbose: int, quiet: bool, nranks: int) -> None:
     """Run the pipeline for CONFIG, resuming finished stages."""
@@ -102,8 +101,8 @@ def _exit_if_not_shared(config, values, nranks: int) -> None:
     """Exit 2 with one line when the run cannot be shared between ``nranks`` ranks in this version."""
     reasons = ranks.unsupported(config, values)
     if reasons:
-        click.echo(f"error: --ranks {nranks}: this version shares only uniform meshes without external "
-                   f"gravity between MPI ranks; the config has {'; '.join(reasons)}", err=True)
+        click.echo(f"error: --ranks {nranks}: this version shares only scenes without external gravity "
+                   f"between MPI ranks; the config has {'; '.join(reasons)}", err=True)
         sys.exit(2)
 
 

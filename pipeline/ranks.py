@@ -45,8 +45,6 @@ def unsupported(config, values: dict[str, Any]) -> list[str]:
     reasons = []
     if getattr(PROBLEMS.get(config.scene.problem), "EXTERNAL_GRAVITY", False):
         reasons.append(f"external gravity (scene.gravity of the {config.scene.problem} problem)")
-    if values["levels"] > 1:
-        reasons.append(f"an adaptive mesh (hydro.max_levels = {values['levels']}; set 1)")
     return reasons
 
 

@@ -8,12 +8,15 @@ import itertools
 import numpy as np
 import pytest
 
+from impactpipe.hydro.amr.regrid import plan_leaves, remesh
+from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.decomposition import (
     TRACER_REACH,
     exchange_routes,
     neighbourhood_routes,
     owned_ranges,
     owners,
+    touching_blocks,
 )
 from impactpipe.hydro.problems.common import adaptive_mesh
 
@@ -111,3 +114,34 @@ def test_the_tracers_neighbourhood_is_every_foreign_cell_within_reach_of_a_rank_
             back = next(r for r in plans[route.peer] if r.peer == rank)
             assert np.array_equal(route.send.blocks, back.receive.blocks)
             assert np.array_equal(route.send.cells, back.receive.cells)
+
+
+@pytest.mark.parametrize(("geometry", "boundary"), [("2d-cylindrical", ("reflecting", "outflow")),
+                                                    ("2d-planar", ("periodic", "periodic")),
+                                                    ("3d", ("outflow", "outflow"))])
+def test_touching_blocks_of_an_adaptive_mesh_are_every_pair_of_touching_boxes(geometry, boundary):
+    """Against a brute-force test of every pair of boxes (nearest periodic image), on a mesh
+    with two levels of refinement around one corner block."""
+    ndim = 3 if geometry == "3d" else 2
+    mesh = adaptive_mesh(geometry, [0.0] * ndim, [1.0] * ndim, [32] * ndim, [boundary] * ndim, 4, 3)
+    for _ in range(2):
+        refine = np.zeros(mesh.nblocks, dtype=bool)
+        refine[np.argmin(mesh.block_lo[:, :ndim].sum(axis=1))] = True
+        mesh, _ = remesh(mesh, HydroState.empty(mesh, 1), plan_leaves(mesh, refine, np.zeros_like(refine)))
+    assert mesh.block_level.max() == 2
+    lo = mesh.block_lo[:, :ndim]
+    hi = lo + mesh.block_dx[:, :ndim] * 4
+    periodic = boundary[0] == "periodic"
+    want = set()
+    for a, b in itertools.permutations(range(mesh.nblocks), 2):
+        gaps = []
+        for d in range(ndim):
+            gap = max(lo[a, d] - hi[b, d], lo[b, d] - hi[a, d], 0.0)
+            if periodic:
+                gap = min(gap, max(lo[a, d] + 1.0 - hi[b, d], lo[b, d] - hi[a, d] - 1.0, 0.0),
+                          max(lo[a, d] - 1.0 - hi[b, d], lo[b, d] - hi[a, d] + 1.0, 0.0))
+            gaps.append(gap)
+        if max(gaps) < 1e-12:
+            want.add((a, b))
+    got = set(zip(*(x.tolist() for x in touching_blocks(mesh))))
+    assert got == want

@@ -1,5 +1,6 @@
 """The hydro stage shared between 2, 3 and 4 MPI ranks (oversubscribed) gives the single-process
-answer bit for bit: every dataset of hydro.h5 (the snapshots, the tracers and their history),
+answer bit for bit, on uniform and adaptive meshes, with and without strength and tracers:
+every dataset of hydro.h5 (the snapshots, the tracers and their history),
 the hydro budget, the stage's counters and the summary's tracer counts; tracers that move into
 another rank's blocks keep their records; a run checkpointed on 2 ranks resumes on 3 or on
 one; what this version does not share is a clear error (docs/runs.md, "Several MPI ranks").
@@ -29,7 +30,8 @@ from impactpipe.pipeline import cli, ranks  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parent / "configs" / "mpi"
 SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml",
-          "impact-strength": CONFIGS / "impact_strength.yaml", "impact_tracers": CONFIGS / "impact_tracers.yaml"}
+          "impact-strength": CONFIGS / "impact_strength.yaml", "impact_tracers": CONFIGS / "impact_tracers.yaml",
+          "impact_adaptive": CONFIGS / "impact_adaptive.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 #: Stops rank 0's hydro stage at the end of its 4th step, as a first SIGINT would (the run
@@ -180,7 +182,7 @@ def test_tracers_moving_into_other_ranks_blocks_keep_the_single_process_records(
             assert got[name].tobytes() == want[name].tobytes(), name
 
 
-@pytest.mark.parametrize(("scene", "resume_ranks"), [("advection", 3), ("impact_tracers", 1)])
+@pytest.mark.parametrize(("scene", "resume_ranks"), [("advection", 3), ("impact_tracers", 1), ("impact_adaptive", 3)])
 def test_a_run_checkpointed_on_two_ranks_resumes_on_another_number_to_the_same_answer(scene, resume_ranks, serial,
                                                                                        tmp_path):
     command = [ranks.mpiexec_path(), "-n", "2", sys.executable, "-c", STOP_AFTER_FOUR_STEPS, "run",
@@ -224,19 +226,6 @@ def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
     result = impactpipe_run(path, tmp_path / "run", "--ranks", "3")
     assert result.returncode == 2
     assert "more ranks (3) than blocks (2)" in result.stderr
-
-
-def test_an_adaptive_mesh_is_refused_before_mpiexec_starts_and_strength_and_tracers_are_not(tmp_path):
-    config = yaml.safe_load(SCENES["impact_tracers"].read_text())
-    config["materials"]["basalt"]["strength"] = {"model": "geo", "preset": "weak"}
-    config["hydro"].update(max_levels=2)
-    path = tmp_path / "unshared.yaml"
-    path.write_text(yaml.safe_dump(config))
-    result = impactpipe_run(path, tmp_path / "run", "--ranks", "2")
-    assert result.returncode == 2
-    assert "hydro.max_levels = 2" in result.stderr
-    assert "tracers" not in result.stderr and "strength" not in result.stderr
-    assert not (tmp_path / "run").exists()
 
 
 def test_external_gravity_is_refused_before_mpiexec_starts(tmp_path):

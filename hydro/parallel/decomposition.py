@@ -162,9 +162,18 @@ def _strips(mesh, axis: int, faces: list[tuple[int, int]]) -> Strips:
 def neighbourhood_routes(mesh, cuts: np.ndarray, rank: int, reach: int = TRACER_REACH) -> list[Route]:
     """The routes of ``rank``, by peer rank, that bring the interior cells of other ranks' blocks
     within ``reach`` cells of this rank's blocks (across faces, edges and corners, periodic
-    faces included) up to date; a cell is listed once per route, in (block, flat cell) order."""
+    faces included) up to date; a cell is listed once per route, in (block, flat cell) order.
+    On an adaptive mesh, whole blocks: every block that touches one of this rank's blocks
+    (:func:`touching_blocks`), since a stencil across a level face reads up to two finer cells
+    deep."""
     owner = owners(cuts)
     per_block = int(np.prod(mesh.padded_shape))
+    if mesh.adaptive:
+        receiver, sender = touching_blocks(mesh)
+        cells = _interior_cells(mesh)
+        keys = (sender[:, None] * per_block + cells[None, :]).ravel()
+        return _routes(keys, np.repeat(owner[sender], cells.size), np.repeat(owner[receiver], cells.size), rank,
+                       per_block)
     senders, receivers, keys = [], [], []
     for offset in itertools.product((-1, 0, 1), repeat=mesh.ndim):
         if not any(offset):
@@ -176,7 +185,42 @@ def neighbourhood_routes(mesh, cuts: np.ndarray, rank: int, reach: int = TRACER_
         keys.append((near[blocks][:, None] * per_block + cells[None, :]).ravel())
         senders.append(np.repeat(owner[near[blocks]], cells.size))
         receivers.append(np.repeat(owner[blocks], cells.size))
-    keys, senders, receivers = (np.concatenate(a) for a in (keys, senders, receivers))
+    return _routes(*(np.concatenate(a) for a in (keys, senders, receivers)), rank, per_block)
+
+
+def plan_routes(mesh, cuts: np.ndarray, rank: int, plan: np.ndarray, stencil: np.ndarray) -> list[Route]:
+    """The routes of ``rank`` that bring to the owner of each row's destination block
+    (``plan[:, 0]``) the cells its kernel reads in the row's source block (``plan[:, 4]``):
+    the source cell ``plan[:, 5:8]`` plus each offset of ``stencil`` (S, 3), where another rank
+    owns the source (the coarse/fine plans of :mod:`impactpipe.hydro.amr.plans`)."""
+    owner = owners(cuts)
+    padded = np.array(mesh.padded_shape)
+    per_block = int(padded.prod())
+    cells = plan[:, None, 5:8] + stencil[None, :, :]
+    flat = (cells[..., 0] * padded[1] + cells[..., 1]) * padded[2] + cells[..., 2]
+    keys = (plan[:, 4:5] * per_block + flat).ravel()
+    senders = np.repeat(owner[plan[:, 4]], len(stencil))
+    receivers = np.repeat(owner[plan[:, 0]], len(stencil))
+    return _routes(keys, senders, receivers, rank, per_block)
+
+
+def block_routes(cuts: np.ndarray, rank: int, receiver_blocks: np.ndarray, sender_blocks: np.ndarray,
+                 per_block: int) -> list[Route]:
+    """The routes of ``rank`` that bring whole rows of per-block arrays (``per_block`` values
+    after the first two axes, e.g. the coarse/fine face fluxes) from the owner of each
+    ``sender_blocks[i]`` to the owner of ``receiver_blocks[i]``."""
+    owner = owners(cuts)
+    cells = np.arange(per_block, dtype=np.int64)
+    keys = (np.asarray(sender_blocks, dtype=np.int64)[:, None] * per_block + cells[None, :]).ravel()
+    return _routes(keys, np.repeat(owner[sender_blocks], per_block), np.repeat(owner[receiver_blocks], per_block),
+                   rank, per_block)
+
+
+def _routes(keys: np.ndarray, senders: np.ndarray, receivers: np.ndarray, rank: int, per_block: int) -> list[Route]:
+    """Routes of ``rank`` from cells ``keys`` (block * per_block + flat cell) that ``senders[i]``
+    sends to ``receivers[i]`` (pairs on one rank dropped); each cell once per route, in key order."""
+    apart = senders != receivers
+    keys, senders, receivers = keys[apart], senders[apart], receivers[apart]
     peers = np.unique(np.concatenate([receivers[senders == rank], senders[receivers == rank]]))
 
     def strips(sender: int, receiver: int) -> Strips:
@@ -184,6 +228,39 @@ def neighbourhood_routes(mesh, cuts: np.ndarray, rank: int, reach: int = TRACER_
         return Strips(cells // per_block, cells % per_block)
 
     return [Route(int(q), strips(rank, q), strips(q, rank)) for q in peers]
+
+
+def touching_blocks(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b): every ordered pair of distinct blocks whose closed boxes touch (faces, edges,
+    corners; across periodic faces too): |c_a - c_b| <= (w_a + w_b) / 2 along every used axis
+    (c the centres, w the widths, periodic axes by the nearest image), candidates from a k-d
+    tree in the max norm (scipy.spatial.cKDTree)."""
+    from scipy.spatial import cKDTree
+
+    nd = mesh.ndim
+    lo = np.asarray(mesh.domain_lo[:nd], float)
+    extent = np.asarray(mesh.domain_hi[:nd], float) - lo
+    width = mesh.block_dx[:, :nd] * np.array(mesh.interior_shape[:nd])
+    centre = mesh.block_lo[:, :nd] + width / 2 - lo
+    periodic = np.array([mesh.boundaries[d][0] == "periodic" for d in range(nd)])
+    slack = 1e-9 * extent.max()
+    tree = cKDTree(np.clip(centre, 0.0, None), boxsize=np.where(periodic, extent, 4.0 * extent))
+    pairs = tree.query_pairs(width.max() + slack, p=np.inf, output_type="ndarray")
+    a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    gap = np.abs(centre[a] - centre[b])
+    gap = np.where(periodic, np.minimum(gap, extent - gap), gap)
+    keep = (gap <= (width[a] + width[b]) / 2 + slack).all(axis=1)
+    a, b = a[keep], b[keep]
+    return np.concatenate([a, b]), np.concatenate([b, a])
+
+
+def _interior_cells(mesh) -> np.ndarray:
+    """Flat padded indices of a block's interior cells."""
+    g = mesh.ghost
+    n = mesh.interior_shape
+    padded = mesh.padded_shape
+    ix, iy, iz = np.meshgrid(*[np.arange(g[d], g[d] + n[d]) for d in range(3)], indexing="ij")
+    return ((ix * padded[1] + iy) * padded[2] + iz).ravel().astype(np.int64)
 
 
 def _block_at_offset(mesh, offset: tuple[int, ...]) -> np.ndarray:

@@ -25,10 +25,14 @@ from typing import Any
 
 import numpy as np
 
+from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts, fill_state_ghost_slabs, fill_state_ghosts
 
-from .decomposition import block_costs, exchange_routes, neighbourhood_routes, owned_ranges
-from .exchange import NEIGHBOURHOOD_TAG, STRIP_TAG, broadcast_arrays, exchange_strips, gather_rows, share_owned_blocks
+from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, owned_ranges, owners,
+                            plan_routes)
+from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, broadcast_arrays,
+                       exchange_strips, gather_rows, share_owned_blocks)
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +61,19 @@ class WholeMesh:
     def any(self, flag: bool) -> bool:
         """Whether ``flag`` holds on some process."""
         return flag
+
+    def plans(self, mesh, axis: int) -> dict:
+        """The coarse/fine plans of ``axis`` whose destination blocks this process advances
+        (:func:`~impactpipe.hydro.amr.plans.axis_plans`)."""
+        return axis_plans(mesh, axis)
+
+    def share_face_flux(self, face_flux: np.ndarray, axis: int) -> None:
+        """Bring the coarse/fine face fluxes ``face_flux`` (NB, 2, NQ, N1, N2) of the finer
+        blocks this process refluxes from up to date (they are)."""
+
+    def remeshed(self, sim) -> "WholeMesh":
+        """The partition of ``sim`` after a regrid changed its mesh (every block again)."""
+        return self
 
     def first_failure(self, failure: np.ndarray) -> int:
         """The first block whose sweep failed (``failure[:, 0]`` != 0), or -1."""
@@ -98,6 +115,10 @@ class BlockRanges(WholeMesh):
         self.nblocks = mesh.nblocks
         self.routes = exchange_routes(mesh, cuts, comm.rank)
         self.neighbourhood = neighbourhood_routes(mesh, cuts, comm.rank)
+        #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their routes.
+        self._plans: dict[int, dict] = {}
+        #: The routes of the face fluxes per (axis, row length), built on first use.
+        self._flux_routes: dict[tuple[int, int], list] = {}
 
     def fill_ghosts(self, state, mesh, axis: int) -> None:
         """Receive the neighbours' strips along ``axis`` from their owners, then fill the owned
@@ -107,7 +128,16 @@ class BlockRanges(WholeMesh):
             return
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis)
+        if mesh.adaptive:
+            plans = self.plans(mesh, axis)
+            exchange_strips(self.comm, plans["restrict_routes"], fields, RESTRICT_TAG + axis)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
+        if mesh.adaptive:
+            for arr in fields:
+                restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
+            exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis)
+            prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
+                                 mesh.ndim)
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice) -> None:
         """Receive the neighbours' strips of the ``components`` of ``field`` along ``axis``, then
@@ -116,7 +146,54 @@ class BlockRanges(WholeMesh):
         if g == 0:
             return
         exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, components)
+        if mesh.adaptive:
+            plans = self.plans(mesh, axis)
+            exchange_strips(self.comm, plans["restrict_routes"], (field,), RESTRICT_TAG + axis, components)
         fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
+        if mesh.adaptive:
+            restrict_ghosts(field[:, components], plans["restrict"], plans["restrict_weight"])
+            exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, components)
+            prolong_field_ghosts(field[:, components], plans["prolong"])
+
+    def plans(self, mesh, axis: int) -> dict:
+        """This rank's rows of the coarse/fine plans of ``axis`` (destination blocks it owns) and
+        the routes that bring the cells they read from other ranks' blocks: the 2^ndim fine
+        cells of a restriction (before the fill), the coarse cell and its neighbours along
+        every used axis of a prolongation (after the restriction, ghosts included)."""
+        if axis not in self._plans:
+            whole = axis_plans(mesh, axis)
+            owner = owners(self.cuts)
+            mine = {}
+            for name, weight in (("restrict", "restrict_weight"), ("prolong", None), ("reflux", "reflux_volume")):
+                keep = owner[whole[name][:, 0]] == self.rank
+                mine[name] = np.ascontiguousarray(whole[name][keep])
+                if weight is not None:
+                    mine[weight] = np.ascontiguousarray(whole[weight][keep])
+            used = [d for d in range(3) if mesh.ghost[d] > 0]
+            corner = np.array([[a, j, k] for a in (0, 1) for j in (0, 1) for k in (0, 1)
+                               if (a == 0 or 0 in used) and (j == 0 or 1 in used) and (k == 0 or 2 in used)])
+            star = np.array([np.zeros(3, int)] + [sign * np.eye(3, dtype=int)[d] for d in used for sign in (-1, 1)])
+            mine["restrict_routes"] = plan_routes(mesh, self.cuts, self.rank, whole["restrict"], corner)
+            mine["prolong_routes"] = plan_routes(mesh, self.cuts, self.rank, whole["prolong"], star)
+            mine["reflux_pairs"] = (whole["reflux"][:, 0], whole["reflux"][:, 5])
+            self._plans[axis] = mine
+        return self._plans[axis]
+
+    def share_face_flux(self, face_flux: np.ndarray, axis: int) -> None:
+        """Receive, from their owners, the face-flux rows of the finer blocks beside this rank's
+        coarse blocks (whole rows of ``face_flux`` (NB, 2, NQ, N1, N2))."""
+        row = int(np.prod(face_flux.shape[2:]))
+        key = (axis, row)
+        if key not in self._flux_routes:
+            coarse, fine = self._plans[axis]["reflux_pairs"]
+            self._flux_routes[key] = block_routes(self.cuts, self.rank, coarse, fine, row)
+        exchange_strips(self.comm, self._flux_routes[key], (face_flux,), FLUX_TAG + axis)
+
+    def remeshed(self, sim) -> "BlockRanges":
+        """A new cut of ``sim``'s blocks after a regrid (every rank regridded the same way from
+        the whole state, :meth:`share`), by the estimated cost of the new blocks."""
+        cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), self.comm.size)
+        return BlockRanges(self.comm, sim.mesh, cuts)
 
     def any(self, flag: bool) -> bool:
         """Whether ``flag`` holds on some rank (one allreduce, LOR)."""
@@ -172,8 +249,6 @@ class BlockRanges(WholeMesh):
 def unsupported(sim, nranks: int) -> list[str]:
     """Why ``sim`` cannot run on ``nranks`` ranks in this version (empty when it can)."""
     reasons = []
-    if sim.mesh.adaptive:
-        reasons.append("an adaptive mesh (hydro.max_levels > 1)")
     if sim.gravity is not None:
         reasons.append("external gravity")
     if nranks > sim.mesh.nblocks:

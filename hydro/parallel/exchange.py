@@ -15,6 +15,11 @@ from .decomposition import Route
 STRIP_TAG = 100
 #: Message tag of the cells around the blocks before the tracers sample the state.
 NEIGHBOURHOOD_TAG = 200
+#: Message tags before the restriction and the prolongation of coarse/fine ghosts along axis
+#: d (+ d), and of the face fluxes before a reflux along axis d (+ d).
+RESTRICT_TAG = 300
+PROLONG_TAG = 400
+FLUX_TAG = 500
 
 
 def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int,

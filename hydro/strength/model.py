@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.eos import reference_densities
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
@@ -160,7 +159,8 @@ class MaterialStrength:
                                 self.face_flux, 3 * self.nmat, lo, hi)
         if mesh.adaptive:
             for axis in range(mesh.ndim):
-                plans = axis_plans(mesh, axis)
+                plans = partition.plans(mesh, axis)
+                partition.share_face_flux(self.face_flux[axis], axis)
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self.face_flux[axis], state.alpha, state.arho,
                        state.arhoe, state.arhoq, state.momentum, state.energy, floors, amounts)
 
