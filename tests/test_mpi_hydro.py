@@ -109,6 +109,33 @@ if comm is None or comm.rank == 0:
 """
 
 
+#: Two steps of a 16 x 8 cell box of one ideal gas in 4 x 2 blocks of 4^2 (outflow faces), the
+#: traffic counters reset after the first; writes each rank's counters and the bytes its routes
+#: imply per step to OUT.rankR.json.
+COUNT_TRAFFIC = """
+import json, sys
+import numpy as np
+from mpi4py import MPI
+from impactpipe.hydro import BlockMesh, HydroState, Simulation
+from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.parallel.distributed import distribute
+gas = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
+mesh = BlockMesh.uniform("2d-planar", [0.0, 0.0], [2.0, 1.0], [16, 8], [("outflow", "outflow")] * 2, 4)
+state = HydroState.empty(mesh, 1)
+state.set_material(mesh, 1.0, 0, pack_eos([gas]), 1.0, np.zeros(3), pressure=1.0)
+sim = Simulation(mesh, ["gas"], [gas], state)
+comm = MPI.COMM_WORLD
+distribute(sim, comm)
+sim.step()
+sim.partition.traffic.reset()
+sim.step()
+fields = sim.state.arrays().values()
+implied = sum(8 * route.send.values(field) for routes in sim.partition.routes for route in routes for field in fields)
+with open(f"{sys.argv[1]}.rank{comm.rank}.json", "w") as out:
+    out.write(json.dumps({"traffic": sim.partition.traffic.as_dict(), "routes_bytes": implied}))
+"""
+
+
 def impactpipe_run(config: Path, out: Path, *options: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "impactpipe.pipeline.cli", "run", str(config), "--out", str(out),
                            "--stage", "hydro", "-q", *options], env=ENV, capture_output=True, text=True, timeout=300)
@@ -216,6 +243,25 @@ def test_a_sweep_failure_stops_every_rank_with_the_single_process_failure_and_ch
             assert np.array_equal(got["state"][name][()], want["state"][name][()], equal_nan=True), name
         for name in want["tracers"]:
             assert got["tracers"][name][()].tobytes() == want["tracers"][name][()].tobytes(), name
+
+
+def test_the_traffic_counters_count_the_bytes_and_messages_of_one_step(tmp_path):
+    """Each rank owns one row of 4 blocks: one message per step (the fill along y), carrying the
+    GHOST = 2 rows of 4 cells next to each of its 4 blocks' shared faces, 7 float64 fields (alpha,
+    arho, arhoe, momentum x 3, energy): 4 x 2 x 4 x 7 x 8 = 1792 B; three allreduces (the time
+    step and the failure check of each sweep)."""
+    result = subprocess.run([ranks.mpiexec_path(), "-n", "2", sys.executable, "-c", COUNT_TRAFFIC,
+                             str(tmp_path / "traffic")], env=ENV, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    for rank in range(2):
+        counted = json.loads((tmp_path / f"traffic.rank{rank}.json").read_text())
+        traffic = counted["traffic"]
+        assert traffic["bytes_sent"] == traffic["bytes_received"] == counted["routes_bytes"] == 4 * 2 * 4 * 7 * 8
+        assert traffic["messages_sent"] == traffic["messages_received"] == 1
+        assert traffic["exchanges"] == 2
+        assert traffic["allreduces"] == 3
+        assert traffic["gathers"] == 0
+        assert 0.0 <= traffic["wait_seconds"] <= traffic["exchange_seconds"]
 
 
 def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):

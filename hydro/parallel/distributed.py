@@ -20,6 +20,7 @@ the exchange before the next ghost fill rebuilds exactly the serial state.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -31,18 +32,21 @@ from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts, fill_
 
 from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, owned_ranges, owners,
                             plan_routes)
-from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, broadcast_arrays,
+from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, Traffic, broadcast_arrays,
                        exchange_strips, gather_rows, share_owned_blocks)
 
 log = logging.getLogger(__name__)
 
 
 class WholeMesh:
-    """One process advances every block."""
+    """One process advances every block; ``traffic`` (:class:`~.exchange.Traffic`) stays zero."""
 
     blocks = slice(None)
     is_root = True
     rank = 0
+
+    def __init__(self):
+        self.traffic = Traffic()
 
     def fill_ghosts(self, state, mesh, axis: int) -> None:
         """Fill the ghosts of every block along ``axis``."""
@@ -106,6 +110,7 @@ class BlockRanges(WholeMesh):
     """This rank advances the blocks ``cuts[rank] .. cuts[rank + 1] - 1`` (see :mod:`.decomposition`)."""
 
     def __init__(self, comm, mesh, cuts: np.ndarray):
+        super().__init__()
         self.comm = comm
         self.cuts = cuts
         self.lo, self.hi = int(cuts[comm.rank]), int(cuts[comm.rank + 1])
@@ -127,15 +132,15 @@ class BlockRanges(WholeMesh):
         if g == 0:
             return
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis)
+        exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
         if mesh.adaptive:
             plans = self.plans(mesh, axis)
-            exchange_strips(self.comm, plans["restrict_routes"], fields, RESTRICT_TAG + axis)
+            exchange_strips(self.comm, plans["restrict_routes"], fields, RESTRICT_TAG + axis, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
         if mesh.adaptive:
             for arr in fields:
                 restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
-            exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis)
+            exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis, self.traffic)
             prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
                                  mesh.ndim)
 
@@ -145,14 +150,16 @@ class BlockRanges(WholeMesh):
         g = int(mesh.ghost[axis])
         if g == 0:
             return
-        exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, components)
+        exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, components)
         if mesh.adaptive:
             plans = self.plans(mesh, axis)
-            exchange_strips(self.comm, plans["restrict_routes"], (field,), RESTRICT_TAG + axis, components)
+            exchange_strips(self.comm, plans["restrict_routes"], (field,), RESTRICT_TAG + axis, self.traffic,
+                            components)
         fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
         if mesh.adaptive:
             restrict_ghosts(field[:, components], plans["restrict"], plans["restrict_weight"])
-            exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, components)
+            exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, self.traffic,
+                            components)
             prolong_field_ghosts(field[:, components], plans["prolong"])
 
     def plans(self, mesh, axis: int) -> dict:
@@ -187,26 +194,33 @@ class BlockRanges(WholeMesh):
         if key not in self._flux_routes:
             coarse, fine = self._plans[axis]["reflux_pairs"]
             self._flux_routes[key] = block_routes(self.cuts, self.rank, coarse, fine, row)
-        exchange_strips(self.comm, self._flux_routes[key], (face_flux,), FLUX_TAG + axis)
+        exchange_strips(self.comm, self._flux_routes[key], (face_flux,), FLUX_TAG + axis, self.traffic)
 
     def remeshed(self, sim) -> "BlockRanges":
         """A new cut of ``sim``'s blocks after a regrid (every rank regridded the same way from
         the whole state, :meth:`share`), by the estimated cost of the new blocks."""
         cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), self.comm.size)
-        return BlockRanges(self.comm, sim.mesh, cuts)
+        partition = BlockRanges(self.comm, sim.mesh, cuts)
+        partition.traffic = self.traffic
+        return partition
 
     def any(self, flag: bool) -> bool:
         """Whether ``flag`` holds on some rank (one allreduce, LOR)."""
         from mpi4py import MPI
 
-        return bool(self.comm.allreduce(bool(flag), op=MPI.LOR))
+        started = time.perf_counter()
+        found = bool(self.comm.allreduce(bool(flag), op=MPI.LOR))
+        self._count_allreduce(started)
+        return found
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """One Allreduce (MAX) of (rate, -first bad block): the serial run's values exactly."""
         from mpi4py import MPI
 
         values = np.array([rate if first_bad < 0 else 0.0, -float(first_bad if first_bad >= 0 else self.nblocks)])
+        started = time.perf_counter()
         self.comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
+        self._count_allreduce(started)
         bad = int(-values[1])
         return float(values[0]), bad if bad < self.nblocks else -1
 
@@ -215,8 +229,15 @@ class BlockRanges(WholeMesh):
         from mpi4py import MPI
 
         local = super().first_failure(failure[self.blocks])
+        started = time.perf_counter()
         first = self.comm.allreduce(self.lo + local if local >= 0 else self.nblocks, op=MPI.MIN)
+        self._count_allreduce(started)
         return first if first < self.nblocks else -1
+
+    def _count_allreduce(self, started: float) -> None:
+        """Count one allreduce that began at ``started`` (``time.perf_counter()``, s) in ``traffic``."""
+        self.traffic.allreduces += 1
+        self.traffic.allreduce_seconds += time.perf_counter() - started
 
     def from_owner(self, block: int, make: Callable[[], Any]) -> Any:
         owner = int(np.searchsorted(self.cuts, block, side="right")) - 1
@@ -224,7 +245,8 @@ class BlockRanges(WholeMesh):
 
     def share(self, sim) -> None:
         """Every rank receives every rank's owned blocks: state (ghosts included) and per-block counters."""
-        share_owned_blocks(self.comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()), self.cuts)
+        share_owned_blocks(self.comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()), self.cuts,
+                           self.traffic)
 
     def agree(self, value: Any) -> Any:
         return self.comm.bcast(value, root=0)
@@ -238,7 +260,7 @@ class BlockRanges(WholeMesh):
         blocks (faces, edges, corners; :func:`~.decomposition.neighbourhood_routes`): the fields
         the tracers read (volume fractions, partial densities and internal energies, momentum)."""
         exchange_strips(self.comm, self.neighbourhood, (state.alpha, state.arho, state.arhoe, state.momentum),
-                        NEIGHBOURHOOD_TAG)
+                        NEIGHBOURHOOD_TAG, self.traffic)
 
     def gather_tracers(self, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
         """Row t of each of ``arrays`` from rank ``owner[t]`` on every rank (one Allgatherv,

@@ -3,9 +3,14 @@ before an output, tracer rows after a tracer sample.
 
 All fields are float64 arrays (NB, C, NX, NY, NZ), C-contiguous, so a block's values are one
 contiguous run and a strip is a fixed set of flat indices (:class:`~.decomposition.Strips`).
+Each exchange adds what it moved and how long it took to a :class:`Traffic` (a few integer
+additions and two clock reads per ghost fill, nothing per cell).
 """
 
 from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -22,13 +27,51 @@ PROLONG_TAG = 400
 FLUX_TAG = 500
 
 
-def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int,
+@dataclass
+class Traffic:
+    """What one rank exchanged with the others since the last :meth:`reset` (cumulative).
+
+    ``bytes_sent`` / ``bytes_received`` (B) and ``messages_sent`` / ``messages_received``:
+    the strips of the ghost fills (:func:`exchange_strips`); ``exchanges``: the ghost fills
+    (one exchange each, without messages where no other rank owns a neighbour);
+    ``exchange_seconds`` (s): wall time inside them (packing, waiting and unpacking);
+    ``wait_seconds`` (s): the part spent in ``Waitall``, waiting for the
+    peers' strips (their transfer, and the peers' lateness in reaching the fill);
+    ``allreduces`` and ``allreduce_seconds`` (s): the reductions of the time step and the
+    failure checks; ``gathers`` and ``gather_seconds`` (s): the sharing of every block before
+    an output (:func:`share_owned_blocks`).
+    """
+
+    bytes_sent: int = 0
+    bytes_received: int = 0
+    messages_sent: int = 0
+    messages_received: int = 0
+    exchanges: int = 0
+    exchange_seconds: float = 0.0
+    wait_seconds: float = 0.0
+    allreduces: int = 0
+    allreduce_seconds: float = 0.0
+    gathers: int = 0
+    gather_seconds: float = 0.0
+
+    def reset(self) -> None:
+        """Every counter back to zero."""
+        for name, value in asdict(Traffic()).items():
+            setattr(self, name, value)
+
+    def as_dict(self) -> dict:
+        """The counters by name."""
+        return asdict(self)
+
+
+def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int, traffic: Traffic,
                     components: slice = slice(None)) -> None:
     """Send this rank's strips and receive its peers' into the ``components`` of ``fields``, one
     message per peer (every field packed into one float64 buffer, message tag ``tag``),
-    non-blocking both ways, then unpack."""
+    non-blocking both ways, then unpack; the bytes, messages and seconds go to ``traffic``."""
     from mpi4py import MPI
 
+    started = time.perf_counter()
     flats = [_flat(field) for field in fields]
     requests, received, sent = [], [], []
     for route in routes:
@@ -39,27 +82,38 @@ def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], t
         buffer = np.concatenate([flat[route.send.indices(field, components)] for flat, field in zip(flats, fields)])
         requests.append(comm.Isend(buffer, dest=route.peer, tag=tag))
         sent.append(buffer)
+    waiting = time.perf_counter()
     MPI.Request.Waitall(requests)
+    traffic.wait_seconds += time.perf_counter() - waiting
     for buffer, strips in received:
         start = 0
         for flat, field in zip(flats, fields):
             size = strips.values(field, components)
             flat[strips.indices(field, components)] = buffer[start:start + size]
             start += size
+    traffic.bytes_sent += sum(buffer.nbytes for buffer in sent)
+    traffic.bytes_received += sum(buffer.nbytes for buffer, _ in received)
+    traffic.messages_sent += len(sent)
+    traffic.messages_received += len(received)
+    traffic.exchanges += 1
+    traffic.exchange_seconds += time.perf_counter() - started
 
 
-def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray) -> None:
+def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray, traffic: Traffic) -> None:
     """Every rank receives every rank's owned blocks (rows ``cuts[r] .. cuts[r + 1] - 1`` of
-    each array, in place): one Allgatherv per array."""
+    each array, in place): one Allgatherv per array, counted in ``traffic`` as one gather."""
     from mpi4py import MPI
     from mpi4py.util.dtlib import from_numpy_dtype
 
+    started = time.perf_counter()
     for array in arrays:
         flat = _flat(array)
         row = int(np.prod(array.shape[1:], dtype=np.int64))
         counts = (np.diff(cuts) * row).tolist()
         displacements = (cuts[:-1] * row).tolist()
         comm.Allgatherv(MPI.IN_PLACE, [flat, (counts, displacements), from_numpy_dtype(array.dtype)])
+    traffic.gathers += 1
+    traffic.gather_seconds += time.perf_counter() - started
 
 
 def gather_rows(comm, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
