@@ -1,4 +1,5 @@
-"""Hydro throughput on several MPI ranks: cell-updates per second of one run shared between ranks.
+"""Hydro throughput on several MPI ranks: cell-updates per second of one run shared between ranks,
+and what each rank exchanged, waited for and computed per step.
 
 Run under mpiexec, one numba thread per rank, and compare the rates of the same cases at 1
 and N ranks (the blocks are cut between the ranks as in ``impactpipe run --ranks N``,
@@ -7,72 +8,149 @@ and N ranks (the blocks are cut between the ranks as in ``impactpipe run --ranks
     NUMBA_NUM_THREADS=1 mpiexec -n 1 python benchmarks/mpi_scaling.py --json
     NUMBA_NUM_THREADS=1 mpiexec -n 2 python benchmarks/mpi_scaling.py --json
 
-Cases are those of benchmarks/hydro_throughput.py that the ranks can share in this version
-(uniform meshes without strength): ``2d-ideal-gas`` (512^2, 64 blocks) and
-``2d-cyl-tillotson`` (the r-z impact, 2400 blocks of 16^2).  Each takes one step, is shared
-between the ranks, takes one more step, then ``--steps`` timed steps between two barriers.
-Rank 0 prints one JSON document: the rank count, and per case the cell-updates per second,
-the wall time and the blocks of each rank.
+Cases are those of benchmarks/hydro_throughput.py: ``2d-cyl-tillotson`` (the r-z impact, 2400
+blocks of 16^2), ``2d-cyl-strength`` (the same impact with GEO 'strong' strength),
+``3d-two-material`` (128^3 periodic box, two ideal gases; 16^3 blocks, ``--block-cells``
+sets another edge) and ``2d-ideal-gas`` (512^2, 64^2 blocks).  A case that
+:func:`impactpipe.hydro.parallel.distributed.unsupported` refuses on the ranks asked for
+(strength, in this version) is reported with ``skipped``, the reasons, and not run; on one
+rank every case runs as a single process.
+
+Each case takes one step, is shared between the ranks, takes one more step, then ``--steps``
+timed steps between two barriers, with the ranks' traffic counters
+(:class:`~impactpipe.hydro.parallel.exchange.Traffic`) reset at the start.  Per rank, per step:
+``bytes_sent``, ``bytes_received`` (B), ``messages_sent``, ``allreduces``; ``wait_s`` (s in
+``Waitall``), ``exchange_s`` (s in the ghost exchanges: packing, waiting, unpacking),
+``allreduce_s``; and ``compute_s_per_cell_update`` = (wall - exchange - allreduce time) / (the
+rank's interior cells x steps), the cost of a cell-update on one core.  Then one snapshot
+(every block shared, the thermodynamics of every cell): ``snapshot_s`` and ``gather_s``.  With
+two or more ranks, ranks 0 and 1 also time a ping-pong (``pingpong``: the one-way latency of an
+8-byte message and the bandwidth of a 16 MiB one, s and B/s).  Rank 0 prints one JSON document.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 import numba
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hydro_throughput import build  # noqa: E402
 
-from impactpipe.hydro.parallel.distributed import distribute  # noqa: E402
+from impactpipe.hydro.parallel.distributed import distribute, unsupported  # noqa: E402
 
-CASES = ("2d-ideal-gas", "2d-cyl-tillotson")
+CASES = ("2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material", "2d-ideal-gas")
+DEFAULT_CASES = ("2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material")
+#: Ping-pong message sizes (B) and round trips.
+LATENCY_BYTES, BANDWIDTH_BYTES, ROUND_TRIPS = 8, 16 * 2 ** 20, 20
 
 
-def measure(comm, case: str, steps: int) -> dict:
-    """Rate (cell-updates/s) of ``steps`` steps of ``case`` shared between the ranks of ``comm``."""
-    sim = build(case, quick=False)
+def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
+    """Rate (cell-updates/s) and per-rank traffic of ``steps`` steps of ``case`` shared between
+    the ranks of ``comm``; ``skipped`` with the reasons where the ranks cannot share it."""
+    sim = build(case, quick=False, block_cells=None if case.startswith("2d-cyl") else block_cells)
+    mesh = sim.mesh
+    result = {"case": case, "cells": mesh.ncells, "blocks": mesh.nblocks, "block_cells": mesh.block_cells,
+              "blocks_per_axis": mesh.blocks_per_axis[:mesh.ndim].tolist(),
+              "periodic": [low == "periodic" for low, _ in mesh.boundaries],
+              "components": sum(array.shape[1] for array in sim.state.arrays().values()), "steps": steps}
+    if comm.size > 1:
+        reasons = unsupported(sim, comm.size)
+        if reasons:
+            return {**result, "skipped": f"not shared between {comm.size} ranks in this version: "
+                                         f"{'; '.join(reasons)} (hydro.parallel.distributed.unsupported)"}
     sim.step()
     if comm.size > 1:
         distribute(sim, comm)
     sim.step()
     comm.Barrier()
+    traffic = sim.partition.traffic
+    traffic.reset()
     start_updates = sim.cell_updates
     started = time.perf_counter()
     for _ in range(steps):
         sim.step()
     comm.Barrier()
     wall = time.perf_counter() - started
-    owned = comm.gather(sim.partition.blocks.indices(sim.mesh.nblocks)[:2], root=0)
-    return {"case": case, "cells": sim.mesh.ncells, "steps": steps, "wall_s": wall,
-            "cell_updates_per_s": (sim.cell_updates - start_updates) / wall,
-            "blocks_per_rank": None if owned is None else [hi - lo for lo, hi in owned]}
+    per_step = traffic.as_dict()
+    snapshot_started = time.perf_counter()
+    sim.snapshot()
+    snapshot_s = time.perf_counter() - snapshot_started
+    lo, hi, _ = sim.partition.blocks.indices(sim.mesh.nblocks)
+    owned_cells = (hi - lo) * sim.mesh.ncells // sim.mesh.nblocks
+    compute = wall - per_step["exchange_seconds"] - per_step["allreduce_seconds"]
+    rank = {"blocks": hi - lo, "cells": owned_cells,
+            "bytes_sent": per_step["bytes_sent"] / steps, "bytes_received": per_step["bytes_received"] / steps,
+            "messages_sent": per_step["messages_sent"] / steps, "allreduces": per_step["allreduces"] / steps,
+            "wait_s": per_step["wait_seconds"] / steps, "exchange_s": per_step["exchange_seconds"] / steps,
+            "allreduce_s": per_step["allreduce_seconds"] / steps,
+            "compute_s_per_cell_update": compute / (owned_cells * steps),
+            "snapshot_s": snapshot_s, "gather_s": traffic.gather_seconds}
+    return {**result, "wall_s": wall, "cell_updates_per_s": (sim.cell_updates - start_updates) / wall,
+            "state_bytes": int(sum(array.nbytes for array in sim.state.arrays().values())),
+            "ranks": comm.gather(rank, root=0)}
+
+
+def pingpong(comm) -> dict | None:
+    """One-way latency (s, 8-byte messages) and bandwidth (B/s, 16 MiB messages) between ranks 0
+    and 1, each the median of ROUND_TRIPS round trips; None on one rank."""
+    if comm.size < 2:
+        return None
+    out = {}
+    for key, size in (("latency_s", LATENCY_BYTES), ("bandwidth_bytes_per_s", BANDWIDTH_BYTES)):
+        buffer = np.zeros(size // 8)
+        times = []
+        for _ in range(ROUND_TRIPS):
+            comm.Barrier()
+            started = time.perf_counter()
+            if comm.rank == 0:
+                comm.Send(buffer, dest=1)
+                comm.Recv(buffer, source=1)
+            elif comm.rank == 1:
+                comm.Recv(buffer, source=0)
+                comm.Send(buffer, dest=0)
+            times.append((time.perf_counter() - started) / 2)
+        one_way = float(np.median(times))
+        out[key] = one_way if key == "latency_s" else size / one_way
+    return comm.bcast(out, root=0)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
+    parser.add_argument("--cases", nargs="*", default=list(DEFAULT_CASES), choices=CASES)
     parser.add_argument("--steps", type=int, default=10, help="timed steps per case (default 10)")
+    parser.add_argument("--block-cells", type=int, help="block edge of the box cases (default: the uniform mesh's own)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     args = parser.parse_args()
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
     numba.set_num_threads(1)
-    results = [measure(comm, case, args.steps) for case in args.cases]
+    results = [measure(comm, case, args.steps, args.block_cells) for case in args.cases]
+    link = pingpong(comm)
     if comm.rank != 0:
         return
+    report = {"ranks": comm.size, "load_average": os.getloadavg(), "cpu_count": os.cpu_count(), "pingpong": link,
+              "results": results}
     if args.json:
-        print(json.dumps({"ranks": comm.size, "results": results}, indent=2))
-    else:
-        for r in results:
-            print(f"{r['case']}: {comm.size} ranks, {r['cell_updates_per_s']:.3g} cell-updates/s, "
-                  f"blocks per rank {r['blocks_per_rank']}")
+        print(json.dumps(report, indent=2))
+        return
+    for r in results:
+        if "skipped" in r:
+            print(f"{r['case']}: {r['skipped']}")
+            continue
+        print(f"{r['case']}: {comm.size} ranks, {r['cell_updates_per_s']:.3g} cell-updates/s")
+        for i, rank in enumerate(r["ranks"]):
+            print(f"  rank {i}: {rank['blocks']} blocks, {rank['bytes_sent']:.3g} B and {rank['messages_sent']:g} "
+                  f"messages sent per step, waiting {rank['wait_s']:.3g} s per step, "
+                  f"{rank['compute_s_per_cell_update']:.3g} s per cell-update")
 
 
 if __name__ == "__main__":
