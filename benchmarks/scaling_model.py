@@ -294,26 +294,24 @@ def run_mesh(config_path: Path, overrides: dict) -> tuple[Mesh, dict]:
 
 
 def costs_from(measured: list[dict], case: str, block_cells: int) -> Costs:
-    """c_cell and c_snap from the one-rank measurement of ``case`` on ``block_cells`` blocks;
-    c_pack from the two-rank one (2d-cyl-tillotson's for a 2D case the ranks skipped)."""
+    """c_cell and c_snap from the one-rank measurements of ``case`` on ``block_cells`` blocks,
+    c_pack from the two-rank ones (2d-cyl-tillotson's for a 2D case the ranks skipped): the
+    medians over the documents and ranks."""
 
-    def result(ranks: int, name: str) -> dict | None:
-        for document in measured:
-            for r in document["results"]:
-                if (document["ranks"] == ranks and r["case"] == name and r["block_cells"] == block_cells
-                        and "skipped" not in r):
-                    return r
-        return None
+    def results(ranks: int, name: str) -> list[dict]:
+        return [r for document in measured if document["ranks"] == ranks for r in document["results"]
+                if r["case"] == name and r["block_cells"] == block_cells and "skipped" not in r]
 
-    one = result(1, case)
-    if one is None:
+    one = results(1, case)
+    if not one:
         raise ValueError(f"no one-rank measurement of {case} on {block_cells}-cell blocks")
-    two = result(2, case) or result(2, "2d-cyl-tillotson" if case.startswith("2d") else case)
-    if two is None:
+    two = results(2, case) or results(2, "2d-cyl-tillotson" if case.startswith("2d") else case)
+    if not two:
         raise ValueError(f"no two-rank measurement for the packing cost of {case}")
-    pack = np.mean([(r["exchange_s"] - r["wait_s"]) / (r["bytes_sent"] + r["bytes_received"]) for r in two["ranks"]])
-    rank = one["ranks"][0]
-    return Costs(rank["compute_s_per_cell_update"], float(pack), rank["snapshot_s"] / one["cells"])
+    pack = [(rank["exchange_s"] - rank["wait_s"]) / (rank["bytes_sent"] + rank["bytes_received"])
+            for r in two for rank in r["ranks"]]
+    return Costs(float(np.median([r["ranks"][0]["compute_s_per_cell_update"] for r in one])), float(np.median(pack)),
+                 float(np.median([r["ranks"][0]["snapshot_s"] / r["cells"] for r in one])))
 
 
 def project(measured: list[dict], steps: dict[str, dict], net: Interconnect) -> dict:
