@@ -13,8 +13,8 @@ blocks of 16^2), ``2d-cyl-strength`` (the same impact with GEO 'strong' strength
 ``3d-two-material`` (128^3 periodic box, two ideal gases; 16^3 blocks, ``--block-cells``
 sets another edge) and ``2d-ideal-gas`` (512^2, 64^2 blocks).  A case that
 :func:`impactpipe.hydro.parallel.distributed.unsupported` refuses on the ranks asked for
-(strength, in this version) is reported with ``skipped``, the reasons, and not run; on one
-rank every case runs as a single process.
+is reported with ``skipped``, the reasons, and not run; on one rank every case runs as a
+single process.
 
 Each case takes one step, is shared between the ranks, takes one more step, then ``--steps``
 timed steps between two barriers, with the ranks' traffic counters

@@ -66,6 +66,10 @@ class WholeMesh:
         """Whether ``flag`` holds on some process."""
         return flag
 
+    def largest(self, value: float) -> float:
+        """The largest of ``value`` over the processes."""
+        return value
+
     def plans(self, mesh, axis: int) -> dict:
         """The coarse/fine plans of ``axis`` whose destination blocks this process advances
         (:func:`~impactpipe.hydro.amr.plans.axis_plans`)."""
@@ -212,6 +216,15 @@ class BlockRanges(WholeMesh):
         found = bool(self.comm.allreduce(bool(flag), op=MPI.LOR))
         self._count_allreduce(started)
         return found
+
+    def largest(self, value: float) -> float:
+        """The largest of ``value`` over the ranks (one allreduce, MAX)."""
+        from mpi4py import MPI
+
+        started = time.perf_counter()
+        largest = float(self.comm.allreduce(value, op=MPI.MAX))
+        self._count_allreduce(started)
+        return largest
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """One Allreduce (MAX) of (rate, -first bad block): the serial run's values exactly."""
