@@ -84,10 +84,15 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
                      *(["--from", from_stage] if from_stage else []), *(f"--stage={s}" for s in stages),
                      *(["--force"] if force else []), *(["-v"] * verbose), *(["--quiet"] if quiet else [])]
         try:
-            sys.exit(ranks.launch(nranks, arguments))
+            status = ranks.launch(nranks, arguments)
         except ranks.RanksUnavailable as exc:
             click.echo(f"error: {exc}", err=True)
             sys.exit(2)
+        if status not in ranks.PIPELINE_STATUSES:
+            click.echo(f"error: an MPI rank ended abnormally (mpiexec exit status {status}: a rank killed by a signal "
+                       f"or out of memory, or a node lost); mpiexec stopped every rank.  The hydro stage's last "
+                       f"checkpoint is kept: run the same command again to resume from it.", err=True)
+        sys.exit(status)
     comm = ranks.join_world()
     if comm is not None and comm.rank != 0:
         sys.exit(_follow_rank_zero(config_path, comm))

@@ -28,6 +28,9 @@ from impactpipe.hydro import PROBLEMS
 #: Slurm's PMI, Open MPI, PMIx); without any of them mpi4py is not imported at all.
 LAUNCHER_VARIABLES = ("PMI_SIZE", "PMI_RANK", "OMPI_COMM_WORLD_SIZE", "PMIX_RANK")
 INSTALL_HINT = 'pip install "impactpipe[mpi]"'
+#: Exit statuses of the pipeline itself (done, failed, bad input, stopped by a signal); any other
+#: status of ``mpiexec`` means a rank died under it.
+PIPELINE_STATUSES = (0, 1, 2, 130)
 #: Seconds between the checks of a rank waiting for rank 0's order.
 ORDER_POLL = 0.05
 

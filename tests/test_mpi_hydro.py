@@ -136,6 +136,32 @@ with open(f"{sys.argv[1]}.rank{comm.rank}.json", "w") as out:
 """
 
 
+#: ``impactpipe run ... --ranks 2`` whose ranks run the command line with rank 1 killed
+#: (SIGKILL, as the kernel's out-of-memory killer or a lost node would) at the start of its 8th
+#: step; the remaining arguments are the command line's.
+KILL_RANK_ONE = """
+import sys
+from impactpipe.pipeline import cli, ranks
+HOOK = '''
+import os, signal, sys
+from impactpipe.hydro.solver import Simulation
+from impactpipe.pipeline.cli import main
+step = Simulation.step
+def dying_step(self, *args, **kwargs):
+    if self.partition.rank == 1 and self.step_count == 7:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return step(self, *args, **kwargs)
+Simulation.step = dying_step
+sys.argv = ["impactpipe", *sys.argv[1:]]
+main()
+'''
+ranks.launch_command = lambda n, arguments: [ranks.mpiexec_path(), "-n", str(n), sys.executable, "-c", HOOK,
+                                             *arguments]
+sys.argv = ["impactpipe", *sys.argv[1:]]
+cli.main()
+"""
+
+
 def impactpipe_run(config: Path, out: Path, *options: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "impactpipe.pipeline.cli", "run", str(config), "--out", str(out),
                            "--stage", "hydro", "-q", *options], env=ENV, capture_output=True, text=True, timeout=300)
@@ -246,22 +272,45 @@ def test_a_sweep_failure_stops_every_rank_with_the_single_process_failure_and_ch
 
 
 def test_the_traffic_counters_count_the_bytes_and_messages_of_one_step(tmp_path):
-    """Each rank owns one row of 4 blocks: one message per step (the fill along y), carrying the
-    GHOST = 2 rows of 4 cells next to each of its 4 blocks' shared faces, 7 float64 fields (alpha,
-    arho, arhoe, momentum x 3, energy): 4 x 2 x 4 x 7 x 8 = 1792 B; three allreduces (the time
-    step and the failure check of each sweep)."""
+    """On 4 x 2 blocks in Morton order each rank owns a square of 2 x 2 blocks: one message per
+    step (the fill along x), carrying the GHOST = 2 columns of 4 cells next to each of its 2
+    blocks' shared faces, 7 float64 fields (alpha, arho, arhoe, momentum x 3, energy):
+    2 x 2 x 4 x 7 x 8 = 896 B (a row of 4 blocks each, as the x-fastest order cut it, shares 4
+    faces: twice that); three allreduces (the time step and the failure check of each sweep)."""
     result = subprocess.run([ranks.mpiexec_path(), "-n", "2", sys.executable, "-c", COUNT_TRAFFIC,
                              str(tmp_path / "traffic")], env=ENV, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     for rank in range(2):
         counted = json.loads((tmp_path / f"traffic.rank{rank}.json").read_text())
         traffic = counted["traffic"]
-        assert traffic["bytes_sent"] == traffic["bytes_received"] == counted["routes_bytes"] == 4 * 2 * 4 * 7 * 8
+        assert traffic["bytes_sent"] == traffic["bytes_received"] == counted["routes_bytes"] == 2 * 2 * 4 * 7 * 8
         assert traffic["messages_sent"] == traffic["messages_received"] == 1
         assert traffic["exchanges"] == 2
         assert traffic["allreduces"] == 3
         assert traffic["gathers"] == 0
         assert 0.0 <= traffic["wait_seconds"] <= traffic["exchange_seconds"]
+
+
+def test_a_killed_rank_stops_every_rank_with_a_clear_message_and_the_same_command_resumes(serial, tmp_path):
+    """Checkpoints every step; rank 1 dies (SIGKILL) in the 8th: mpiexec ends rank 0, the
+    launcher names what happened, the checkpoint of step 7 is intact, and the same command
+    resumes it to the single-process answer."""
+    config = yaml.safe_load(SCENES["impact_adaptive"].read_text())
+    config["hydro"]["checkpoint_wall_seconds"] = 1e-9
+    path = tmp_path / "every_step.yaml"
+    path.write_text(yaml.safe_dump(config))
+    run_dir = tmp_path / "run"
+    killed = subprocess.run([sys.executable, "-c", KILL_RANK_ONE, "run", str(path), "--out", str(run_dir),
+                             "--stage", "hydro", "-q", "--ranks", "2"], env=ENV, capture_output=True, text=True,
+                            timeout=300)
+    assert killed.returncode not in ranks.PIPELINE_STATUSES
+    assert "an MPI rank ended abnormally" in killed.stderr and "run the same command again" in killed.stderr
+    with h5py.File(run_dir / "hydro.checkpoint.h5", "r") as f:
+        assert f.attrs["step_count"] == 7
+    resumed = impactpipe_run(path, run_dir, "--ranks", "2")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "resuming from checkpoint at" in (run_dir / "run.log").read_text()
+    assert_same_answer(run_dir, serial["impact_adaptive"])
 
 
 def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):

@@ -37,7 +37,7 @@ from impactpipe.hydro.amr.criteria import (
 )
 from impactpipe.hydro.amr.plans import axis0_weights
 from impactpipe.hydro.amr.transfer import prolong_blocks, restrict_blocks
-from impactpipe.hydro.mesh.blocks import BlockMesh, block_keys
+from impactpipe.hydro.mesh.blocks import BlockMesh, morton_keys
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 
 
@@ -196,7 +196,8 @@ class _Leaves:
 def plan_leaves(mesh: BlockMesh, refine: np.ndarray, coarsen: np.ndarray) -> dict | None:
     """The new leaf set from the flags, 2:1 balanced (module docstring); None when nothing changes.
 
-    Returns a dict with ``level`` and ``index`` of the new leaves (sorted by block key),
+    Returns a dict with ``level`` and ``index`` of the new leaves (in Morton order,
+    :func:`~impactpipe.hydro.mesh.blocks.morton_keys`),
     ``keep`` (new, old) index pairs, ``children`` rows (new child, old parent, cx, cy, cz) and
     ``parents`` rows (new parent, old child, cx, cy, cz).
     """
@@ -266,7 +267,7 @@ def plan_leaves(mesh: BlockMesh, refine: np.ndarray, coarsen: np.ndarray) -> dic
         entries.append((parent[0], list(parent[1:]), "parent", members))
     level = np.array([e[0] for e in entries], dtype=np.int64)
     index = np.array([e[1] for e in entries], dtype=np.int64).reshape(-1, 3)
-    order = np.argsort(block_keys(level, index), kind="stable")
+    order = np.argsort(morton_keys(level, index, mesh.max_level), kind="stable")
     keep, children, parents = [], [], []
     for new, e in enumerate(entries[i] for i in order):
         if e[2] == "keep":

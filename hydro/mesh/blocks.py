@@ -7,7 +7,9 @@ with integer index ``block_index`` = (i, j, k) covers
 
     [domain_lo + (i, j, k) W_L, domain_lo + (i + 1, j + 1, k + 1) W_L],   W_L = block_cells dx_0 / 2^L
 
-(dx_0 the root cell size).  Only leaf blocks are stored.  Neighbouring leaves differ by at
+(dx_0 the root cell size).  Only leaf blocks are stored, in Morton (Z-order) order of their
+lower corners (:func:`morton_keys`): the blocks of a contiguous range of the order form a
+compact region, which is what one MPI rank owns (:mod:`impactpipe.hydro.parallel`).  Neighbouring leaves differ by at
 most one level across faces, edges and corners (2:1 balance, kept by
 :mod:`impactpipe.hydro.amr.regrid`).
 
@@ -76,6 +78,21 @@ def block_keys(level, index) -> np.ndarray:
     level = np.asarray(level, dtype=np.int64)
     index = np.asarray(index, dtype=np.int64)
     return ((level << KEY_BITS | index[:, 2]) << KEY_BITS | index[:, 1]) << KEY_BITS | index[:, 0]
+
+
+def morton_keys(level, index, max_level: int) -> np.ndarray:
+    """Keys that order blocks (level (N,), index (N, 3)) along a Morton (Z-order) curve: the bits
+    of their lower corners on the level-``max_level`` block grid, c_d = index_d 2^(max_level -
+    level), interleaved (x lowest).  Leaves never share a lower corner, so the keys of a mesh's
+    leaves are unique; a parent's key is its first child's, so refining or coarsening keeps
+    the blocks of a region together in the order."""
+    level = np.asarray(level, dtype=np.int64)
+    corner = np.asarray(index, dtype=np.int64) << (int(max_level) - level)[:, None]
+    keys = np.zeros(len(level), dtype=np.int64)
+    for bit in range(KEY_BITS):
+        for d in range(3):
+            keys |= ((corner[:, d] >> bit) & 1) << (3 * bit + d)
+    return keys
 
 
 @dataclass
@@ -173,6 +190,7 @@ class BlockMesh:
         nb = int(np.prod(nblk))
         idx = np.arange(nb)
         index = np.stack([idx % nblk[0], (idx // nblk[0]) % nblk[1], idx // (nblk[0] * nblk[1])], axis=1)
+        index = index[np.argsort(morton_keys(np.zeros(nb, dtype=np.int64), index, 0), kind="stable")]
         return cls.from_leaves(geometry, lo, hi, nblk, block_cells, tuple(tuple(b) for b in boundaries),
                                np.zeros(nb, dtype=np.int64), index, int(max_level))
 
