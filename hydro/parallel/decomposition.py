@@ -1,9 +1,12 @@
 """Which rank advances which blocks, and which cells the ranks exchange before a ghost fill.
 
-Rank r owns the blocks ``cuts[r] .. cuts[r + 1] - 1`` of the mesh's block order.  The cuts
-balance an estimated cost per block (:func:`block_costs`): a cell that holds material costs
-:data:`MATERIAL_CELL_COST`, a void cell :data:`VOID_CELL_COST` (the sweep skips the Riemann
-solver and the EOS in void; the ratio is an estimate, not a measurement).
+Rank r owns the blocks ``cuts[r] .. cuts[r + 1] - 1`` of the mesh's block order (a Morton
+curve, :func:`impactpipe.hydro.mesh.blocks.morton_keys`).  The cuts balance an estimated cost
+per block (:func:`block_costs`), weights measured by ``benchmarks/block_costs.py`` on the 2D
+impact (docs/performance.md, "Several MPI ranks"): a void cell costs about a third of a cell
+holding material (the sweep skips the Riemann solver and the EOS in void, but still moves
+through it), and a block holding both, where the interfaces and free surfaces are, costs
+about as much again per cell.
 
 Exchange plan: a ghost slab of block b along axis d copies the ``GHOST`` interior cells of
 its neighbour next to the shared face (:mod:`impactpipe.hydro.mesh.boundary`).  Where the
@@ -32,18 +35,25 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 #: Cells beyond a block's faces, edges and corners that the stencil of a tracer in the block reads.
 TRACER_REACH = 1
-#: Estimated cost of one sweep of a cell holding material / a void cell (arbitrary units).
-MATERIAL_CELL_COST = 10
-VOID_CELL_COST = 1
+#: Cost of a step of a cell holding material / of a void cell / added per cell of a block that
+#: holds both (units of 10 ns: benchmarks/block_costs.py measured 200, 70 and 330 ns per
+#: cell-update of full, void and mixed blocks of the 2D impact on one core, 510, 171 and 544
+#: with strength).
+MATERIAL_CELL_COST = 20
+VOID_CELL_COST = 7
+MIXED_BLOCK_CELL_COST = 20
 
 
 def block_costs(mesh, alpha: np.ndarray) -> np.ndarray:
     """(NB,) int64 estimated cost per block from the volume fractions ``alpha`` (NB, M, NX, NY, NZ):
     :data:`MATERIAL_CELL_COST` per interior cell whose summed volume fraction is >= PHI_VOID,
-    :data:`VOID_CELL_COST` per other interior cell."""
+    :data:`VOID_CELL_COST` per other interior cell, and :data:`MIXED_BLOCK_CELL_COST` per cell
+    of a block that has both."""
     phi = mesh.interior(alpha).sum(axis=1).reshape(mesh.nblocks, -1)
+    cells = phi.shape[1]
     material = (phi >= PHI_VOID).sum(axis=1).astype(np.int64)
-    return MATERIAL_CELL_COST * material + VOID_CELL_COST * (phi.shape[1] - material)
+    mixed = (material > 0) & (material < cells)
+    return MATERIAL_CELL_COST * material + VOID_CELL_COST * (cells - material) + MIXED_BLOCK_CELL_COST * cells * mixed
 
 
 def owned_ranges(costs: np.ndarray, nranks: int) -> np.ndarray:
