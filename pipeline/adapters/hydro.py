@@ -116,6 +116,9 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         ranks.send_order({"resume": checkpoint.is_file(), "checkpoint": str(checkpoint), "end_time": end_time,
                           "times": times})
         distribute(sim, comm)
+        log.info("hydro: snapshots and checkpoints gathered to rank 0, which writes them (every block "
+                 "shared before each output; h5py %s parallel HDF5, which this version does not use)",
+                 "has" if h5py.get_config().mpi else "is built without")
     progress = ctx.progress("hydro", end_time)
     last_checkpoint = [time.perf_counter()]
     stopped = []
