@@ -491,22 +491,25 @@ class Simulation:
         return self.partition.largest(float(pressure.max()))
 
     def snapshot(self) -> Snapshot:
-        """The interior cells at the current time as a :class:`Snapshot` (copies); collective
-        on several ranks (every block is shared first)."""
-        self.partition.share(self)
+        """The interior cells at the current time as a :class:`Snapshot` (copies).  Collective
+        on several ranks: each computes the fields of its own blocks, and the process that
+        writes (rank 0) receives them; the other ranks' snapshots hold only their own blocks."""
         mesh = self.mesh
         st = self.state
+        own = self.partition.blocks
         shape = (mesh.nblocks,) + mesh.interior_shape
-        pressure = np.zeros(shape)
-        sound = np.zeros(shape)
-        eint = np.zeros(shape)
-        temp = np.zeros(shape)
-        cell_thermodynamics(st.alpha, st.arho, st.arhoe, st.arhoq, self.eos.kind, self.eos.params, self.eos.table,
-                            self.shear_modulus, self.tensile_strength, pressure, sound, eint, temp)
+        pressure, sound, eint, temp = (np.zeros(shape) for _ in range(4))
+        cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
+                            self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength,
+                            pressure[own], sound[own], eint[own], temp[own])
         arho = mesh.interior(st.arho).copy()
-        rho = arho.sum(axis=1)
+        alpha = mesh.interior(st.alpha).copy()
+        velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
+        rho = arho[own].sum(axis=1)
         safe = np.where(rho > 0.0, rho, 1.0)
-        velocity = np.where(rho[:, None] > 0.0, mesh.interior(st.momentum) / safe[:, None], 0.0)
+        velocity[own] = np.where(rho[:, None] > 0.0, mesh.interior(st.momentum)[own] / safe[:, None], 0.0)
+        extra = {} if self.strength is None else self.strength.cell_fields(st, own)
+        self.partition.gather_to_root([pressure, sound, eint, temp, arho, alpha, velocity, *extra.values()])
         return Snapshot(
             time=self.time,
             geometry=mesh.geometry,
@@ -516,13 +519,13 @@ class Simulation:
             block_level=mesh.block_level.copy(),
             block_id=mesh.block_id.copy(),
             partial_density=arho,
-            volume_fraction=mesh.interior(st.alpha).copy(),
+            volume_fraction=alpha,
             velocity=velocity,
             specific_internal_energy=eint,
             pressure=pressure,
             temperature=temp,
             sound_speed=sound,
-            extra={} if self.strength is None else self.strength.cell_fields(st),
+            extra=extra,
         )
 
     # ------------------------------------------------------------------ checkpoints

@@ -33,7 +33,7 @@ from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts, fill_
 from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, owned_ranges, owners,
                             plan_routes)
 from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, Traffic, broadcast_arrays,
-                       exchange_strips, gather_rows, share_owned_blocks)
+                       exchange_strips, gather_owned_blocks, gather_rows, share_owned_blocks)
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +97,10 @@ class WholeMesh:
     def agree(self, value: Any) -> Any:
         """Rank 0's ``value`` on every process."""
         return value
+
+    def gather_to_root(self, arrays: list[np.ndarray]) -> None:
+        """Bring every block's rows of ``arrays`` (each (NB, ...)) to the process that writes
+        (this one has them)."""
 
     def block_owners(self, blocks: np.ndarray, out: np.ndarray) -> None:
         """``out[t]``: the process that owns block ``blocks[t]`` (this one), -1 where ``blocks[t]`` is -1."""
@@ -263,6 +267,11 @@ class BlockRanges(WholeMesh):
 
     def agree(self, value: Any) -> Any:
         return self.comm.bcast(value, root=0)
+
+    def gather_to_root(self, arrays: list[np.ndarray]) -> None:
+        """Rank 0 receives every rank's rows of ``arrays`` (one Gatherv each,
+        :func:`~.exchange.gather_owned_blocks`)."""
+        gather_owned_blocks(self.comm, arrays, self.cuts, self.traffic)
 
     def block_owners(self, blocks: np.ndarray, out: np.ndarray) -> None:
         """``out[t]``: the rank whose range holds block ``blocks[t]``, -1 where ``blocks[t]`` is -1."""

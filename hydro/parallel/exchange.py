@@ -116,6 +116,29 @@ def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray, traffic
     traffic.gather_seconds += time.perf_counter() - started
 
 
+def gather_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray, traffic: Traffic) -> None:
+    """Rank 0 receives every rank's owned blocks (rows ``cuts[r] .. cuts[r + 1] - 1`` of each
+    array, in place; the other ranks' arrays are unchanged): one Gatherv per array, counted in
+    ``traffic`` as one gather."""
+    from mpi4py import MPI
+    from mpi4py.util.dtlib import from_numpy_dtype
+
+    started = time.perf_counter()
+    lo, hi = int(cuts[comm.rank]), int(cuts[comm.rank + 1])
+    for array in arrays:
+        flat = _flat(array)
+        row = int(np.prod(array.shape[1:], dtype=np.int64))
+        kind = from_numpy_dtype(array.dtype)
+        if comm.rank == 0:
+            counts = (np.diff(cuts) * row).tolist()
+            displacements = (cuts[:-1] * row).tolist()
+            comm.Gatherv(MPI.IN_PLACE, [flat, (counts, displacements), kind], root=0)
+        else:
+            comm.Gatherv([flat[lo * row:hi * row], kind], None, root=0)
+    traffic.gathers += 1
+    traffic.gather_seconds += time.perf_counter() - started
+
+
 def gather_rows(comm, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
     """Row t of every float64 array in ``arrays`` (each (N, ...), C-contiguous) from rank
     ``owner[t]`` on every rank, in place; rows with ``owner`` -1 stay as they are.  One

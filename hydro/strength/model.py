@@ -213,17 +213,18 @@ class MaterialStrength:
         """Stress work put into internal energy, sum of dt alpha_k S_k : D V (J)."""
         return {name: float(v) for name, v in zip(AMOUNT_NAMES, self.amounts.sum(axis=0))}
 
-    def cell_fields(self, state: HydroState) -> dict[str, np.ndarray]:
-        """Interior block-shaped fields for snapshots (see :data:`impactpipe.hydro.output.io.EXTRA_UNITS`).
+    def cell_fields(self, state: HydroState, blocks: slice = slice(None)) -> dict[str, np.ndarray]:
+        """Interior block-shaped fields for snapshots (see :data:`impactpipe.hydro.output.io.EXTRA_UNITS`),
+        computed for the ``blocks`` (zeros in the other rows).
 
         ``deviatoric_stress_<ij>``: mixture sum_k alpha_k S_k,ij (Pa); ``von_mises_stress``:
         sqrt(3/2 S:S) of the mixture (Pa); ``plastic_strain``, ``damage``: mass-weighted
         means over the materials with strength (-).
         """
         mesh = self.mesh
-        alpha = mesh.interior(state.alpha)
-        arho = mesh.interior(state.arho)
-        arhoq = mesh.interior(state.arhoq)
+        alpha = mesh.interior(state.alpha)[blocks]
+        arho = mesh.interior(state.arho)[blocks]
+        arhoq = mesh.interior(state.arhoq)[blocks]
         names = ("xx", "yy", "zz", "xy", "xz", "yz")[: self.ns]
         stress = np.zeros((len(names),) + alpha[:, 0].shape)
         eps = np.zeros(alpha[:, 0].shape)
@@ -245,4 +246,8 @@ class MaterialStrength:
         out["von_mises_stress"] = np.sqrt(1.5 * ss)
         out["plastic_strain"] = np.where(mass > 0.0, eps / safe, 0.0)
         out["damage"] = np.where(mass > 0.0, dmg / safe, 0.0)
-        return out
+        whole = {}
+        for name, values in out.items():
+            whole[name] = np.zeros((mesh.nblocks,) + values.shape[1:])
+            whole[name][blocks] = values
+        return whole
