@@ -13,6 +13,7 @@ import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numba import njit
 
 from .decomposition import Route
 
@@ -68,18 +69,23 @@ def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], t
                     components: slice = slice(None)) -> None:
     """Send this rank's strips and receive its peers' into the ``components`` of ``fields``, one
     message per peer (every field packed into one float64 buffer, message tag ``tag``),
-    non-blocking both ways, then unpack; the bytes, messages and seconds go to ``traffic``."""
+    non-blocking both ways, then unpack; the bytes, messages and seconds go to ``traffic``.
+    The buffers are kept on the routes' strips and reused (:meth:`Strips.buffer`); packing
+    and unpacking are numba loops over the strips' flat indices."""
     from mpi4py import MPI
 
     started = time.perf_counter()
     flats = [_flat(field) for field in fields]
     requests, received, sent = [], [], []
     for route in routes:
-        buffer = np.empty(sum(route.receive.values(field, components) for field in fields))
+        buffer = route.receive.buffer(fields, components)
         requests.append(comm.Irecv(buffer, source=route.peer, tag=tag))
         received.append((buffer, route.receive))
     for route in routes:
-        buffer = np.concatenate([flat[route.send.indices(field, components)] for flat, field in zip(flats, fields)])
+        buffer = route.send.buffer(fields, components)
+        start = 0
+        for flat, field in zip(flats, fields):
+            start = pack_values(flat, route.send.indices(field, components), buffer, start)
         requests.append(comm.Isend(buffer, dest=route.peer, tag=tag))
         sent.append(buffer)
     waiting = time.perf_counter()
@@ -88,15 +94,29 @@ def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], t
     for buffer, strips in received:
         start = 0
         for flat, field in zip(flats, fields):
-            size = strips.values(field, components)
-            flat[strips.indices(field, components)] = buffer[start:start + size]
-            start += size
+            start = unpack_values(buffer, start, strips.indices(field, components), flat)
     traffic.bytes_sent += sum(buffer.nbytes for buffer in sent)
     traffic.bytes_received += sum(buffer.nbytes for buffer, _ in received)
     traffic.messages_sent += len(sent)
     traffic.messages_received += len(received)
     traffic.exchanges += 1
     traffic.exchange_seconds += time.perf_counter() - started
+
+
+@njit(cache=True)
+def pack_values(flat, indices, buffer, start):
+    """buffer[start + i] = flat[indices[i]]; returns the next free position of ``buffer``."""
+    for i in range(indices.size):
+        buffer[start + i] = flat[indices[i]]
+    return start + indices.size
+
+
+@njit(cache=True)
+def unpack_values(buffer, start, indices, flat):
+    """flat[indices[i]] = buffer[start + i]; returns the position after the values read."""
+    for i in range(indices.size):
+        flat[indices[i]] = buffer[start + i]
+    return start + indices.size
 
 
 def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray, traffic: Traffic) -> None:
