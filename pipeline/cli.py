@@ -74,15 +74,19 @@ def validate_cmd(config_path: str) -> None:
 @click.option("--ranks", "nranks", type=click.IntRange(min=1), default=1, show_default=True,
               help="Run the hydro stage on N MPI ranks (launches `mpiexec -n N` with this command; needs "
                    f'{ranks.INSTALL_HINT}).  This version: scenes without external gravity; docs/runs.md.')
+@click.option("--stage-function", "stage_functions", multiple=True, metavar="STAGE=MODULE:FUNCTION",
+              help="Run this function instead of a stage's own (as a sweep's stage_functions); repeatable.")
 def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
-            force: bool, verbose: int, quiet: bool, nranks: int) -> None:
+            force: bool, verbose: int, quiet: bool, nranks: int, stage_functions: tuple[str, ...]) -> None:
     """Run the pipeline for CONFIG, resuming finished stages."""
+    replaced = _stage_functions_or_exit(stage_functions)
     if nranks > 1:
         _setup_logging(verbose, quiet)
         _exit_if_not_shared(*_load_or_exit(config_path), nranks)
         arguments = ["run", config_path, *(["--out", out_dir] if out_dir else []),
                      *(["--from", from_stage] if from_stage else []), *(f"--stage={s}" for s in stages),
-                     *(["--force"] if force else []), *(["-v"] * verbose), *(["--quiet"] if quiet else [])]
+                     *(["--force"] if force else []), *(["-v"] * verbose), *(["--quiet"] if quiet else []),
+                     *(f"--stage-function={s}" for s in stage_functions)]
         try:
             status = ranks.launch(nranks, arguments)
         except ranks.RanksUnavailable as exc:
@@ -96,18 +100,31 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
     comm = ranks.join_world()
     if comm is not None and comm.rank != 0:
         sys.exit(_follow_rank_zero(config_path, comm))
+    ranks.watch_launching_process()
     try:
-        _run_pipeline(config_path, out_dir, from_stage, stages, force, verbose, quiet)
+        _run_pipeline(config_path, out_dir, from_stage, stages, force, verbose, quiet, replaced)
     finally:
         ranks.release()
+
+
+def _stage_functions_or_exit(given: tuple[str, ...]) -> dict[str, str]:
+    """``--stage-function STAGE=MODULE:FUNCTION`` options as {stage: "module:function"}; exit 2 on a bad one."""
+    replaced = {}
+    for option in given:
+        stage, _, function = option.partition("=")
+        if stage not in STAGES or ":" not in function:
+            click.echo(f"--stage-function: expected STAGE=package.module:function with STAGE one of "
+                       f"{', '.join(STAGES)} (got {option!r})", err=True)
+            sys.exit(2)
+        replaced[stage] = function
+    return replaced
 
 
 def _exit_if_not_shared(config, values, nranks: int) -> None:
     """Exit 2 with one line when the run cannot be shared between ``nranks`` ranks in this version."""
     reasons = ranks.unsupported(config, values)
     if reasons:
-        click.echo(f"error: --ranks {nranks}: this version shares only scenes without external gravity "
-                   f"between MPI ranks; the config has {'; '.join(reasons)}", err=True)
+        click.echo(f"error: --ranks {nranks}: {ranks.refusal(reasons)}", err=True)
         sys.exit(2)
 
 
@@ -133,7 +150,7 @@ def _follow_rank_zero(config_path: str, comm) -> int:
 
 
 def _run_pipeline(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
-                  force: bool, verbose: int, quiet: bool) -> None:
+                  force: bool, verbose: int, quiet: bool, stage_functions: dict[str, str]) -> None:
     """``impactpipe run`` in this process (rank 0 of several)."""
     _setup_logging(verbose, quiet)
     config, values = _load_or_exit(config_path)
@@ -143,7 +160,7 @@ def _run_pipeline(config_path: str, out_dir: str | None, from_stage: str | None,
     try:
         with run_lock(run_dir), runstore.run_log(run_dir):
             summary = run(config, run_dir, stages=stages or None, from_stage=from_stage, force=force,
-                          show_progress=not quiet)
+                          show_progress=not quiet, stage_functions=stage_functions or None)
     except RunDirError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(2)

@@ -7,6 +7,11 @@ than hydro and all files.  The other ranks only take part in the hydro stage: th
 rank 0's order (:func:`wait_for_order`, sleeping rather than polling), build the same
 simulation, advance their blocks, and exit after the hydro stage; an order of None (the
 hydro stage does not run, or rank 0 stopped before it) lets them exit at once.
+
+A sweep runs each of its points this way too (``execution.ranks_per_run``,
+:func:`impactpipe.pipeline.sweep.run_point`), with ``mpiexec`` or Slurm's ``srun`` as the
+launcher (:func:`launch_command`); rank 0 stops the run when the process that launched the
+ranks is gone (:func:`watch_launching_process`).
 """
 
 from __future__ import annotations
@@ -15,14 +20,18 @@ import importlib.util
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import sysconfig
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
 from impactpipe.hydro import PROBLEMS
+
+from .lock import process_alive
 
 #: Environment variables that MPI launchers set in the processes they start (MPICH / Hydra and
 #: Slurm's PMI, Open MPI, PMIx); without any of them mpi4py is not imported at all.
@@ -33,6 +42,11 @@ INSTALL_HINT = 'pip install "impactpipe[mpi]"'
 PIPELINE_STATUSES = (0, 1, 2, 130)
 #: Seconds between the checks of a rank waiting for rank 0's order.
 ORDER_POLL = 0.05
+#: Set by :func:`rank_environment` to ``HOST PID`` of the process that starts the ranks: rank 0
+#: stops the run once that process is gone (:func:`watch_launching_process`).
+LAUNCHED_BY_VARIABLE = "IMPACTPIPE_LAUNCHED_BY"
+#: Seconds between rank 0's checks that the process that launched the ranks is alive.
+LAUNCHER_POLL = 0.5
 
 _world: dict[str, Any] = {"comm": None, "ordered": False}
 
@@ -51,6 +65,12 @@ def unsupported(config, values: dict[str, Any]) -> list[str]:
     return reasons
 
 
+def refusal(reasons: list[str]) -> str:
+    """Why a config with ``reasons`` (from :func:`unsupported`) is not run on several ranks, in words."""
+    return (f"this version shares only scenes without external gravity between MPI ranks; the config has "
+            f"{'; '.join(reasons)}")
+
+
 def mpi_installed() -> bool:
     """Whether mpi4py can be imported (the ``mpi`` extra is installed)."""
     return importlib.util.find_spec("mpi4py") is not None
@@ -67,11 +87,39 @@ def mpiexec_path() -> str:
     return found
 
 
-def launch_command(nranks: int, arguments: list[str]) -> list[str]:
-    """``mpiexec -n N <this python> -m impactpipe.pipeline.cli <arguments>``."""
+def launcher_path(launcher: str) -> str:
+    """The program of ``launcher``, ``mpiexec`` (:func:`mpiexec_path`) or ``srun`` (on PATH)."""
+    if launcher == "mpiexec":
+        return mpiexec_path()
+    found = shutil.which(launcher)
+    if found is None:
+        raise RanksUnavailable(f"no {launcher} on PATH (srun comes with Slurm)")
+    return found
+
+
+def launch_command(nranks: int, arguments: list[str], launcher: str = "mpiexec", threads: int | None = None,
+                   options: list[str] | tuple[str, ...] = ()) -> list[str]:
+    """``mpiexec -n N <this python> -m impactpipe.pipeline.cli <arguments>``, or with ``launcher``
+    ``srun``: ``srun -n N --cpus-per-task=<threads> ...`` (each rank's numba threads; left out
+    when ``threads`` is None).  ``options`` go after ``-n N`` (``--mpi=pmix``, a host file)."""
     if not mpi_installed():
-        raise RanksUnavailable(f"--ranks {nranks} needs mpi4py and an MPI library: {INSTALL_HINT}")
-    return [mpiexec_path(), "-n", str(nranks), sys.executable, "-m", "impactpipe.pipeline.cli", *arguments]
+        raise RanksUnavailable(f"{nranks} ranks need mpi4py and an MPI library: {INSTALL_HINT}")
+    command = [launcher_path(launcher), "-n", str(nranks)]
+    if launcher == "srun" and threads is not None:
+        command.append(f"--cpus-per-task={threads}")
+    return [*command, *options, sys.executable, "-m", "impactpipe.pipeline.cli", *arguments]
+
+
+def rank_environment(nranks: int, threads: int | None = None) -> dict[str, str]:
+    """This process's environment for the ranks it starts: ``NUMBA_NUM_THREADS`` = ``threads``, or
+    when None cores / ranks (at least 1) unless it is set, and :data:`LAUNCHED_BY_VARIABLE`."""
+    env = dict(os.environ)
+    if threads is None:
+        env.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // nranks)))
+    else:
+        env["NUMBA_NUM_THREADS"] = str(threads)
+    env[LAUNCHED_BY_VARIABLE] = f"{socket.gethostname()} {os.getpid()}"
+    return env
 
 
 def launch(nranks: int, arguments: list[str]) -> int:
@@ -79,12 +127,10 @@ def launch(nranks: int, arguments: list[str]) -> int:
 
     Each rank gets ``NUMBA_NUM_THREADS`` = cores / ranks (at least 1) unless it is set.  While
     ``mpiexec`` runs, Ctrl-C reaches it from the terminal (this process ignores it) and a
-    SIGTERM sent to this process is passed on, so rank 0 stops the run at the end of a step.
+    SIGTERM sent to this process is passed on, so rank 0 stops the run at the end of a step;
+    so it does when this process is killed (:func:`watch_launching_process`).
     """
-    command = launch_command(nranks, arguments)
-    env = dict(os.environ)
-    env.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // nranks)))
-    process = subprocess.Popen(command, env=env)
+    process = subprocess.Popen(launch_command(nranks, arguments), env=rank_environment(nranks))
     previous = {signal.SIGINT: signal.signal(signal.SIGINT, signal.SIG_IGN),
                 signal.SIGTERM: signal.signal(signal.SIGTERM, lambda signum, frame: process.send_signal(signum))}
     try:
@@ -92,6 +138,27 @@ def launch(nranks: int, arguments: list[str]) -> int:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+def watch_launching_process() -> None:
+    """Rank 0 of ranks started by impactpipe (:func:`rank_environment`): stop the run once the
+    process that launched them is gone (a sweep's worker that was killed), as a SIGTERM would:
+    the hydro stage ends its step and keeps its checkpoint.  Does nothing without
+    :data:`LAUNCHED_BY_VARIABLE`; a launching process on another host cannot be watched."""
+    recorded = os.environ.get(LAUNCHED_BY_VARIABLE)
+    if not recorded:
+        return
+    host, pid = recorded.rsplit(" ", 1)
+    threading.Thread(target=_stop_when_gone, args=(host, int(pid)), name="watch-launcher", daemon=True).start()
+
+
+def _stop_when_gone(host: str, pid: int) -> None:
+    """Sleep while process ``pid`` on ``host`` runs, then SIGTERM this process (once)."""
+    while process_alive(host, pid):
+        time.sleep(LAUNCHER_POLL)
+    sys.stderr.write(f"the process {pid} that launched the ranks is gone; stopping the run\n")
+    sys.stderr.flush()
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def join_world():
