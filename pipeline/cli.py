@@ -189,33 +189,32 @@ def _run_pipeline(config_path: str, out_dir: str | None, from_stage: str | None,
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), help="Sweep directory (overrides `output`).")
 @click.option("--backend", type=click.Choice(["local", "dask"]), help="Execution backend (overrides the file).")
 @click.option("--scheduler", help="Dask scheduler address (implies --backend dask).")
-@click.option("--workers", type=int, help="Parallel runs (default: cores / threads_per_run).")
+@click.option("--workers", type=int, help="Parallel runs (default: cores / (threads_per_run x ranks_per_run)).")
+@click.option("--ranks-per-run", "ranks_per_run", type=click.IntRange(min=1),
+              help="MPI ranks sharing each point's hydro stage (overrides execution.ranks_per_run; needs "
+                   f'{ranks.INSTALL_HINT}; docs/sweeps.md, "Points on several MPI ranks").')
 @click.option("--reuse-hydro", "reuse_hydro", multiple=True, type=click.Path(file_okay=False), metavar="RUN_DIR",
               help="A finished run whose hydro stage the points with the same hydro settings adopt instead of "
                    "running it (e.g. to add hand-off seeds to earlier runs); repeatable.")
 @click.option("-v", "--verbose", count=True, help="More log output.")
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bar.")
 def sweep_cmd(sweep_path: str, out_dir: str | None, backend: str | None, scheduler: str | None,
-              workers: int | None, reuse_hydro: tuple[str, ...], verbose: int, quiet: bool) -> None:
+              workers: int | None, ranks_per_run: int | None, reuse_hydro: tuple[str, ...], verbose: int,
+              quiet: bool) -> None:
     """Run every point of the sweep file SWEEP (a grid or a Q*_D search); resumes where it stopped."""
     from impactpipe.analysis.qstar import plus_minus
 
     from .sweep import SweepError, load_sweep, run_sweep, sweep_status
 
     _setup_logging(verbose, quiet)
+    given = {"backend": "dask" if scheduler else backend, "scheduler": scheduler, "workers": workers,
+             "ranks_per_run": ranks_per_run}
     try:
-        sweep = load_sweep(sweep_path, out_dir)
+        sweep = load_sweep(sweep_path, out_dir, execution={k: v for k, v in given.items() if v is not None})
     except SweepError as exc:
         for message in exc.messages:
             click.echo(message, err=True)
         sys.exit(2)
-    execution = sweep.spec.execution
-    if scheduler:
-        execution.backend, execution.scheduler = "dask", scheduler
-    elif backend:
-        execution.backend = backend
-    if workers:
-        execution.workers = workers
     try:
         result = run_sweep(sweep, show_progress=not quiet, reuse_runs=list(reuse_hydro),
                            report=_point_lines(quiet))

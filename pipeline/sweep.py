@@ -10,7 +10,9 @@ hand-off result: the first point of such a group runs them, the others adopt its
 Execution goes through a ``concurrent.futures`` executor: a process pool sized to the
 cores (``backend: local``) or a Dask client (``backend: dask``, a scheduler address or a
 LocalCluster).  A failed point is recorded with its error and log and retried up to
-``execution.retries`` times; it never stops the other points.
+``execution.retries`` times; it never stops the other points.  With ``execution.ranks_per_run``
+> 1 a worker runs its point on that many MPI ranks, through the launcher of ``impactpipe run
+--ranks`` (:func:`_run_on_ranks`), and waits for them.
 
 A sweep holds the lock of its directory and each point that of its run directory
 (:mod:`impactpipe.pipeline.lock`), so a second sweep on the same directory stops at once
@@ -32,7 +34,9 @@ import os
 import re
 import signal
 import socket
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -49,12 +53,13 @@ from pydantic import Field, ValidationError, model_validator
 
 from impactpipe import storage
 
-from . import checks, runstore
+from . import checks, ranks, runstore
 from .config import (Config, ConfigError, Strict, _LineFinder, duplicate_keys, key_paths, load_yaml, parse_config,
                      read_yaml_text, unknown_keys)
 from .derived import derive, snapshot_at, snapshot_times
 from .lock import process_alive, recorded_holder, run_lock
-from .stages import STAGES, adopt_stages, plan, read_records, read_summary, stage_hashes
+from .stages import (RESOLVED_CONFIG_FILE, STAGES, adopt_stages, plan, read_records, read_summary, resolved_yaml,
+                     stage_hashes)
 
 log = logging.getLogger(__name__)
 
@@ -128,9 +133,24 @@ class QStarSearch(Strict):
 class Execution(Strict):
     backend: Literal["local", "dask"] = "local"
     scheduler: str | None = Field(None, description="Dask scheduler address; none starts a LocalCluster")
-    workers: int | None = Field(None, ge=1, description="parallel runs; default cores // threads_per_run")
-    threads_per_run: int = Field(1, ge=1, description="numba threads of each run")
+    workers: int | None = Field(None, ge=1,
+                                description="parallel runs; default cores // (threads_per_run * ranks_per_run)")
+    threads_per_run: int = Field(1, ge=1, description="numba threads of each run (of each of its ranks)")
+    ranks_per_run: int = Field(1, ge=1, description="MPI ranks that share each run's hydro stage, started by "
+                                                    "the launcher (docs/sweeps.md, 'Points on several MPI ranks')")
+    launcher: Literal["mpiexec", "srun"] = Field(
+        "mpiexec", description="what starts a run's ranks: mpiexec (beside this Python, else on PATH) or Slurm's srun")
+    launcher_options: list[str] = Field(default_factory=list,
+                                        description="more arguments of the launcher, after -n N (e.g. --mpi=pmix)")
     retries: int = Field(1, ge=0, description="times a failed point is run again")
+
+    def cores_per_run(self) -> int:
+        """Cores one run keeps busy: ``threads_per_run`` numba threads on each of ``ranks_per_run`` ranks."""
+        return self.threads_per_run * self.ranks_per_run
+
+    def default_workers(self) -> int:
+        """Parallel runs when ``workers`` is not set: cores // :meth:`cores_per_run`, at least 1."""
+        return max(1, (os.cpu_count() or 1) // self.cores_per_run())
 
 
 class SweepSpec(Strict):
@@ -224,8 +244,11 @@ class Sweep:
         return with_replicates(point, replicates, snapshots)
 
 
-def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
-    """Read and validate a sweep file and the base config of every grid point (raises SweepError)."""
+def load_sweep(path: str | Path, output: str | Path | None = None, execution: dict[str, Any] | None = None) -> Sweep:
+    """Read and validate a sweep file and the base config of every grid point (raises SweepError).
+    ``execution``: settings of the file's ``execution`` given elsewhere (the command line), which
+    win over the file's; with ``ranks_per_run`` > 1 the points must be able to run on several
+    MPI ranks (:func:`ranks_problems`)."""
     path = Path(path)
     try:
         text = read_yaml_text(path, "sweep file")
@@ -236,6 +259,8 @@ def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
         raise SweepError([f"{path}: not valid YAML: {exc}"]) from exc
     if not isinstance(data, dict):
         raise SweepError([f"{path}: a sweep file must be a mapping of keys"])
+    if execution and isinstance(data.get("execution") or {}, dict):
+        data["execution"] = {**(data.get("execution") or {}), **execution}
     root = yaml.compose(text)
     lines = _LineFinder(path, root)
     found = duplicate_keys(root, path) + [lines.format(loc, msg) for loc, msg in unknown_keys(data, SweepSpec)]
@@ -262,15 +287,41 @@ def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
     directory = Path(output or spec.output or Path("sweeps") / spec.name)
     sweep = Sweep(spec=spec, base_text=base_text, base_path=base_path, directory=directory, source=path)
     messages = []
+    checked = []
     for params in (p for point in grid_points(sweep) for p in sweep.replicate_runs(point)):
         try:
-            checks.check(sweep.config_for(params))
+            config = sweep.config_for(params)
+            checked.append((config, checks.check(config)))
         except ConfigError as exc:
             label = ", ".join(f"{k}={v}" for k, v in params.items())
             messages += [f"point {label}: {m}" for m in exc.messages]
+    messages += [lines.format(loc, message) for loc, message in ranks_problems(spec.execution, checked)]
     if messages:
         raise SweepError(messages)
     return sweep
+
+
+def ranks_problems(execution: Execution, points: list[tuple[Config, dict[str, Any]]]) -> list[tuple[tuple, str]]:
+    """Why the points, (config, derived values) each, cannot run on ``execution.ranks_per_run``
+    MPI ranks, as (key path, message) (empty with one rank, or when they can): mpi4py or the
+    launcher missing on this machine, or a scene this version does not share between ranks
+    (:func:`impactpipe.pipeline.ranks.unsupported`)."""
+    nranks = execution.ranks_per_run
+    if nranks == 1:
+        return []
+    problems = []
+    if not ranks.mpi_installed():
+        problems.append((("execution", "ranks_per_run"),
+                         f"{nranks} ranks per run need mpi4py and an MPI library: {ranks.INSTALL_HINT}"))
+    else:
+        try:
+            ranks.launcher_path(execution.launcher)
+        except ranks.RanksUnavailable as exc:
+            problems.append((("execution", "launcher"), str(exc)))
+    refused = list(dict.fromkeys(reason for config, values in points for reason in ranks.unsupported(config, values)))
+    if refused:
+        problems.append((("execution", "ranks_per_run"), f"{nranks} ranks per run: {ranks.refusal(refused)}"))
+    return problems
 
 
 def grid_points(sweep: Sweep) -> list[dict[str, Any]]:
@@ -335,6 +386,9 @@ class PointJob:
     reuse_dir: str | None
     threads: int
     stage_functions: dict[str, str]
+    ranks: int = 1
+    launcher: str = "mpiexec"
+    launcher_options: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -354,13 +408,25 @@ def run_point(job: PointJob) -> PointResult:
     """Run one point in a worker: adopt shared stages, run the pipeline, log to run.log
     (:func:`impactpipe.pipeline.runstore.run_log`).  The point holds its run directory's lock
     throughout; a directory another process still holds (a worker of a sweep that was killed,
-    finishing its stage) is waited for, so no point ever runs twice at the same time."""
-    _set_threads(job.threads)
+    finishing its stage) is waited for, so no point ever runs twice at the same time.  With
+    ``job.ranks`` > 1 the run goes to that many MPI ranks (:func:`_run_on_ranks`)."""
     run_dir = Path(job.run_dir)
     t0 = time.perf_counter()
-    with run_lock(run_dir, wait=True, what=f"point {job.name}"), runstore.run_log(run_dir):
-        summary = _run_logged(job, run_dir)
+    if job.ranks > 1:
+        summary = _run_on_ranks(job, run_dir)
+    else:
+        _set_threads(job.threads)
+        with run_lock(run_dir, wait=True, what=f"point {job.name}"), runstore.run_log(run_dir):
+            summary = _run_logged(job, run_dir)
     return PointResult(job.name, "complete", summary, None, time.perf_counter() - t0)
+
+
+def _adopt_shared(job: PointJob, run_dir: Path) -> None:
+    """Adopt the finished stages of the point (or donor run) this point shares them with, if any."""
+    if job.reuse_dir:
+        adopted = adopt_stages(run_dir, Path(job.reuse_dir), job.config)
+        if adopted:
+            log.info("%s: reused %s from %s", job.name, ", ".join(adopted), job.reuse_dir)
 
 
 def _run_logged(job: PointJob, run_dir: Path) -> dict[str, Any]:
@@ -369,10 +435,7 @@ def _run_logged(job: PointJob, run_dir: Path) -> dict[str, Any]:
     from . import stages
 
     try:
-        if job.reuse_dir:
-            adopted = adopt_stages(run_dir, Path(job.reuse_dir), job.config)
-            if adopted:
-                log.info("%s: reused %s from %s", job.name, ", ".join(adopted), job.reuse_dir)
+        _adopt_shared(job, run_dir)
         return stages.run(job.config, run_dir, show_progress=False, stage_functions=job.stage_functions or None)
     except Exception as exc:
         if isinstance(exc, stages.StageInterrupted) and multiprocessing.parent_process() is not None:
@@ -383,6 +446,79 @@ def _run_logged(job: PointJob, run_dir: Path) -> dict[str, Any]:
             os._exit(1)
         (run_dir / "error.log").write_text(traceback.format_exc())
         raise PointFailed(f"{job.name}: {type(exc).__name__}: {exc} (log: {run_dir / 'error.log'})") from None
+
+
+#: Lines of a failed launch's output that the point's error message ends with.
+OUTPUT_TAIL_LINES = 12
+#: Seconds between a local worker's checks that its point's ranks have exited (:func:`_wait_passing_on_stop`).
+STOP_POLL = 0.1
+
+
+def _run_on_ranks(job: PointJob, run_dir: Path) -> dict[str, Any]:
+    """A point on ``job.ranks`` MPI ranks: holding the run directory's lock (waiting for an earlier
+    holder), adopt the shared stages and write the point's config there
+    (``config.resolved.yaml``, the file every run writes); then, the lock released, run
+    ``impactpipe run`` of that config through the launcher (:func:`impactpipe.pipeline.ranks.
+    launch_command`, ``NUMBA_NUM_THREADS`` = ``job.threads`` on each rank), whose rank 0 takes
+    the lock and writes run.log as a single process would, and wait for it
+    (:func:`_wait_passing_on_stop`).  Returns the run's summary.  A launch that fails writes its
+    output to ``error.log`` and raises PointFailed with the end of it; a pool worker that
+    passed a stop on exits once the ranks have stopped (as in :func:`_run_logged`)."""
+    with run_lock(run_dir, wait=True, what=f"point {job.name}"), runstore.run_log(run_dir):
+        _adopt_shared(job, run_dir)
+        storage.write_text_atomic(run_dir / RESOLVED_CONFIG_FILE, resolved_yaml(job.config))
+    arguments = ["run", str(run_dir / RESOLVED_CONFIG_FILE), "--out", str(run_dir), "--quiet",
+                 *(f"--stage-function={stage}={function}" for stage, function in job.stage_functions.items())]
+    try:
+        command = ranks.launch_command(job.ranks, arguments, job.launcher, job.threads, job.launcher_options)
+    except ranks.RanksUnavailable as exc:
+        raise PointFailed(f"{job.name}: {exc}") from None
+    with tempfile.TemporaryFile("w+") as output:
+        process = subprocess.Popen(command, env=ranks.rank_environment(job.ranks, job.threads),
+                                   stdin=subprocess.DEVNULL, stdout=output, stderr=subprocess.STDOUT,
+                                   start_new_session=True)
+        stop = _wait_passing_on_stop(process)
+        output.seek(0)
+        text = output.read()
+    if stop is not None and multiprocessing.parent_process() is not None:
+        log.warning("%s: %s passed on to its ranks, which stopped (%s); this worker stops", job.name, stop,
+                    exit_text(process.returncode))
+        os._exit(1)
+    if process.returncode != 0:
+        (run_dir / "error.log").write_text(text)
+        tail = "\n".join(text.strip().splitlines()[-OUTPUT_TAIL_LINES:])
+        raise PointFailed(f"{job.name}: {job.launcher} -n {job.ranks} ended with {exit_text(process.returncode)}: "
+                          f"{tail} (log: {run_dir / 'error.log'})")
+    return read_summary(run_dir)
+
+
+def _wait_passing_on_stop(process: subprocess.Popen) -> str | None:
+    """Wait for the launched ranks.  In the main thread (a local pool's worker) the first SIGINT or
+    SIGTERM this process gets (the sweep stopping its workers, :func:`_stop_pool_workers`, or
+    gone, :func:`_watch_sweep`) is passed on to the launcher as SIGTERM, so rank 0 ends its step,
+    keeps its checkpoint and stops the run; later ones are ignored (a second would stop the
+    ranks at once).  The launcher runs in a session of its own, so a Ctrl-C at the terminal
+    reaches the ranks only this way.  Returns the name of the signal passed on, or None."""
+    if threading.current_thread() is not threading.main_thread():
+        process.wait()
+        return None
+    stop: list[str] = []
+
+    def pass_on(signum, frame):
+        if not stop:
+            stop.append(signal.Signals(signum).name)
+            process.send_signal(signal.SIGTERM)
+
+    previous = {signum: signal.signal(signum, pass_on) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        # not process.wait(): the kernel may hand the signal to another thread (the sweep watcher),
+        # and the handler runs only once the main thread runs again, which a blocked wait never does
+        while process.poll() is None:
+            time.sleep(STOP_POLL)
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return stop[0] if stop else None
 
 
 def _set_threads(threads: int) -> None:
@@ -623,7 +759,7 @@ class SweepRunner:
 
     def in_flight_limit(self) -> int:
         """Jobs handed to the executor at a time: ``execution.workers`` when set, else the workers
-        of a local pool made from the sweep's settings (cores // threads_per_run, as
+        of a local pool made from the sweep's settings (:meth:`Execution.default_workers`, as
         :func:`make_executor` sizes it); unbounded for Dask, whose scheduler queues by itself,
         and for an executor passed in without ``workers`` (its size is not known here)."""
         execution = self.sweep.spec.execution
@@ -631,7 +767,7 @@ class SweepRunner:
             return 1 << 30
         if execution.workers:
             return execution.workers
-        return max(1, (os.cpu_count() or 1) // execution.threads_per_run) if self.own_pool else 1 << 30
+        return execution.default_workers() if self.own_pool else 1 << 30
 
     def _shared_sources(self, names: list[str]) -> dict[str, str]:
         """For each point, the point whose finished stages it reuses: the first of the points with
@@ -665,8 +801,10 @@ class SweepRunner:
             reuse_dir = self.points[reuse]["run_dir"] if reuse != name else None
         else:
             reuse_dir = reuse  # a donor run's directory, or None
+        execution = self.sweep.spec.execution
         job = PointJob(name, point["params"], self._configs[name], point["run_dir"], reuse_dir,
-                       self.sweep.spec.execution.threads_per_run, self.sweep.spec.stage_functions)
+                       execution.threads_per_run, self.sweep.spec.stage_functions, execution.ranks_per_run,
+                       execution.launcher, execution.launcher_options)
         future = self.executor.submit(run_point, job)
         self._record(name, status="running", attempts=point["attempts"] + new_attempt, error=None,
                      host=socket.gethostname(), pid=os.getpid())
@@ -1035,8 +1173,9 @@ def exit_text(code: int | None) -> str:
 
 
 def make_executor(execution: Execution) -> tuple[cf.Executor, Any]:
-    """(executor, closer): a :class:`LocalPool`, or a Dask client's executor."""
-    workers = execution.workers or max(1, (os.cpu_count() or 1) // execution.threads_per_run)
+    """(executor, closer): a :class:`LocalPool`, or a Dask client's executor; ``execution.workers``
+    workers, by default :meth:`Execution.default_workers`."""
+    workers = execution.workers or execution.default_workers()
     if execution.backend == "local":
         pool = LocalPool(workers, execution.threads_per_run)
         return pool, pool.shutdown

@@ -101,6 +101,28 @@ def hanging_hydro(ctx):
     return hydro(ctx)
 
 
+#: Seconds ``paced_hydro`` waits after every step.
+STEP_PACE = 0.5
+
+
+def paced_hydro(ctx):
+    """The real hydro stage, waiting STEP_PACE seconds after every step, when it also writes its
+    process id to ``<runs dir>/<run name>.pid``, so a test can stop a sweep while the stage
+    steps (on several MPI ranks: the id of rank 0, which decides when the run stops)."""
+    from impactpipe.pipeline.adapters.hydro import run_hydro_stage
+
+    pid_file = ctx.run_dir.parent / f"{ctx.run_dir.name}.pid"
+    asked = ctx.stop_requested
+
+    def paced():
+        pid_file.write_text(str(os.getpid()))
+        time.sleep(STEP_PACE)
+        return asked()
+
+    ctx.stop_requested = paced
+    return run_hydro_stage(ctx)
+
+
 def held_hydro(ctx):
     """A hydro stage that writes its process id to ``<runs dir>/<run name>.pid`` and then waits
     until ``<runs dir>/release`` exists (a minute at most), so a test can kill the pool workers
@@ -131,6 +153,8 @@ TIMED_STAGES = {**STAGES, "analysis": "sweep_stand_ins:timed_analysis"}
 SLOW_STAGES = {**STAGES, "analysis": "sweep_stand_ins:slow_analysis"}
 #: Stages whose hydro takes a minute (``hanging_hydro``).
 HANGING_STAGES = {**STAGES, "hydro": "sweep_stand_ins:hanging_hydro"}
+#: The real stages, with a hydro stage paced to STEP_PACE seconds a step (``paced_hydro``).
+PACED_STAGES = {"hydro": "sweep_stand_ins:paced_hydro"}
 #: Stages whose hydro waits for a release file (``held_hydro``).
 HELD_STAGES = {**STAGES, "hydro": "sweep_stand_ins:held_hydro"}
 #: Stages whose hydro kills its process at FATAL_VELOCITY (``fatal_hydro``).
