@@ -168,6 +168,17 @@ def impactpipe_run(config: Path, out: Path, *options: str) -> subprocess.Complet
                            "--stage", "hydro", "-q", *options], env=ENV, capture_output=True, text=True, timeout=300)
 
 
+def run_serial_and_shared(script: str, nranks: int, serial_out: Path, shared_out: Path) -> None:
+    """``script`` on the advection scene as one process (writing ``serial_out``) and on ``nranks``
+    ranks (``shared_out``); both must exit 0."""
+    serial = subprocess.run([sys.executable, "-c", script, str(SCENES["advection"]), str(serial_out)],
+                            env=ENV, capture_output=True, text=True, timeout=300)
+    shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", script,
+                             str(SCENES["advection"]), str(shared_out)], env=ENV, capture_output=True, text=True,
+                            timeout=300)
+    assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
+
+
 def hydro_answer(run_dir: Path) -> dict:
     """Every dataset of hydro.h5, its budget and counters, and the summary's hydro_budget."""
     out: dict = {}
@@ -221,12 +232,7 @@ def test_the_tracer_scene_samples_tracers_and_records_their_peaks(serial):
 
 @pytest.mark.parametrize("nranks", [2, 3])
 def test_tracers_moving_into_other_ranks_blocks_keep_the_single_process_records(nranks, tmp_path):
-    serial = subprocess.run([sys.executable, "-c", TRACERS_ACROSS_RANKS, str(SCENES["advection"]),
-                             str(tmp_path / "serial.npz")], env=ENV, capture_output=True, text=True, timeout=300)
-    shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", TRACERS_ACROSS_RANKS,
-                             str(SCENES["advection"]), str(tmp_path / "shared.npz")],
-                            env=ENV, capture_output=True, text=True, timeout=300)
-    assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
+    run_serial_and_shared(TRACERS_ACROSS_RANKS, nranks, tmp_path / "serial.npz", tmp_path / "shared.npz")
     want, got = np.load(tmp_path / "serial.npz"), np.load(tmp_path / "shared.npz")
     assert got["crossed"] > 10
     assert len(want["history_time"]) >= 3
@@ -254,12 +260,7 @@ def test_a_run_checkpointed_on_two_ranks_resumes_on_another_number_to_the_same_a
 @pytest.mark.parametrize("nranks", [2, 3])
 def test_a_sweep_failure_stops_every_rank_with_the_single_process_failure_and_checkpoint(nranks, tmp_path):
     """The failure, and the last good state and tracers that every rank restores."""
-    serial = subprocess.run([sys.executable, "-c", FAIL_IN_A_SWEEP, str(SCENES["advection"]),
-                             str(tmp_path / "serial.h5")], env=ENV, capture_output=True, text=True, timeout=300)
-    shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", FAIL_IN_A_SWEEP,
-                             str(SCENES["advection"]), str(tmp_path / "shared.h5")],
-                            env=ENV, capture_output=True, text=True, timeout=300)
-    assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
+    run_serial_and_shared(FAIL_IN_A_SWEEP, nranks, tmp_path / "serial.h5", tmp_path / "shared.h5")
     failure = (tmp_path / "serial.h5.rank0.json").read_text()
     assert "NaN in the updated state" in failure
     for rank in range(nranks):
