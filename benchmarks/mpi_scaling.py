@@ -11,7 +11,10 @@ and N ranks (the blocks are cut between the ranks as in ``impactpipe run --ranks
 Cases are those of benchmarks/hydro_throughput.py: ``2d-cyl-tillotson`` (the r-z impact, 2400
 blocks of 16^2), ``2d-cyl-strength`` (the same impact with GEO 'strong' strength),
 ``3d-two-material`` (128^3 periodic box, two ideal gases; 16^3 blocks, ``--block-cells``
-sets another edge) and ``2d-ideal-gas`` (512^2, 64^2 blocks).  A case that
+sets another edge) and ``2d-ideal-gas`` (512^2, 64^2 blocks).  Each case reports its mesh
+(``blocks_per_axis``, ``block_cells``, ``periodic``), the state's float64 ``components`` per
+cell, its ``materials`` and whether it runs ``strength`` (what benchmarks/scaling_model.py
+needs to recount the bytes exchanged).  A case that
 :func:`impactpipe.hydro.parallel.distributed.unsupported` refuses on the ranks asked for
 is reported with ``skipped``, the reasons, and not run; on one rank every case runs as a
 single process.
@@ -60,7 +63,8 @@ def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
     result = {"case": case, "cells": mesh.ncells, "blocks": mesh.nblocks, "block_cells": mesh.block_cells,
               "blocks_per_axis": mesh.blocks_per_axis[:mesh.ndim].tolist(),
               "periodic": [low == "periodic" for low, _ in mesh.boundaries],
-              "components": sum(array.shape[1] for array in sim.state.arrays().values()), "steps": steps}
+              "components": sum(array.shape[1] for array in sim.state.arrays().values()),
+              "materials": sim.state.nmat, "strength": sim.strength is not None, "steps": steps}
     if comm.size > 1:
         reasons = unsupported(sim, comm.size)
         if reasons:

@@ -2,58 +2,71 @@
 
 The model follows what the code does in this version (:mod:`impactpipe.hydro.parallel`):
 
-* Decomposition.  Rank r owns the contiguous range ``cuts[r] .. cuts[r + 1] - 1`` of the block
-  order (x fastest, then y, then z), cut by :func:`~impactpipe.hydro.parallel.decomposition.owned_ranges`
-  in whole blocks; here every block is given the same cost, so a rank owns
-  W_r = floor or ceil(NB / P) blocks of B^d cells.  Its subdomain is a slab of the slowest
-  axis (part of a plane once NB / P is below a plane of blocks), not a cube: its surface
-  does not shrink with P the way a cube's would, and the model counts it block face by
-  block face (:func:`face_counts`).
-* Exchange.  Before every ghost fill along axis d, each block face whose neighbour another rank
-  owns costs one strip each way: GHOST = 2 layers of B^(d-1) interior cells of c float64
-  components, s = 8 GHOST B^(d-1) c bytes; one message per peer rank and axis.  A step fills
-  the ghosts of the state once per axis (c = 3M + 4 + M NQ, M materials, NQ transported
-  scalars per material: 0 without strength, NS + 2 with it, NS = 4 stress components in 2D and
-  6 in 3D); with strength the serial code fills four more per axis (alpha, partial densities
-  and momentum, c = 2M + 3; the stress, NS; the momentum, 3; the stress again, NS:
-  :mod:`impactpipe.hydro.strength.model`), which the model counts as four more exchanges
-  (:func:`exchange_components`).  The exchanges are blocking: nothing overlaps them.
-* Reductions.  One Allreduce for the time step and one per sweep for the failure check:
-  1 + d per step, each alpha ceil(log2 P) s.
-* Outputs.  Before every snapshot and every LOG_INTERVAL-th step's log line (its peak pressure),
-  every rank receives every block (Allgatherv of the whole padded state, S_tot bytes) and
-  computes the thermodynamics of every cell.
+* Decomposition.  The run's mesh is the code's own: the uniform
+  :class:`~impactpipe.hydro.mesh.blocks.BlockMesh` of the config
+  (:func:`impactpipe.hydro.problems.common.adaptive_mesh` with one level), in the code's
+  block order.  Rank r owns the contiguous range ``cuts[r] .. cuts[r + 1] - 1`` of that
+  order, cut by :func:`~impactpipe.hydro.parallel.decomposition.owned_ranges` with one cost
+  per block (the code's estimate, 10 per material cell and 1 per void cell, balances the
+  initial state's material, not the work of a later step), so a rank owns
+  W_r = floor or ceil(NB / P) blocks of n_b = B^d cells.  The faces between ranks are
+  counted, per rank and axis, from the mesh's neighbour table (``mesh.neighbor``) and the
+  owners of the blocks (:func:`face_counts`): whatever block order the mesh has, the model
+  follows it.  With the order of this version (x fastest, then y, then z) a rank's blocks
+  are a slab of the slowest axis, or part of a plane of blocks once NB / P is below one.
+* Exchange.  Before every ghost fill along axis d, each block face whose neighbour another
+  rank owns costs one strip each way (:func:`~impactpipe.hydro.parallel.decomposition.exchange_routes`):
+  GHOST = 2 layers of B^(d-1) interior cells of c float64 components,
+  s = 8 GHOST B^(d-1) c bytes; one message per peer rank, axis and fill.  A step fills the
+  state's ghosts once per axis (c = 3M + 4 + M NQ, M materials, NQ transported scalars per
+  material: 0 without strength, NS + 2 with it, NS = 4 stress components in 2D and 6 in
+  3D).  With strength the step fills the work arrays' ghosts three more times per axis
+  (:mod:`impactpipe.hydro.strength.model`): after loading the stress, the velocities, fill
+  and stress (c = 4 + NS); after the half kick, the velocities (c = 3); after the stress
+  update, the stress (c = NS) (:func:`exchange_components`).  The exchanges are blocking:
+  nothing overlaps them.
+* Reductions.  One allreduce for the time step, one per sweep for the failure check, and
+  with strength one for the non-finite momentum check: R = 1 + d (+ 1) per step, each
+  alpha ceil(log2 P) s.
+* Outputs.  Every LOG_INTERVAL-th step's log line (its peak pressure,
+  :meth:`~impactpipe.hydro.solver.Simulation.max_pressure`): each rank computes the
+  thermodynamics of its own cells, then one allreduce (MAX).  Every snapshot: every rank
+  receives every block (Allgatherv of the whole padded state, S_tot bytes) and computes the
+  thermodynamics of every cell.
 
 Time of one step on P ranks (s), the slowest rank setting each phase:
 
-    t_compute  = max_r W_r B^d c_cell
-    t_exchange = sum over exchanges k and axes d of
+    t_compute  = max_r W_r n_b c_cell
+    t_exchange = sum over fills k and axes d of
                  max_r [ m_rd alpha + 2 f_rd s_kd c_pack + f_on_rd s_kd / beta_shm ]
                  + max_n f_off_nd s_kd / beta_link
-    t_reduce   = (1 + d) alpha ceil(log2 P)
+    t_reduce   = R alpha ceil(log2 P)
 
-with f_rd the rank's block faces along d whose neighbour another rank owns (f_on_rd of them on
-its own node, f_off_nd the node's faces to other nodes), m_rd its peers along d, c_cell (s)
-the measured compute cost of a cell-update on one core, c_pack (s/B) the measured cost of
-packing and unpacking a byte of strips, alpha (s) the latency, beta_shm (B/s) the on-node
-bandwidth of one rank and beta_link (B/s) the bandwidth of one node's link, which all the
-node's off-node strips share.  The latency and transfer terms (not c_pack) are what
-overlapping the exchange with the interior's sweep could hide: t_step = t_compute + t_exchange
-+ t_reduce without overlap, max(t_compute, t_network) + t_pack + t_reduce with it.  A run of
-n steps with g = n_snap + n / LOG_INTERVAL gathers takes
+with f_rd the rank's block faces along d whose neighbour another rank owns (f_on_rd of them
+to ranks on its own node, f_off_nd the faces of node n's ranks to other nodes), m_rd its
+peers along d, c_cell (s) the measured compute cost of a cell-update on one core, c_pack
+(s/B) the measured cost of packing and unpacking a byte of strips, alpha (s) the latency,
+beta_shm (B/s) the on-node bandwidth of one rank and beta_link (B/s) the bandwidth of one
+node's link, which all the node's off-node strips share.  The latency and transfer terms (not
+c_pack) are what overlapping the exchange with the interior's sweep could hide:
+t_step = t_compute + t_exchange + t_reduce without overlap (the code),
+max(t_compute, t_network) + t_pack + t_reduce with it (a projection).  A run of n steps
+and n_snap snapshots takes
 
-    T_P = n t_step + g (S_tot / min(beta_link, beta_shm) + alpha ceil(log2 P) + N c_snap)
+    T_P = n t_step + (n / LOG_INTERVAL) (max_r W_r n_b c_snap + alpha ceil(log2 P))
+          + n_snap (S_tot / min(beta_link, beta_shm) + alpha ceil(log2 P) + N c_snap)
 
-(N cells, c_snap (s) the thermodynamics of one cell of a snapshot; a ring Allgatherv moves
-S_tot through each rank and each node's link once), one rank
-T_1 = n N c_cell + g N c_snap, and the parallel efficiency is E = T_1 / (P T_P).  Strong
-scaling keeps the mesh; weak scaling keeps N / P by refining the mesh.  The steps to hand-off
-n grow with the cells per projectile radius as measured on two coarse uniform meshes
-(:func:`step_growth`).  Two other ways of making the outputs, not the code of this version,
-are projected beside it (:data:`OUTPUTS`, :func:`output_time`): a log line that reduces the
-ranks' own peak pressures, and snapshots whose thermodynamics each rank computes over its own
-blocks.  Not modelled: rank 0 writing the snapshots, the cost estimate's error in the cut of
-an impact's blocks (void cells are cheaper), and memory: every rank holds the whole state.
+(N cells, c_snap (s) the thermodynamics of one cell of a snapshot, taken for the log line's
+too; a ring Allgatherv moves S_tot through each rank and each node's link once), one rank
+T_1 = n N c_cell + (n / LOG_INTERVAL + n_snap) N c_snap, and the parallel efficiency is
+E = T_1 / (P T_P).  Strong scaling keeps the mesh; weak scaling keeps N / P by refining the
+mesh.  The steps to hand-off n grow with the cells per projectile radius as measured on two
+coarse uniform meshes (:func:`step_growth`).  Snapshots whose thermodynamics each rank
+computes over its own blocks before the gather (N c_snap -> max_r W_r n_b c_snap), not the
+code of this version, are projected beside it (:data:`OUTPUTS`, :func:`output_time`).  Not
+modelled: adaptive meshes (their coarse/fine exchanges and the gather of every block before
+each regrid), rank 0 writing the snapshots, the cost estimate's error in the cut of an
+impact's blocks, and memory: every rank holds the whole state.
 
     python benchmarks/scaling_model.py --measured ONE.json TWO.json ONE_8.json TWO_8.json \\
         --steps STEPS_8C.json STEPS_OBLIQUE.json --json
@@ -72,14 +85,14 @@ from pathlib import Path
 
 import numpy as np
 
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.parallel.decomposition import owned_ranges, owners
+from impactpipe.hydro.problems.common import adaptive_mesh
 from impactpipe.hydro.solver import LOG_INTERVAL
+from impactpipe.hydro.strength.update import WK_S, WK_V, stress_slots
 
 #: Bytes of one exchanged value (float64).
 WORD = 8
-#: Stored deviatoric stress components per dimension (:func:`impactpipe.hydro.strength.update.stress_slots`).
-STRESS_SLOTS = {2: 4, 3: 6}
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 #: The projected runs: config, overrides (uniform mesh, the named resolution), the measured case
 #: whose cost per cell-update stands for the run's, and the block edge that case must have.
@@ -93,6 +106,9 @@ RUNS = {
 RANKS = (64, 256, 1024)
 #: Materials of an impact's state: the target and the projectile (hydro.problems.impact).
 IMPACT_MATERIALS = 2
+#: Geometry of the mesh that stands for a measured case's in :func:`check_measured` (the neighbour
+#: table, all the check needs, depends on the block counts and the periodic axes only).
+CHECK_GEOMETRY = {2: "2d-planar", 3: "3d"}
 
 
 @dataclass(frozen=True)
@@ -117,143 +133,144 @@ class Costs:
     snapshot_s_per_cell: float
 
 
-@dataclass(frozen=True)
-class Mesh:
-    """A uniform block mesh: ``blocks_per_axis`` (x, y[, z]), ``block_cells`` B, ``periodic`` per axis."""
+def block_cells_of(mesh: BlockMesh) -> int:
+    """Interior cells of one block, n_b = B^d."""
+    return int(np.prod(mesh.interior_shape))
 
-    blocks_per_axis: tuple[int, ...]
-    block_cells: int
-    periodic: tuple[bool, ...]
 
-    @property
-    def ndim(self) -> int:
-        return len(self.blocks_per_axis)
+def strip_values(mesh: BlockMesh, axis: int, components: int) -> int:
+    """Values of one strip along ``axis``: GHOST x the block's interior cells across the other
+    axes (B^(d-1)) x ``components``."""
+    return int(mesh.ghost[axis]) * block_cells_of(mesh) // mesh.interior_shape[axis] * components
 
-    @property
-    def nblocks(self) -> int:
-        return int(np.prod(self.blocks_per_axis))
 
-    @property
-    def cells(self) -> int:
-        return self.nblocks * self.block_cells ** self.ndim
-
-    def strip_values(self, components: int) -> int:
-        """Values of one strip: GHOST B^(d-1) cells x ``components``."""
-        return GHOST * self.block_cells ** (self.ndim - 1) * components
-
-    def padded_state_bytes(self, components: int) -> int:
-        """Bytes of the whole state with its ghosts, S_tot = 8 c NB (B + 2 GHOST)^d."""
-        return WORD * components * self.nblocks * (self.block_cells + 2 * GHOST) ** self.ndim
+def padded_state_bytes(mesh: BlockMesh, components: int) -> int:
+    """Bytes of the whole state with its ghosts, S_tot = 8 c NB (B + 2 GHOST)^d."""
+    return WORD * components * mesh.nblocks * int(np.prod(mesh.padded_shape))
 
 
 def exchange_components(ndim: int, nmat: int, strength: bool) -> list[int]:
-    """Float64 components per cell of each exchange along one axis in one step: the state
-    (3M + 4 + M NQ) and, with strength, the four fills of :mod:`impactpipe.hydro.strength.model`
-    (2M + 3, NS, 3, NS)."""
+    """Float64 components per cell of each ghost fill along one axis in one step: the state
+    (3M + 4 + M NQ, NQ = NS + 2 with strength) and, with strength, the three fills of the work
+    arrays (:mod:`impactpipe.hydro.strength.model`): velocities, fill and stress
+    (slots WK_V .. WK_S + NS - 1, 4 + NS), velocities (3), stress (NS)."""
     if not strength:
         return [3 * nmat + 4]
-    ns = STRESS_SLOTS[ndim]
-    return [3 * nmat + 4 + nmat * (ns + 2), 2 * nmat + 3, ns, 3, ns]
+    ns = stress_slots(ndim)
+    return [3 * nmat + 4 + nmat * (ns + 2), WK_S + ns - WK_V, 3, ns]
 
 
-def cuts_for(mesh: Mesh, nranks: int) -> np.ndarray:
-    """The cut points of ``nranks`` ranks over the block order with one cost per block."""
+def reductions_per_step(ndim: int, strength: bool) -> int:
+    """Allreduces of one step, R: the time step, the failure check after each of the d sweeps,
+    and with strength the non-finite momentum check."""
+    return 1 + ndim + int(strength)
+
+
+def cuts_for(mesh: BlockMesh, nranks: int) -> np.ndarray:
+    """The cut points of ``nranks`` ranks over the mesh's block order with one cost per block."""
     return owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), nranks)
 
 
-def face_counts(mesh: Mesh, cuts: np.ndarray, ranks_per_node: int) -> list[dict]:
-    """Per axis d: ``faces`` (P,) f_rd, ``on_node`` (P,) f_on_rd, ``peers`` (P,) m_rd and
-    ``node_off`` (nodes,) f_off_nd (block faces along d whose neighbour another rank owns; a
-    node's faces to ranks on other nodes, nodes of ``ranks_per_node`` consecutive ranks)."""
+def face_counts(mesh: BlockMesh, cuts: np.ndarray, ranks_per_node: int) -> list[dict]:
+    """Per used axis d: ``faces`` (P,) f_rd, ``on_node`` (P,) f_on_rd, ``peers`` (P,) m_rd and
+    ``node_off`` (nodes,) f_off_nd.
+
+    A face is a (block, side) whose neighbour in ``mesh.neighbor`` another rank owns; its
+    block's owner sends that block's strip, as the exchange plan of the code does
+    (:func:`~impactpipe.hydro.parallel.decomposition.exchange_routes`).  Nodes hold
+    ``ranks_per_node`` consecutive ranks.  Vectorised over the blocks (numpy, no loop over blocks).
+    """
+    if mesh.adaptive:
+        raise ValueError("the model counts the faces of a uniform mesh; an adaptive one has coarse/fine exchanges too")
     nranks = len(cuts) - 1
-    grid = owners(cuts).reshape(mesh.blocks_per_axis[::-1])
+    owner = owners(cuts)
     node_of = np.arange(nranks) // ranks_per_node
+    nnodes = int(node_of[-1]) + 1
     out = []
-    for d in range(mesh.ndim):
-        along = mesh.ndim - 1 - d
-        if mesh.periodic[d]:
-            a, b = grid, np.roll(grid, -1, axis=along)
-        else:
-            n = grid.shape[along]
-            a, b = np.take(grid, range(n - 1), axis=along), np.take(grid, range(1, n), axis=along)
-        cross = a != b
-        a, b = a[cross], b[cross]
-        off = node_of[a] != node_of[b]
-        pairs = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0).reshape(-1, 2)
+    for axis in range(mesh.ndim):
+        neighbour = mesh.neighbor[:, axis, :].ravel()
+        block = np.repeat(np.arange(mesh.nblocks), 2)
+        inside = neighbour >= 0
+        sender, receiver = owner[block[inside]], owner[neighbour[inside]]
+        apart = sender != receiver
+        sender, receiver = sender[apart], receiver[apart]
+        off = node_of[sender] != node_of[receiver]
+        pairs = np.unique(np.minimum(sender, receiver) * nranks + np.maximum(sender, receiver))
         out.append({
-            "faces": np.bincount(a, minlength=nranks) + np.bincount(b, minlength=nranks),
-            "on_node": np.bincount(a[~off], minlength=nranks) + np.bincount(b[~off], minlength=nranks),
-            "peers": np.bincount(pairs.ravel(), minlength=nranks),
-            "node_off": (np.bincount(node_of[a[off]], minlength=node_of[-1] + 1)
-                         + np.bincount(node_of[b[off]], minlength=node_of[-1] + 1)),
+            "faces": np.bincount(sender, minlength=nranks),
+            "on_node": np.bincount(sender[~off], minlength=nranks),
+            "peers": np.bincount(np.concatenate([pairs // nranks, pairs % nranks]), minlength=nranks),
+            "node_off": np.bincount(node_of[sender[off]], minlength=nnodes),
         })
     return out
 
 
-def step_time(mesh: Mesh, components: list[int], costs: Costs, net: Interconnect, cuts: np.ndarray) -> dict:
+def step_time(mesh: BlockMesh, components: list[int], reductions: int, costs: Costs, net: Interconnect,
+              cuts: np.ndarray) -> dict:
     """The terms of one step's time (s) on the ranks of ``cuts`` (module docstring):
-    ``compute``, ``pack``, ``network`` (latency and transfer of the strips), ``reduce``."""
+    ``compute``, ``pack``, ``network`` (latency and transfer of the strips), ``reduce``
+    (``reductions`` allreduces)."""
     nranks = len(cuts) - 1
-    compute = int(np.diff(cuts).max()) * mesh.block_cells ** mesh.ndim * costs.cell_update_s
+    compute = int(np.diff(cuts).max()) * block_cells_of(mesh) * costs.cell_update_s
     pack = network = 0.0
     if nranks > 1:
-        for faces in face_counts(mesh, cuts, net.ranks_per_node):
+        for axis, faces in enumerate(face_counts(mesh, cuts, net.ranks_per_node)):
             for c in components:
-                strip = WORD * mesh.strip_values(c)
+                strip = WORD * strip_values(mesh, axis, c)
                 packing = 2 * faces["faces"] * strip * costs.pack_s_per_byte
                 moving = faces["peers"] * net.latency_s + faces["on_node"] * strip / net.shm_bytes_per_s
                 slowest = int(np.argmax(packing + moving))
                 pack += packing[slowest]
                 network += moving[slowest] + faces["node_off"].max() * strip / net.link_bytes_per_s
-    reduce = (1 + mesh.ndim) * net.latency_s * math.ceil(math.log2(nranks)) if nranks > 1 else 0.0
+    reduce = reductions * tree_latency(net, nranks)
     return {"compute": compute, "pack": pack, "network": network, "reduce": reduce}
 
 
-#: How a run's outputs are made: this version (every snapshot and every LOG_INTERVAL-th log line
-#: gathers every block, and every rank computes the thermodynamics of every cell); "local-log"
-#: (the log line reduces the ranks' own peak pressures); "distributed" (besides, each rank computes
-#: a snapshot's thermodynamics over its own blocks before the gather).  Only the first is the code.
-OUTPUTS = ("this-version", "local-log", "distributed")
+def tree_latency(net: Interconnect, nranks: int) -> float:
+    """Latency of one allreduce over ``nranks`` ranks, alpha ceil(log2 P) (s); 0 on one rank."""
+    return net.latency_s * math.ceil(math.log2(nranks)) if nranks > 1 else 0.0
 
 
-def output_time(mesh: Mesh, state_components: int, costs: Costs, net: Interconnect, cuts: np.ndarray,
+#: How a run's snapshots are made: this version (every rank receives every block and computes the
+#: thermodynamics of every cell); "distributed" (each rank computes the thermodynamics of its own
+#: blocks before the gather; not the code of this version).  The log lines are the code's in both.
+OUTPUTS = ("this-version", "distributed")
+
+
+def output_time(mesh: BlockMesh, state_components: int, costs: Costs, net: Interconnect, cuts: np.ndarray,
                 steps: float, snapshots: int, outputs: str) -> float:
-    """Time (s) of a run's outputs on the ranks of ``cuts``: ``snapshots`` snapshots and
-    steps / LOG_INTERVAL log lines, made as ``outputs`` (:data:`OUTPUTS`) says.
-
-    A gather costs S_tot / min(beta_link, beta_shm) + alpha ceil(log2 P) (none on one rank), the
-    thermodynamics N c_snap on every rank, or max_r W_r B^d c_snap where each rank does its own.
-    """
+    """Time (s) of a run's outputs on the ranks of ``cuts``: steps / LOG_INTERVAL log lines, each
+    max_r W_r n_b c_snap + alpha ceil(log2 P) (own blocks, one MAX allreduce), and ``snapshots``
+    snapshots made as ``outputs`` (:data:`OUTPUTS`) says: a gather S_tot / min(beta_link,
+    beta_shm) + alpha ceil(log2 P) (none on one rank) and the thermodynamics, N c_snap on every
+    rank (this version) or max_r W_r n_b c_snap (distributed)."""
     nranks = len(cuts) - 1
-    logs = steps / LOG_INTERVAL
-    reduce = net.latency_s * math.ceil(math.log2(nranks)) if nranks > 1 else 0.0
-    gather = mesh.padded_state_bytes(state_components) / min(net.link_bytes_per_s, net.shm_bytes_per_s) + reduce
-    if nranks == 1:
-        gather = 0.0
-    whole = mesh.cells * costs.snapshot_s_per_cell
-    own = int(np.diff(cuts).max()) * mesh.block_cells ** mesh.ndim * costs.snapshot_s_per_cell
-    if outputs == "this-version":
-        return (snapshots + logs) * (gather + whole)
-    log_lines = logs * (own + reduce)
-    return log_lines + snapshots * (gather + (whole if outputs == "local-log" else own))
+    reduce = tree_latency(net, nranks)
+    gather = 0.0 if nranks == 1 else (
+        padded_state_bytes(mesh, state_components) / min(net.link_bytes_per_s, net.shm_bytes_per_s) + reduce)
+    own = int(np.diff(cuts).max()) * block_cells_of(mesh) * costs.snapshot_s_per_cell
+    whole = mesh.ncells * costs.snapshot_s_per_cell
+    logs = steps / LOG_INTERVAL * (own + reduce)
+    return logs + snapshots * (gather + (whole if outputs == "this-version" else own))
 
 
-def run_time(mesh: Mesh, components: list[int], state_components: int, costs: Costs, net: Interconnect,
+def run_time(mesh: BlockMesh, components: list[int], reductions: int, costs: Costs, net: Interconnect,
              nranks: int, steps: float, snapshots: int) -> dict:
     """Wall time (s) of ``steps`` steps and ``snapshots`` snapshots on ``nranks`` ranks, and the
-    efficiency E = T_1 / (P T_P), per way of making the outputs (:data:`OUTPUTS`), without
-    overlap of the exchange (``wall_s``, ``efficiency``) and with it (``*_overlapped``)."""
+    efficiency E = T_1 / (P T_P), per way of making the snapshots (:data:`OUTPUTS`), without
+    overlap of the exchange (``wall_s``, ``efficiency``: the code) and with it
+    (``*_overlapped``: a projection).  ``components``: the fills of a step, the state's first."""
     cuts = cuts_for(mesh, nranks)
-    t = step_time(mesh, components, costs, net, cuts)
-    serial = (steps * mesh.cells * costs.cell_update_s
-              + (snapshots + steps / LOG_INTERVAL) * mesh.cells * costs.snapshot_s_per_cell)
+    t = step_time(mesh, components, reductions, costs, net, cuts)
+    serial = (steps * mesh.ncells * costs.cell_update_s
+              + (snapshots + steps / LOG_INTERVAL) * mesh.ncells * costs.snapshot_s_per_cell)
     plain = steps * (t["compute"] + t["pack"] + t["network"] + t["reduce"])
     overlapped = steps * (max(t["compute"], t["network"]) + t["pack"] + t["reduce"])
-    row = {"ranks": nranks, "cells": mesh.cells, "blocks_per_rank": mesh.nblocks / nranks,
+    row = {"ranks": nranks, "cells": mesh.ncells, "blocks_per_rank": mesh.nblocks / nranks,
            "imbalance": int(np.diff(cuts).max()) * nranks / mesh.nblocks, "steps": steps, "step_terms_s": t,
-           "state_bytes_per_rank": mesh.padded_state_bytes(state_components)}
+           "state_bytes_per_rank": padded_state_bytes(mesh, components[0])}
     for outputs in OUTPUTS:
-        extra = output_time(mesh, state_components, costs, net, cuts, steps, snapshots, outputs)
+        extra = output_time(mesh, components[0], costs, net, cuts, steps, snapshots, outputs)
         row[outputs] = {"outputs_s": extra, "wall_s": plain + extra, "efficiency": serial / (nranks * (plain + extra)),
                         "wall_overlapped_s": overlapped + extra,
                         "efficiency_overlapped": serial / (nranks * (overlapped + extra))}
@@ -278,16 +295,17 @@ def handoff_steps(document: dict, cells_per_radius: float) -> float:
     return s1 * (cells_per_radius / n1) ** p
 
 
-def run_mesh(config_path: Path, overrides: dict) -> tuple[Mesh, dict]:
-    """The uniform impact mesh of a config with ``overrides`` (pipeline.derived), and the derived values."""
+def run_mesh(config_path: Path, overrides: dict) -> tuple[BlockMesh, dict]:
+    """The uniform impact mesh of a config with ``overrides`` as the code builds it
+    (:func:`impactpipe.hydro.problems.common.adaptive_mesh` with one level over the box of
+    pipeline.derived), and the derived values."""
     from impactpipe.pipeline import derived, load_config
 
     config = load_config(config_path, overrides=overrides)
     values = derived.derive(config)
     domain = values["domain"]
-    block = domain["block_cells"]
-    periodic = tuple(pair[0] == "periodic" for pair in domain["boundaries"])
-    mesh = Mesh(tuple(n // block for n in domain["cells"]), block, periodic)
+    mesh = adaptive_mesh(values["geometry"], domain["lo"], domain["hi"], domain["cells"],
+                         [tuple(pair) for pair in domain["boundaries"]], domain["block_cells"], 1)
     values["snapshots"] = len(derived.snapshot_times(config, float(values["end_time"])))
     values["strength_on"] = any(choice["enabled"] for choice in values["strength"].values())
     return mesh, values
@@ -295,19 +313,15 @@ def run_mesh(config_path: Path, overrides: dict) -> tuple[Mesh, dict]:
 
 def costs_from(measured: list[dict], case: str, block_cells: int) -> Costs:
     """c_cell and c_snap from the one-rank measurements of ``case`` on ``block_cells`` blocks,
-    c_pack from the two-rank ones (2d-cyl-tillotson's for a 2D case the ranks skipped): the
-    medians over the documents and ranks."""
+    c_pack from its two-rank ones: the medians over the documents (and ranks)."""
 
-    def results(ranks: int, name: str) -> list[dict]:
+    def results(ranks: int) -> list[dict]:
         return [r for document in measured if document["ranks"] == ranks for r in document["results"]
-                if r["case"] == name and r["block_cells"] == block_cells and "skipped" not in r]
+                if r["case"] == case and r["block_cells"] == block_cells and "skipped" not in r]
 
-    one = results(1, case)
-    if not one:
-        raise ValueError(f"no one-rank measurement of {case} on {block_cells}-cell blocks")
-    two = results(2, case) or results(2, "2d-cyl-tillotson" if case.startswith("2d") else case)
-    if not two:
-        raise ValueError(f"no two-rank measurement for the packing cost of {case}")
+    one, two = results(1), results(2)
+    if not one or not two:
+        raise ValueError(f"{case} on {block_cells}-cell blocks needs one-rank and two-rank measurements")
     pack = [(rank["exchange_s"] - rank["wait_s"]) / (rank["bytes_sent"] + rank["bytes_received"])
             for r in two for rank in r["ranks"]]
     return Costs(float(np.median([r["ranks"][0]["compute_s_per_cell_update"] for r in one])), float(np.median(pack)),
@@ -320,9 +334,10 @@ def project(measured: list[dict], steps: dict[str, dict], net: Interconnect) -> 
     for name, (config_path, overrides, case) in RUNS.items():
         mesh, values = run_mesh(config_path, overrides)
         n = overrides["hydro.cells_per_projectile_radius"]
-        components = exchange_components(mesh.ndim, IMPACT_MATERIALS, values["strength_on"])
+        strength = values["strength_on"]
+        components = exchange_components(mesh.ndim, IMPACT_MATERIALS, strength)
+        reductions = reductions_per_step(mesh.ndim, strength)
         costs = costs_from(measured, case, mesh.block_cells)
-        state_components = components[0]
         rows = {"strong": [], "weak": []}
         for mode in rows:
             for nranks in RANKS:
@@ -330,32 +345,43 @@ def project(measured: list[dict], steps: dict[str, dict], net: Interconnect) -> 
                 grown = mesh if mode == "strong" else run_mesh(
                     config_path, {**overrides, "hydro.cells_per_projectile_radius": resolution})[0]
                 count = handoff_steps(steps[name], resolution)
-                row = run_time(grown, components, state_components, costs, net, nranks, count, values["snapshots"])
+                row = run_time(grown, components, reductions, costs, net, nranks, count, values["snapshots"])
                 rows[mode].append({"cells_per_projectile_radius": resolution, **row})
         out[name] = {"config": str(config_path.relative_to(CONFIGS.parent)), "overrides": overrides,
                      "cost_case": case, "costs": costs.__dict__, "exchange_components": components,
-                     "end_time": values["end_time"], "blocks_per_axis": mesh.blocks_per_axis,
+                     "reductions_per_step": reductions, "end_time": values["end_time"],
+                     "snapshots": values["snapshots"], "blocks_per_axis": mesh.blocks_per_axis[:mesh.ndim].tolist(),
                      "block_cells": mesh.block_cells, "step_growth": step_growth(steps[name]),
-                     "cell_updates": mesh.cells * handoff_steps(steps[name], n),
-                     **rows}
+                     "cell_updates": mesh.ncells * handoff_steps(steps[name], n), **rows}
     return out
 
 
 def check_measured(measured: list[dict]) -> list[dict]:
-    """The model's bytes per step and rank for every measured multi-rank case (its own cuts and
-    mesh), beside the counted bytes: the surface formula against the code."""
+    """The model's bytes sent per step and rank for every measured multi-rank case (the case's
+    mesh and cut, its fills per axis), beside the counted bytes: the formulas against the code."""
     rows = []
     for document in measured:
         for r in document["results"]:
             if document["ranks"] < 2 or "skipped" in r:
                 continue
-            mesh = Mesh(tuple(r["blocks_per_axis"]), r["block_cells"], tuple(r["periodic"]))
+            ndim = len(r["blocks_per_axis"])
+            cells = [n * r["block_cells"] for n in r["blocks_per_axis"]]
+            boundaries = [("periodic",) * 2 if periodic else ("outflow",) * 2 for periodic in r["periodic"]]
+            mesh = BlockMesh.uniform(CHECK_GEOMETRY[ndim], [0.0] * ndim, [1.0] * ndim, cells, boundaries,
+                                     r["block_cells"])
             cuts = np.concatenate([[0], np.cumsum([rank["blocks"] for rank in r["ranks"]])])
+            components = exchange_components(ndim, r["materials"], r["strength"])
             faces = face_counts(mesh, cuts, len(cuts))
-            model = sum(WORD * mesh.strip_values(r["components"]) * f["faces"] for f in faces)
+            model = sum(WORD * strip_values(mesh, axis, c) * f["faces"]
+                        for axis, f in enumerate(faces) for c in components)
             rows.append({"case": r["case"], "block_cells": r["block_cells"], "ranks": document["ranks"],
+                         "exchange_components": components,
                          "model_bytes_sent": model.tolist(),
-                         "measured_bytes_sent": [rank["bytes_sent"] for rank in r["ranks"]]})
+                         "measured_bytes_sent": [rank["bytes_sent"] for rank in r["ranks"]],
+                         "model_messages_sent": sum(len(components) * f["peers"] for f in faces).tolist(),
+                         "measured_messages_sent": [rank["messages_sent"] for rank in r["ranks"]],
+                         "model_allreduces": reductions_per_step(ndim, r["strength"]),
+                         "measured_allreduces": [rank["allreduces"] for rank in r["ranks"]]})
     return rows
 
 
@@ -380,6 +406,9 @@ def main() -> None:
     if args.json:
         print(json.dumps(report, indent=2, default=float))
         return
+    for row in report["check"]:
+        print(f"check {row['case']} ({row['block_cells']}-cell blocks, {row['ranks']} ranks): bytes sent per step "
+              f"{row['model_bytes_sent']} modelled, {row['measured_bytes_sent']} counted")
     for name, run in report["runs"].items():
         print(f"{name}: {run['cell_updates']:.3g} cell-updates, c_cell {run['costs']['cell_update_s']:.3g} s")
         for mode in ("strong", "weak"):
