@@ -3,6 +3,7 @@
 
 Modules: ``parameters`` (packing of resolved specs, shear table), ``yield_strength``
 (Y(P, T, D)), ``elastic`` (Jaumann update, radial return), ``damage`` (ROCK failure strain),
+``flaws`` (Weibull flaws of a body per cell), ``fracture`` (Grady-Kipp damage rate),
 ``update`` (per-cell stress kernel), ``divergence`` (conservative stress fluxes), ``model``
 (:class:`MaterialStrength`, the per-step driver the Simulation calls).
 """
