@@ -1,9 +1,10 @@
 """Published material parameter sets shipped with the package, and their resolution.
 
 The data file ``data/materials.yaml`` holds Tillotson and Mie-Grueneisen EOS sets and
-the GEO / ROCK strength presets of the reference study (SI units).  A material in a
-config names a preset and may override any parameter; :func:`resolve_eos` and
-:func:`resolve_strength` return the complete parameter dicts the solver consumes.
+the GEO / ROCK strength presets of the reference study and the Weibull flaw parameters of
+tensile fracture (SI units).  A material in a config names a preset and may override any
+parameter; :func:`resolve_eos`, :func:`resolve_strength` and :func:`resolve_damage` return
+the complete parameter dicts the solver consumes.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ GEO_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi")
 ROCK_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "Y_c", "mu_d", "T_melt", "xi", "P_bd", "P_bp", "poisson")
 VON_MISES_KEYS = ("yield_strength", "poisson")
 OPTIONAL_STRENGTH_KEYS = ("shear_modulus", "Y_T", "initial_damage")
+GRADY_KIPP_KEYS = ("weibull_m", "weibull_k")
+OPTIONAL_GRADY_KIPP_KEYS = ("young_modulus",)
 #: Thermal-softening exponent for GEO presets, which publish none (the ROCK presets use 1.2).
 GEO_DEFAULT_XI = 1.2
 
@@ -94,3 +97,28 @@ def resolve_strength(model: str, preset: str | None, overrides: dict[str, Any]) 
         if key in params and key not in resolved:
             resolved[key] = float(params[key])
     return {"model": model, **resolved}
+
+
+def damage_presets(model: str) -> list[str]:
+    """Names of the damage presets available for ``model`` (grady_kipp)."""
+    return sorted(material_data()["damage"].get(model, {}))
+
+
+def resolve_damage(spec: dict[str, Any] | None) -> dict[str, Any]:
+    """Complete damage block of a strength spec: ``{model, preset, parameters...}`` with the
+    preset's values updated by the parameters given; None or model ``instant`` is the instant
+    tensile failure.  Raises KeyError naming the first missing parameter."""
+    spec = dict(spec or {})
+    model = spec.pop("model", "instant")
+    preset = spec.pop("preset", None)
+    if model == "instant":
+        return {"model": "instant"}
+    params: dict[str, Any] = {}
+    if preset is not None:
+        params.update(material_data()["damage"][model][preset])
+    params.update({k: v for k, v in spec.items() if v is not None})
+    for key in GRADY_KIPP_KEYS:
+        if key not in params:
+            raise KeyError(key)
+    keep = GRADY_KIPP_KEYS + OPTIONAL_GRADY_KIPP_KEYS
+    return {"model": model, **{k: float(params[k]) for k in keep if k in params}}

@@ -16,6 +16,8 @@ from impactpipe.hydro.strength.fracture import (
     active_flaws, crack_speed, crack_sphere_radius, damage_step, damaged_deviator, damaged_pressure,
     grady_kipp_damage, largest_principal_stress, tensile_strain, young_modulus,
 )
+from impactpipe.hydro.strength.parameters import GRADY_KIPP, INSTANT, WEIBULL_K, WEIBULL_M, YOUNG, pack_damage
+from impactpipe.pipeline.presets import resolve_damage
 
 # basalt (Benz & Asphaug 1994; method.md 2.4)
 M_BASALT, K_BASALT = 8.5, 3.0e39
@@ -250,3 +252,24 @@ def test_damage_rate_linear_in_active_flaws_gives_the_wrong_strain_rate_law():
     slope = np.polyfit(np.log(RATES), np.log(bar_fragmentation_stress(m, k, n_flaws, first_power=True)), 1)[0]
     assert slope != pytest.approx(3.0 / (m + 3.0), rel=0.10)
     assert slope == pytest.approx(1.0 / (m + 1.0), rel=0.10)
+
+
+# ------------------------------------------------------------------ parameters
+
+
+def test_damage_block_presets_and_validation():
+    basalt = resolve_damage({"model": "grady_kipp", "preset": "basalt"})
+    assert basalt == {"model": "grady_kipp", "weibull_m": 8.5, "weibull_k": 3.0e39, "young_modulus": 53.1e9}
+    assert resolve_damage({"model": "grady_kipp", "preset": "basalt", "weibull_m": 9.0})["weibull_m"] == 9.0
+    assert resolve_damage(None) == {"model": "instant"}
+    with pytest.raises(KeyError):
+        resolve_damage({"model": "grady_kipp", "weibull_m": 9.0})
+    arrays = pack_damage([None, basalt, {"model": "grady_kipp", "weibull_m": 6.0, "weibull_k": 1e20}])
+    assert list(arrays.model) == [INSTANT, GRADY_KIPP, GRADY_KIPP]
+    assert arrays.params[1, WEIBULL_M] == 8.5 and arrays.params[1, WEIBULL_K] == 3.0e39
+    assert arrays.params[1, YOUNG] == 53.1e9 and arrays.params[2, YOUNG] == 0.0
+    for bad in ({"model": "weibull"}, {"model": "grady_kipp", "weibull_m": 8.5},
+                {"model": "grady_kipp", "weibull_m": 0.0, "weibull_k": 1e39},
+                {"model": "grady_kipp", "weibull_m": 8.5, "weibull_k": 1e39, "young_modulus": -1.0}):
+        with pytest.raises(ValueError):
+            pack_damage([bad])

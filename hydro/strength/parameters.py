@@ -102,3 +102,51 @@ def pack_strength(specs: list[dict | None]) -> StrengthArrays:
         else:
             shear[k, 1] = shear_ratio(float(spec["poisson"]))
     return StrengthArrays(model, params, shear, tensile)
+
+
+INSTANT = 0
+GRADY_KIPP = 1
+DAMAGE_CODES = {"instant": INSTANT, "grady_kipp": GRADY_KIPP}
+
+# damage parameter row slots
+WEIBULL_M, WEIBULL_K, YOUNG = range(3)
+NDAMAGE = 3
+
+
+class DamageArrays(NamedTuple):
+    """Tensile-fracture parameters of M materials for the kernels.
+
+    model: (M,) int64 damage model codes (INSTANT, GRADY_KIPP); params: (M, NDAMAGE) rows of
+    Weibull m (-), Weibull k (m^-3) and Young's modulus E (Pa; 0: E = 9 K G / (3 K + G) from
+    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`).
+    """
+
+    model: np.ndarray
+    params: np.ndarray
+
+
+def pack_damage(specs: list[dict | None]) -> DamageArrays:
+    """Pack resolved damage blocks (one per material, None = instant tensile failure) into
+    :class:`DamageArrays`; raises ValueError for an unknown model or a parameter out of range
+    (m > 0, k > 0, E >= 0)."""
+    m = len(specs)
+    model = np.zeros(m, dtype=np.int64)
+    params = np.zeros((m, NDAMAGE))
+    for k, spec in enumerate(specs):
+        spec = spec or {"model": "instant"}
+        name = spec.get("model", "instant")
+        if name not in DAMAGE_CODES:
+            raise ValueError(f"material {k}: unknown damage model {name!r} (allowed: {', '.join(DAMAGE_CODES)})")
+        model[k] = DAMAGE_CODES[name]
+        if model[k] == INSTANT:
+            continue
+        for slot, key in ((WEIBULL_M, "weibull_m"), (WEIBULL_K, "weibull_k")):
+            if key not in spec:
+                raise ValueError(f"material {k}: damage model {name} needs {key}")
+            params[k, slot] = float(spec[key])
+            if params[k, slot] <= 0.0:
+                raise ValueError(f"material {k}: {key} must be > 0 (got {params[k, slot]:g})")
+        params[k, YOUNG] = float(spec.get("young_modulus", 0.0))
+        if params[k, YOUNG] < 0.0:
+            raise ValueError(f"material {k}: young_modulus must be >= 0 (got {params[k, YOUNG]:g})")
+    return DamageArrays(model, params)
