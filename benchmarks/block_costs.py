@@ -1,8 +1,9 @@
 """Cost of a block's step by what it holds: void, full of material, or both (the weights MPI ranks cut by).
 
-The MPI ranks share the blocks by an estimated cost per block (``MATERIAL_CELL_COST`` per
-interior cell holding material, ``VOID_CELL_COST`` per void cell, ``MIXED_BLOCK_CELL_COST``
-more per cell of a block holding both; :mod:`impactpipe.hydro.parallel.decomposition`).  This measures what they cost: it builds a case
+The MPI ranks share the blocks by an estimated cost per block
+(:mod:`impactpipe.hydro.parallel.decomposition`): ``MATERIAL_CELL_COST`` per interior cell
+holding material, ``VOID_CELL_COST`` per void cell, ``MIXED_BLOCK_CELL_COST`` more per cell of
+a block holding both.  This measures what they cost: it builds a case
 of benchmarks/hydro_throughput.py, takes two steps, sorts the blocks into void (no cell with
 material), full (every cell) and mixed, and times on one thread the per-block kernels of a step
 on copies of each class's blocks: the time-step kernel and the two sweeps, and with strength

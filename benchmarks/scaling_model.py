@@ -54,17 +54,15 @@ max(t_compute, t_network) + t_pack + t_reduce with it (a projection).  A run of 
 and n_snap snapshots takes
 
     T_P = n t_step + (n / LOG_INTERVAL) (max_r W_r n_b c_snap + alpha ceil(log2 P))
-          + n_snap (S_tot / min(beta_link, beta_shm) + alpha ceil(log2 P) + N c_snap)
+          + n_snap (S_tot / min(beta_link, beta_shm) + alpha ceil(log2 P) + max_r W_r n_b c_snap)
 
-(N cells, c_snap (s) the thermodynamics of one cell of a snapshot, taken for the log line's
-too; a ring Allgatherv moves S_tot through each rank and each node's link once), one rank
+(N cells, c_snap (s) the fields of one cell of a snapshot, taken for the log line's too; each
+rank computes its own blocks' fields and rank 0 gathers them: S_tot, the padded state's bytes,
+bounds the interior fields gathered from above and passes rank 0's link once), one rank
 T_1 = n N c_cell + (n / LOG_INTERVAL + n_snap) N c_snap, and the parallel efficiency is
 E = T_1 / (P T_P).  Strong scaling keeps the mesh; weak scaling keeps N / P by refining the
 mesh.  The steps to hand-off n grow with the cells per projectile radius as measured on two
-coarse uniform meshes (:func:`step_growth`).  Snapshots whose thermodynamics each rank
-computes over its own blocks before the gather (N c_snap -> max_r W_r n_b c_snap), not the
-code of this version, are projected beside it (:data:`OUTPUTS`, :func:`output_time`).  Not
-modelled: adaptive meshes (their coarse/fine exchanges and the gather of every block before
+coarse uniform meshes (:func:`step_growth`).  Not modelled: adaptive meshes (their coarse/fine exchanges and the gather of every block before
 each regrid), rank 0 writing the snapshots, the cost estimate's error in the cut of an
 impact's blocks, and memory: every rank holds the whole state.
 
@@ -231,27 +229,27 @@ def tree_latency(net: Interconnect, nranks: int) -> float:
     return net.latency_s * math.ceil(math.log2(nranks)) if nranks > 1 else 0.0
 
 
-#: How a run's snapshots are made: this version (every rank receives every block and computes the
-#: thermodynamics of every cell); "distributed" (each rank computes the thermodynamics of its own
-#: blocks before the gather; not the code of this version).  The log lines are the code's in both.
-OUTPUTS = ("this-version", "distributed")
+#: How a run's outputs are made: this version's (each rank computes its own blocks' snapshot
+#: fields and log-line pressures; rank 0 gathers the snapshots, one reduction per log line).
+OUTPUTS = ("this-version",)
 
 
 def output_time(mesh: BlockMesh, state_components: int, costs: Costs, net: Interconnect, cuts: np.ndarray,
                 steps: float, snapshots: int, outputs: str) -> float:
     """Time (s) of a run's outputs on the ranks of ``cuts``: steps / LOG_INTERVAL log lines, each
     max_r W_r n_b c_snap + alpha ceil(log2 P) (own blocks, one MAX allreduce), and ``snapshots``
-    snapshots made as ``outputs`` (:data:`OUTPUTS`) says: a gather S_tot / min(beta_link,
-    beta_shm) + alpha ceil(log2 P) (none on one rank) and the thermodynamics, N c_snap on every
-    rank (this version) or max_r W_r n_b c_snap (distributed)."""
+    snapshots made as ``outputs`` (:data:`OUTPUTS`) says: the fields of the rank's own blocks,
+    max_r W_r n_b c_snap, and a gather to rank 0 bounded by S_tot / min(beta_link, beta_shm) +
+    alpha ceil(log2 P) (none on one rank)."""
     nranks = len(cuts) - 1
     reduce = tree_latency(net, nranks)
     gather = 0.0 if nranks == 1 else (
         padded_state_bytes(mesh, state_components) / min(net.link_bytes_per_s, net.shm_bytes_per_s) + reduce)
     own = int(np.diff(cuts).max()) * block_cells_of(mesh) * costs.snapshot_s_per_cell
-    whole = mesh.ncells * costs.snapshot_s_per_cell
     logs = steps / LOG_INTERVAL * (own + reduce)
-    return logs + snapshots * (gather + (whole if outputs == "this-version" else own))
+    if outputs not in OUTPUTS:
+        raise ValueError(f"outputs must be one of {OUTPUTS}, got {outputs!r}")
+    return logs + snapshots * (gather + own)
 
 
 def run_time(mesh: BlockMesh, components: list[int], reductions: int, costs: Costs, net: Interconnect,
@@ -415,8 +413,8 @@ def main() -> None:
             for row in run[mode]:
                 cases = ", ".join(f"{outputs} {row[outputs]['efficiency']:.2f} ({row[outputs]['wall_s'] / 3600:.3g} h)"
                                   for outputs in OUTPUTS)
-                print(f"  {mode:6s} {row['ranks']:5d} ranks {row['cells']:.3g} cells: E {cases}; distributed and "
-                      f"overlapped {row['distributed']['efficiency_overlapped']:.2f}")
+                print(f"  {mode:6s} {row['ranks']:5d} ranks {row['cells']:.3g} cells: E {cases}; overlapped "
+                      f"{row['this-version']['efficiency_overlapped']:.2f}")
 
 
 if __name__ == "__main__":
