@@ -7,13 +7,13 @@ The model follows what the code does in this version (:mod:`impactpipe.hydro.par
   (:func:`impactpipe.hydro.problems.common.adaptive_mesh` with one level), in the code's
   block order.  Rank r owns the contiguous range ``cuts[r] .. cuts[r + 1] - 1`` of that
   order, cut by :func:`~impactpipe.hydro.parallel.decomposition.owned_ranges` with one cost
-  per block (the code's estimate, 10 per material cell and 1 per void cell, balances the
-  initial state's material, not the work of a later step), so a rank owns
+  per block (the code's cut weighs the measured cost of material, void and mixed blocks of
+  the current state, which a uniform box does not vary), so a rank owns
   W_r = floor or ceil(NB / P) blocks of n_b = B^d cells.  The faces between ranks are
   counted, per rank and axis, from the mesh's neighbour table (``mesh.neighbor``) and the
   owners of the blocks (:func:`face_counts`): whatever block order the mesh has, the model
-  follows it.  With the order of this version (x fastest, then y, then z) a rank's blocks
-  are a slab of the slowest axis, or part of a plane of blocks once NB / P is below one.
+  follows it.  With the order of this version (a Morton curve) a rank's blocks are a
+  compact group.
 * Exchange.  Before every ghost fill along axis d, each block face whose neighbour another
   rank owns costs one strip each way (:func:`~impactpipe.hydro.parallel.decomposition.exchange_routes`):
   GHOST = 2 layers of B^(d-1) interior cells of c float64 components,
