@@ -99,12 +99,20 @@ class ExternalGravity:
         self.work = 0.0
         self._block_work = np.zeros(mesh.nblocks)
 
-    def advance(self, state: HydroState, dt: float, block_lo: np.ndarray, block_dx: np.ndarray) -> None:
-        """Apply the gravity impulse and work of one step of ``dt`` (s) to ``state``'s interior cells."""
+    def advance(self, state: HydroState, dt: float, block_lo: np.ndarray, block_dx: np.ndarray,
+                partition=None) -> None:
+        """Apply the gravity impulse and work of one step of ``dt`` (s) to the interior cells of
+        the blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`; every
+        block without one).  The work is summed over every block in block order, the blocks of
+        other processes received first (``partition.share_rows``), so it is the same on any
+        number of processes."""
         nb = state.arho.shape[0]
         if self._block_work.shape[0] != nb:
             self._block_work = np.zeros(nb)
+        own = slice(None) if partition is None else partition.blocks
         g = self.acceleration
-        apply_gravity(dt, g[0], g[1], g[2], self.geometry_code, self.ndim, state.arho, state.momentum, state.energy,
-                      block_lo, block_dx, self._block_work)
+        apply_gravity(dt, g[0], g[1], g[2], self.geometry_code, self.ndim, state.arho[own], state.momentum[own],
+                      state.energy[own], block_lo[own], block_dx[own], self._block_work[own])
+        if partition is not None:
+            partition.share_rows(self._block_work)
         self.work += float(self._block_work.sum())

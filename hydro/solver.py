@@ -272,12 +272,12 @@ class Simulation:
             self.strength.load_stress(st, self.eos, part)
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
         if self.gravity is not None:
-            self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx)
+            self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
         if self.strength is not None:
             self.strength.update(st, dt, self.eos, part)
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
         if self.gravity is not None:
-            self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx)
+            self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
         if part.any(not np.isfinite(st.momentum[part.blocks]).all()):
             raise HydroFailure("NaN in the momentum after the strength and gravity step", self._good_clock[0], -1,
                                None, {})

@@ -73,7 +73,7 @@ def validate_cmd(config_path: str) -> None:
 @click.option("-q", "--quiet", is_flag=True, help="Warnings and errors only, no progress bars.")
 @click.option("--ranks", "nranks", type=click.IntRange(min=1), default=1, show_default=True,
               help="Run the hydro stage on N MPI ranks (launches `mpiexec -n N` with this command; needs "
-                   f'{ranks.INSTALL_HINT}).  This version: scenes without external gravity; docs/runs.md.')
+                   f'{ranks.INSTALL_HINT}); docs/runs.md.')
 @click.option("--stage-function", "stage_functions", multiple=True, metavar="STAGE=MODULE:FUNCTION",
               help="Run this function instead of a stage's own (as a sweep's stage_functions); repeatable.")
 def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stages: tuple[str, ...],
@@ -82,7 +82,7 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
     replaced = _stage_functions_or_exit(stage_functions)
     if nranks > 1:
         _setup_logging(verbose, quiet)
-        _exit_if_not_shared(*_load_or_exit(config_path), nranks)
+        _load_or_exit(config_path)
         arguments = ["run", config_path, *(["--out", out_dir] if out_dir else []),
                      *(["--from", from_stage] if from_stage else []), *(f"--stage={s}" for s in stages),
                      *(["--force"] if force else []), *(["-v"] * verbose), *(["--quiet"] if quiet else []),
@@ -120,14 +120,6 @@ def _stage_functions_or_exit(given: tuple[str, ...]) -> dict[str, str]:
     return replaced
 
 
-def _exit_if_not_shared(config, values, nranks: int) -> None:
-    """Exit 2 with one line when the run cannot be shared between ``nranks`` ranks in this version."""
-    reasons = ranks.unsupported(config, values)
-    if reasons:
-        click.echo(f"error: --ranks {nranks}: {ranks.refusal(reasons)}", err=True)
-        sys.exit(2)
-
-
 def _follow_rank_zero(config_path: str, comm) -> int:
     """A rank other than 0 under mpiexec: the hydro stage's share of the work, nothing else
     (rank 0 reports every error and owns the run directory); returns the exit status."""
@@ -154,8 +146,6 @@ def _run_pipeline(config_path: str, out_dir: str | None, from_stage: str | None,
     """``impactpipe run`` in this process (rank 0 of several)."""
     _setup_logging(verbose, quiet)
     config, values = _load_or_exit(config_path)
-    if ranks.world() is not None:
-        _exit_if_not_shared(config, values, ranks.world().size)
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     try:
         with run_lock(run_dir), runstore.run_log(run_dir):

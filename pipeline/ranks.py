@@ -29,7 +29,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from impactpipe.hydro import PROBLEMS
 
 from .lock import process_alive
 
@@ -53,22 +52,6 @@ _world: dict[str, Any] = {"comm": None, "ordered": False}
 
 class RanksUnavailable(RuntimeError):
     """Several ranks were asked for but mpi4py or ``mpiexec`` is missing."""
-
-
-def unsupported(config, values: dict[str, Any]) -> list[str]:
-    """What in ``config`` this version cannot share between ranks, as config keys (empty when
-    nothing).  More ranks than blocks is found when the hydro stage starts
-    (:func:`impactpipe.hydro.parallel.distributed.unsupported`)."""
-    reasons = []
-    if getattr(PROBLEMS.get(config.scene.problem), "EXTERNAL_GRAVITY", False):
-        reasons.append(f"external gravity (scene.gravity of the {config.scene.problem} problem)")
-    return reasons
-
-
-def refusal(reasons: list[str]) -> str:
-    """Why a config with ``reasons`` (from :func:`unsupported`) is not run on several ranks, in words."""
-    return (f"this version shares only scenes without external gravity between MPI ranks; the config has "
-            f"{'; '.join(reasons)}")
 
 
 def mpi_installed() -> bool:

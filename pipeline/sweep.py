@@ -287,25 +287,22 @@ def load_sweep(path: str | Path, output: str | Path | None = None, execution: di
     directory = Path(output or spec.output or Path("sweeps") / spec.name)
     sweep = Sweep(spec=spec, base_text=base_text, base_path=base_path, directory=directory, source=path)
     messages = []
-    checked = []
     for params in (p for point in grid_points(sweep) for p in sweep.replicate_runs(point)):
         try:
-            config = sweep.config_for(params)
-            checked.append((config, checks.check(config)))
+            checks.check(sweep.config_for(params))
         except ConfigError as exc:
             label = ", ".join(f"{k}={v}" for k, v in params.items())
             messages += [f"point {label}: {m}" for m in exc.messages]
-    messages += [lines.format(loc, message) for loc, message in ranks_problems(spec.execution, checked)]
+    messages += [lines.format(loc, message) for loc, message in ranks_problems(spec.execution)]
     if messages:
         raise SweepError(messages)
     return sweep
 
 
-def ranks_problems(execution: Execution, points: list[tuple[Config, dict[str, Any]]]) -> list[tuple[tuple, str]]:
-    """Why the points, (config, derived values) each, cannot run on ``execution.ranks_per_run``
-    MPI ranks, as (key path, message) (empty with one rank, or when they can): mpi4py or the
-    launcher missing on this machine, or a scene this version does not share between ranks
-    (:func:`impactpipe.pipeline.ranks.unsupported`)."""
+def ranks_problems(execution: Execution) -> list[tuple[tuple, str]]:
+    """Why the points cannot run on ``execution.ranks_per_run`` MPI ranks, as (key path,
+    message) (empty with one rank, or when they can): mpi4py or the launcher missing on this
+    machine."""
     nranks = execution.ranks_per_run
     if nranks == 1:
         return []
@@ -318,9 +315,6 @@ def ranks_problems(execution: Execution, points: list[tuple[Config, dict[str, An
             ranks.launcher_path(execution.launcher)
         except ranks.RanksUnavailable as exc:
             problems.append((("execution", "launcher"), str(exc)))
-    refused = list(dict.fromkeys(reason for config, values in points for reason in ranks.unsupported(config, values)))
-    if refused:
-        problems.append((("execution", "ranks_per_run"), f"{nranks} ranks per run: {ranks.refusal(refused)}"))
     return problems
 
 

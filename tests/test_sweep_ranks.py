@@ -153,19 +153,14 @@ def test_a_failed_launch_is_a_failed_point_with_the_end_of_its_output(tmp_path, 
     ("no mpi4py", 'execution.ranks_per_run: 2 ranks per run need mpi4py and an MPI library: '
                   'pip install "impactpipe[mpi]"'),
     ("no srun", "execution.launcher: no srun on PATH"),
-    ("external gravity", "execution.ranks_per_run: 2 ranks per run: this version shares only scenes without "
-                         "external gravity between MPI ranks; the config has external gravity (scene.gravity "
-                         "of the column_collapse problem)"),
 ])
 def test_what_cannot_run_on_ranks_is_refused_before_anything_is_written(change, message, tmp_path, monkeypatch):
     fields = {}
     if change == "no mpi4py":
         monkeypatch.setattr(ranks, "mpi_installed", lambda: False)
-    elif change == "no srun":
+    else:
         monkeypatch.setenv("PATH", str(tmp_path))
         fields["execution"] = {"ranks_per_run": 2, "launcher": "srun"}
-    else:
-        fields.update(base=str(HERE.parent / "configs" / "column_collapse.yaml"), axes={})
     path = write_sweep(tmp_path, **fields)
     result = CliRunner().invoke(cli.main, ["sweep", str(path), "--out", str(tmp_path / "sweep")])
     assert result.exit_code == 2

@@ -102,6 +102,10 @@ class WholeMesh:
         """Bring every block's rows of ``arrays`` (each (NB, ...)) to the process that writes
         (this one has them)."""
 
+    def share_rows(self, array: np.ndarray) -> None:
+        """Bring every block's row of ``array`` ((NB, ...), computed by each block's owner) to
+        every process (this one has them)."""
+
     def block_owners(self, blocks: np.ndarray, out: np.ndarray) -> None:
         """``out[t]``: the process that owns block ``blocks[t]`` (this one), -1 where ``blocks[t]`` is -1."""
         np.minimum(blocks, 0, out=out)
@@ -268,6 +272,10 @@ class BlockRanges(WholeMesh):
     def agree(self, value: Any) -> Any:
         return self.comm.bcast(value, root=0)
 
+    def share_rows(self, array: np.ndarray) -> None:
+        """Every rank receives every rank's rows of ``array`` (one Allgatherv)."""
+        share_owned_blocks(self.comm, [array], self.cuts, self.traffic)
+
     def gather_to_root(self, arrays: list[np.ndarray]) -> None:
         """Rank 0 receives every rank's rows of ``arrays`` (one Gatherv each,
         :func:`~.exchange.gather_owned_blocks`)."""
@@ -293,8 +301,6 @@ class BlockRanges(WholeMesh):
 def unsupported(sim, nranks: int) -> list[str]:
     """Why ``sim`` cannot run on ``nranks`` ranks in this version (empty when it can)."""
     reasons = []
-    if sim.gravity is not None:
-        reasons.append("external gravity")
     if nranks > sim.mesh.nblocks:
         reasons.append(f"more ranks ({nranks}) than blocks ({sim.mesh.nblocks})")
     return reasons

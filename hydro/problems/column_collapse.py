@@ -52,8 +52,6 @@ GEOMETRIES = ('2d-planar',)
 #: Cells per block edge unless the hydro options give one (the column is small; 8 wastes less void).
 BLOCK_CELLS = 8
 
-#: The run carries an external gravity field (:class:`~impactpipe.hydro.gravity.ExternalGravity`).
-EXTERNAL_GRAVITY = True
 #: Mesh axis of the vertical (gravity points along -z).
 VERTICAL_AXIS = 1
 
