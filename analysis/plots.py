@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 
 from impactpipe.storage import atomic_path
 
+from .fragments import LaboratoryFragmentation, cumulative_number
 from .qstar import QStarFit
 
 matplotlib.use("Agg")
@@ -221,3 +222,45 @@ def qstar_figure(Q, mlr_over_mt, n_lr, fit: QStarFit, *, target_radius: float | 
 def plot_qstar(path, Q, mlr_over_mt, n_lr, fit: QStarFit, **kwargs) -> Path:
     """Write :func:`qstar_figure` to ``path``."""
     return save_figure(qstar_figure(Q, mlr_over_mt, n_lr, fit, **kwargs), path)
+
+
+def fragments_figure(mass_fraction, speed, experiment: LaboratoryFragmentation | None = None) -> Figure:
+    """Fragments of one body: (left) cumulative number N(>= m) against m / M_T, (right) speed
+    against m / M_T, with a laboratory experiment's largest fragment and speed law beside them.
+
+    Args:
+        mass_fraction: (F,) fragment masses over the target's mass M_T (-).
+        speed: (F,) fragment speeds (m/s).
+        experiment: measured fragments to draw (the largest fragment as a star, the speed law
+            V(m / M_T) as a dashed line), or None.
+    """
+    fraction = np.asarray(mass_fraction, dtype=float)
+    speed = np.asarray(speed, dtype=float)
+    ordered, number = cumulative_number(fraction)
+    fig = Figure(figsize=(9.0, 3.8), layout="constrained")
+    ax_n = fig.add_subplot(1, 2, 1)
+    ax_n.step(ordered, number, where="post", label="this run")
+    ax_n.set_xscale("log")
+    ax_n.set_yscale("log")
+    ax_n.set_xlabel(r"$m / M_T$")
+    ax_n.set_ylabel(r"$N(\geq m)$")
+    ax_v = fig.add_subplot(1, 2, 2)
+    ax_v.scatter(fraction, np.maximum(speed, 1e-30), s=8, label="this run")
+    ax_v.set_xscale("log")
+    ax_v.set_yscale("log")
+    ax_v.set_xlabel(r"$m / M_T$")
+    ax_v.set_ylabel("speed (m/s)")
+    if experiment is not None:
+        ax_n.plot([experiment.largest_fraction], [1], "k*", markersize=10, label=experiment.reference)
+        span = np.logspace(np.log10(max(fraction.min(initial=1.0), 1e-6)), 0.0, 50)
+        ax_v.plot(span, experiment.fragment_speed(span), "k--", label=f"{experiment.reference}: fit")
+        ax_v.plot([experiment.largest_fraction], [experiment.largest_speed], "k*", markersize=10,
+                  label=f"{experiment.reference}: largest")
+    ax_n.legend(fontsize=7)
+    ax_v.legend(fontsize=7)
+    return fig
+
+
+def plot_fragments(path, mass_fraction, speed, **kwargs) -> Path:
+    """Write :func:`fragments_figure` to ``path``."""
+    return save_figure(fragments_figure(mass_fraction, speed, **kwargs), path)

@@ -523,6 +523,65 @@ def _writable(target: Path, out_path: str | None):
         sys.exit(2)
 
 
+@main.command("fragments")
+@click.argument("run_dir", metavar="RUN_DIR", type=click.Path(file_okay=False, exists=True))
+@click.option("--time", "at_time", type=float, help="Snapshot time (s); the nearest snapshot is used (default: last).")
+@click.option("--material", "materials", multiple=True,
+              help="Material of the body that breaks (repeatable; default: the target's material).")
+@click.option("--max-damage", type=float, default=0.99, show_default=True,
+              help="Cells at or above this damage are broken and join no fragment.")
+@click.option("--min-fill", type=float, default=0.5, show_default=True,
+              help="Least volume fraction of the body's materials in a fragment's cell.")
+@click.option("--experiment", type=click.Choice(["none", "nakamura-fujiwara"]), default="none", show_default=True,
+              help="Print and plot a laboratory experiment's fragments beside the run's.")
+@click.option("--top", type=click.IntRange(min=1), default=10, show_default=True, help="Fragments to list.")
+@click.option("--out", "out_path", type=click.Path(),
+              help="Output PNG, or a directory for the default file name (default RUN_DIR/plots/fragments.png).")
+def fragments_cmd(run_dir: str, at_time: float | None, materials: tuple[str, ...], max_damage: float,
+                  min_fill: float, experiment: str, top: int, out_path: str | None) -> None:
+    """Find the intact fragments of the target in a hydro snapshot (RUN_DIR/fragments.h5), print the largest
+    and plot their cumulative mass distribution and speeds (docs/analysis.md, "Fragments")."""
+    from impactpipe.analysis.fragments import NAKAMURA_FUJIWARA_1991
+    from impactpipe.analysis.plots import plot_fragments
+
+    from .fragments import run_fragments
+    from .stages import RESOLVED_CONFIG_FILE
+
+    config = _load_run_config(run_dir)
+    if not (Path(run_dir) / "hydro.h5").is_file():
+        click.echo(f"{run_dir}: no hydro.h5 (has the hydro stage finished?)", err=True)
+        sys.exit(2)
+    names = list(materials) or [config.scene.target.material]
+    half_domain = bool((derived.derive(config).get("domain") or {}).get("half_domain", False))
+    resolved = (Path(run_dir) / RESOLVED_CONFIG_FILE).read_text()
+    try:
+        fragments, target_mass, snapshot = run_fragments(Path(run_dir), names, half_domain, at_time, min_fill,
+                                                         max_damage, resolved)
+    except ValueError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+    reference = None if experiment == "none" else NAKAMURA_FUJIWARA_1991
+    fraction = fragments.mass / target_mass
+    click.echo(f"t = {snapshot.time:.6g} s: {fragments.count} fragment{'' if fragments.count == 1 else 's'} of "
+               f"{', '.join(names)} "
+               f"(damage < {max_damage:g}, fill >= {min_fill:g}); M_T = {target_mass:.6g} kg, "
+               f"{fraction.sum():.4f} of it in fragments")
+    click.echo(f"{'#':>3} {'m/M_T':>9} {'speed m/s':>10} {'a (m)':>10} {'b/a':>6} {'c/a':>6} {'cells':>7}")
+    for i in range(min(top, fragments.count)):
+        a, b, c = fragments.semi_axes[i]
+        click.echo(f"{i + 1:>3} {fraction[i]:>9.4g} {fragments.speed[i]:>10.4g} {a:>10.4g} "
+                   f"{b / a if a > 0 else 0.0:>6.3f} {c / a if a > 0 else 0.0:>6.3f} {fragments.cells[i]:>7d}")
+    if reference is not None:
+        click.echo(f"{reference.reference}: largest fragment {reference.largest_fraction:g} of M_T at "
+                   f"{reference.largest_speed:g} m/s; others V = {reference.speed_coefficient:g} "
+                   f"(m/M_T)^{reference.speed_exponent:g} m/s")
+    target = _figure_path(run_dir, out_path, "fragments.png")
+    if fragments.count:
+        with _writable(target, out_path):
+            plot_fragments(target, fraction, fragments.speed, experiment=reference)
+        click.echo(f"wrote {Path(run_dir) / 'fragments.h5'} and {target}")
+
+
 @main.command("export")
 @click.argument("run_dir", metavar="RUN_DIR", type=click.Path(file_okay=False, exists=True))
 @click.option("--time", "at_time", type=float, help="Snapshot time (s); the nearest snapshot is used (default: last).")
