@@ -99,6 +99,13 @@ class ExternalGravity:
         self.work = 0.0
         self._block_work = np.zeros(mesh.nblocks)
 
+    def spec(self) -> dict:
+        """What rebuilds this object (:func:`gravity_from_spec`)."""
+        return {"kind": "uniform", "acceleration": self.acceleration.tolist(), "work": self.work}
+
+    def prepare(self, state: HydroState, mesh: BlockMesh, partition=None) -> None:
+        """Nothing to compute before a step's kicks: the field is uniform."""
+
     def advance(self, state: HydroState, dt: float, block_lo: np.ndarray, block_dx: np.ndarray,
                 partition=None) -> None:
         """Apply the gravity impulse and work of one step of ``dt`` (s) to the interior cells of
@@ -116,3 +123,18 @@ class ExternalGravity:
         if partition is not None:
             partition.share_rows(self._block_work)
         self.work += float(self._block_work.sum())
+
+
+def gravity_from_spec(spec: dict, mesh: BlockMesh):
+    """The gravity object a ``spec()`` dict describes (checkpoints), its work restored: uniform
+    (:class:`ExternalGravity`) or the bodies' own (:class:`impactpipe.hydro.self_gravity.SelfGravity`)."""
+    if spec["kind"] == "uniform":
+        gravity = ExternalGravity(spec["acceleration"], mesh)
+    elif spec["kind"] == "self":
+        from impactpipe.hydro.self_gravity import SelfGravity
+
+        gravity = SelfGravity(mesh, order=spec["order"], mirror_y=spec["mirror_y"])
+    else:
+        raise ValueError(f"unknown gravity kind {spec['kind']!r} (uniform, self)")
+    gravity.work = float(spec["work"])
+    return gravity

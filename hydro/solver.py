@@ -29,6 +29,7 @@ from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.gravity import gravity_from_spec
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.hydro.parallel.distributed import WholeMesh
@@ -96,9 +97,12 @@ class Simulation:
             ``save(h5group)`` and ``mesh_changed(mesh)`` (see :mod:`impactpipe.hydro.tracers.motion`).
         refinement: when and where an adaptive mesh (``mesh.max_level`` > 0) refines; the
             default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
-        gravity: external gravity, applied in two half kicks around the stress update, or None: an
-            object with ``advance(state, dt, block_lo, block_dx)`` and ``work`` (J), see
-            :class:`impactpipe.hydro.gravity.ExternalGravity`.
+        gravity: gravity, applied in two half kicks around the stress update, or None: an object
+            with ``prepare(state, mesh, partition)`` (once per step, before the kicks),
+            ``advance(state, dt, block_lo, block_dx, partition)``, ``spec()`` (what a checkpoint
+            stores to rebuild it) and ``work`` (J): uniform
+            (:class:`impactpipe.hydro.gravity.ExternalGravity`) or the bodies' own
+            (:class:`impactpipe.hydro.self_gravity.SelfGravity`).
     """
 
     def __init__(self, mesh: BlockMesh, material_names: list[str], eos_specs: list[dict], state: HydroState,
@@ -183,6 +187,7 @@ class Simulation:
         self._good = {name: self.mesh.interior(arr).copy() for name, arr in self.state.arrays().items()}
         self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
+        self._good_gravity_work = None if self.gravity is None else self.gravity.work
 
     # ------------------------------------------------------------------ stepping
 
@@ -268,6 +273,8 @@ class Simulation:
         st = self.state
         half = 0.5 * dt
         part = self.partition
+        if self.gravity is not None:
+            self.gravity.prepare(st, self.mesh, part)
         if self.strength is not None:
             self.strength.load_stress(st, self.eos, part)
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
@@ -381,6 +388,7 @@ class Simulation:
         for dst, src in zip(self._good_counters, self._counter_arrays()):
             np.copyto(dst, src)
         self._good_clock = (self.time, self.step_count, self.cell_updates)
+        self._good_gravity_work = None if self.gravity is None else self.gravity.work
 
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step: the
@@ -395,6 +403,8 @@ class Simulation:
         for dst, src in zip(self._counter_arrays(), self._good_counters):
             np.copyto(dst, src)
         self.time, self.step_count, self.cell_updates = self._good_clock
+        if self.gravity is not None:
+            self.gravity.work = self._good_gravity_work
         self._failure[:] = 0
         if self.tracers is not None:
             self.partition.share_neighbourhood(self.state)
@@ -553,6 +563,7 @@ class Simulation:
                 fh.attrs["blocks_refined"] = self.blocks_refined
                 fh.attrs["blocks_coarsened"] = self.blocks_coarsened
                 fh.attrs["peak_pressure"] = self.peak_pressure
+                fh.attrs["gravity"] = json.dumps(None if self.gravity is None else self.gravity.spec())
                 mesh_grp = fh.create_group("mesh")
                 for key, value in self.mesh.to_arrays().items():
                     if isinstance(value, (str, int)):
@@ -602,6 +613,9 @@ class Simulation:
             sim.blocks_refined = int(fh.attrs.get("blocks_refined", 0))
             sim.blocks_coarsened = int(fh.attrs.get("blocks_coarsened", 0))
             sim.peak_pressure = float(fh.attrs.get("peak_pressure", 0.0))
+            gravity = json.loads(fh.attrs.get("gravity", "null"))
+            if gravity is not None:
+                sim.gravity = gravity_from_spec(gravity, mesh)
             sim.step_count = int(fh.attrs["step_count"])
             sim.cell_updates = int(fh.attrs["cell_updates"])
             dt_first = float(fh.attrs["dt_first"])

@@ -368,9 +368,6 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         if box.level > levels - 1:
             errors.append(f"hydro.refinement.boxes[{i}].level: {box.level} is finer than the finest level "
                           f"{levels - 1} (hydro.max_levels resolves to {levels}); use 0 to {levels - 1}")
-    if values.get("self_gravity"):
-        errors.append(f"hydro.self_gravity: self-gravity in the hydro stage is not available in this version "
-                      f"({values['self_gravity_rule']}); set hydro.self_gravity: false to run without it")
     return errors
 
 

@@ -185,6 +185,7 @@ SMALL_CASES = {
     "noh": ({"cells": 64}, ["gas"]),
     "interface_advection": ({"cells": 64}, ["heavy", "light"]),
     "column_collapse": ({"cells_per_height": 8}, ["sand"]),
+    "hydrostatic_body": ({"cells_per_radius": 8, "body": {"material": "basalt", "radius": 5.0e4}}, ["basalt"]),
 }
 
 

@@ -70,6 +70,10 @@ class WholeMesh:
         """The largest of ``value`` over the processes."""
         return value
 
+    def sum_integers(self, array: np.ndarray) -> None:
+        """Sum the int64 ``array`` over the processes, in place (integer sums do not depend
+        on the order, so the result is the same on any number of processes)."""
+
     def plans(self, mesh, axis: int) -> dict:
         """The coarse/fine plans of ``axis`` whose destination blocks this process advances
         (:func:`~impactpipe.hydro.amr.plans.axis_plans`)."""
@@ -233,6 +237,14 @@ class BlockRanges(WholeMesh):
         largest = float(self.comm.allreduce(value, op=MPI.MAX))
         self._count_allreduce(started)
         return largest
+
+    def sum_integers(self, array: np.ndarray) -> None:
+        """Sum the int64 ``array`` over the ranks, in place (one allreduce, SUM)."""
+        from mpi4py import MPI
+
+        started = time.perf_counter()
+        self.comm.Allreduce(MPI.IN_PLACE, array, op=MPI.SUM)
+        self._count_allreduce(started)
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """One Allreduce (MAX) of (rate, -first bad block): the serial run's values exactly."""

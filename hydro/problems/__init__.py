@@ -19,6 +19,7 @@ refinement rule flags the initial state (the impact: where the bodies' surfaces 
 from impactpipe.hydro.problems import (
     advection,
     column_collapse,
+    hydrostatic_body,
     impact,
     interface_advection,
     noh,
@@ -37,6 +38,7 @@ PROBLEMS = {
     "noh": noh,
     "interface_advection": interface_advection,
     "column_collapse": column_collapse,
+    "hydrostatic_body": hydrostatic_body,
 }
 
 __all__ = ["PROBLEMS"]

@@ -63,7 +63,7 @@ MIN_CELLS_PER_HEIGHT = 4
 #: kinetic energy has fallen below 1e-3 of its peak (docs/validation.md, "Granular column collapse").
 MAX_CFL = 0.2
 
-#: Checkpoints do not carry the external gravity or the rough floor (Simulation.save_checkpoint),
+#: Checkpoints do not carry the rough floor (Simulation.save_checkpoint),
 #: so the hydro stage restarts an interrupted run of this problem from t = 0.
 RESUMABLE = False
 

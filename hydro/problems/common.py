@@ -30,11 +30,12 @@ def material_list(materials: dict[str, dict], used: list[str]):
 
 
 def new_simulation(mesh: BlockMesh, names: list[str], specs: list[dict], state: HydroState, cfl: float,
-                   tensile_strength=None, strength=None, refinement=None) -> Simulation:
+                   tensile_strength=None, strength=None, refinement=None, gravity=None) -> Simulation:
     """A :class:`Simulation` over ``state`` with the given materials (``strength``: one resolved spec each;
-    ``refinement``: the :class:`~impactpipe.hydro.amr.regrid.RefinementRule` of an adaptive mesh)."""
+    ``refinement``: the :class:`~impactpipe.hydro.amr.regrid.RefinementRule` of an adaptive mesh;
+    ``gravity``: the scene's gravity object or None)."""
     return Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strength, strength=strength,
-                      refinement=refinement)
+                      refinement=refinement, gravity=gravity)
 
 
 def tensile_strengths(materials: dict[str, dict], used: list[str]) -> list[float]:

@@ -30,6 +30,11 @@ symmetry side).  Outflow everywhere else: what leaves is counted by the solver. 
 bodies' surfaces cross start at the finest level (so both spheres are resolved at dx from
 t = 0), and ``refinement`` (:class:`~impactpipe.hydro.amr.regrid.RefinementRule` keys)
 decides where the mesh refines and coarsens as the impact proceeds.
+With ``self_gravity`` the bodies' own gravity acts in the hydro stage
+(:class:`~impactpipe.hydro.self_gravity.SelfGravity`, expansion order ``self_gravity_order``;
+a 3d half domain stands for the whole body) and the target starts in hydrostatic equilibrium,
+at its reference density with the internal energy that gives the EOS the lithostatic pressure
+(:func:`lithostatic_pressure`); the projectile starts at p = 0.
 Volume fractions are set by ``subsamples`` point samples per cell and axis in the cells that
 the sphere's surface may cut (cells wholly inside or outside are set directly), weighted by
 the annular volume in 2d-cylindrical.
@@ -55,6 +60,7 @@ from impactpipe.hydro.problems.common import (
 )
 from impactpipe.hydro.problems.parameters import Parameter, Record
 from impactpipe.hydro.mesh.state import HydroState
+from impactpipe.hydro.self_gravity import DEFAULT_ORDER, G, SelfGravity
 from impactpipe.hydro.tracers.placement import place_on_grid, place_on_rays
 
 #: Material index of the projectile (the target is 0).
@@ -98,6 +104,8 @@ DEFAULTS = {
     "margin": PARAMETERS["domain_margin"].default,
     "subsamples": 4,
     "end_time": 1.0,
+    "self_gravity": False,
+    "self_gravity_order": DEFAULT_ORDER,
     **ADAPTIVE_DEFAULTS,
 }
 
@@ -223,11 +231,27 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     for k, (body, body_centre, body_velocity) in enumerate(bodies):
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         frac = sphere_fraction(mesh, body_centre, body["radius"], p["subsamples"])
-        state.set_material(mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
+        if k == 0 and p["self_gravity"]:
+            distance = np.sqrt((mesh.cell_centers() ** 2).sum(axis=1))
+            pressure = np.where(frac > 0.0, lithostatic_pressure(rho0, body["radius"], distance), 0.0)
+            state.set_material(mesh, frac, k, eos, rho0, body_velocity, pressure=pressure)
+        else:
+            state.set_material(mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
     strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
+    gravity = None
+    if p["self_gravity"]:
+        gravity = SelfGravity(mesh, order=p["self_gravity_order"], mirror_y=box["half_domain"])
     return new_simulation(mesh, names, specs, state, cfl, strengths,
                           strength_specs(materials, [tgt["material"], prj["material"]]),
-                          refinement=rule_from_config(p["refinement"]))
+                          refinement=rule_from_config(p["refinement"]), gravity=gravity)
+
+
+def lithostatic_pressure(density: float, radius: float, distance):
+    """Pressure (Pa) at ``distance`` r (m) from the centre of a uniform self-gravitating sphere
+    of ``density`` rho (kg/m^3) and ``radius`` R (m) in hydrostatic equilibrium:
+    p = (2 pi / 3) G rho^2 (R^2 - r^2) inside, 0 outside."""
+    r = np.asarray(distance, dtype=float)
+    return 2.0 * np.pi / 3.0 * G * density ** 2 * np.clip(radius * radius - r * r, 0.0, None)
 
 
 def surface_crosses(mesh: BlockMesh, center, radius: float) -> np.ndarray:

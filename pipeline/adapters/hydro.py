@@ -30,6 +30,7 @@ from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.output.io import append_snapshot, write_tracers
 from impactpipe.hydro.parallel.distributed import collect, distribute
 from impactpipe.hydro.problems import PROBLEMS, impact
+from impactpipe.hydro.self_gravity import DEFAULT_ORDER
 from impactpipe.hydro.solver import HydroFailure, Simulation
 from impactpipe.hydro.tracers.motion import Tracers
 
@@ -68,6 +69,7 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
             "cells_per_projectile_radius": config.hydro.cells_per_projectile_radius,
             "margin": values["domain"]["margin"],
             "end_time": values["end_time"],
+            "self_gravity": bool(values["self_gravity"]),
             **mesh,
         }
     return {**scene.model_dump(exclude={"problem", "geometry"}), **mesh}
@@ -107,6 +109,9 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     end_time = float(values["end_time"])
     work = ctx.run_dir / WORK_FILE
     checkpoint = ctx.run_dir / CHECKPOINT_FILE
+    if values.get("self_gravity"):
+        log.info("hydro: self-gravity on, multipole expansion of order %d about the centre of mass (%s)",
+                 DEFAULT_ORDER, values["self_gravity_rule"])
     sim, initial = _resume_or_start(config, values, work, checkpoint, ctx.stage_hash)
     times = [t for t in derived.snapshot_times(config, end_time) if t > sim.time]
     if sim.time == 0.0 and sim.step_count == 0:
@@ -157,6 +162,10 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     wall = time.perf_counter() - t_wall
     budget = conservation_budget(initial, sim.totals(), sim.floor_amounts,
                                  sim.gravity.work if sim.gravity is not None else 0.0)
+    if hasattr(sim.gravity, "potential_energy"):
+        budget["gravitational_potential_energy"] = sim.gravity.potential_energy
+        log.info("hydro: self-gravity did %.6g J of work; the potential energy of the mass is %.6g J",
+                 sim.gravity.work, sim.gravity.potential_energy)
     with h5py.File(work, "a") as f:
         storage.write_provenance(f, ctx.provenance(started, wall))
         group = f.require_group("budget")
@@ -237,7 +246,7 @@ def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: s
             same = f.attrs.get("stage_hash") == stage_hash
             initial = {key: f.attrs[f"initial_{key}"] for key in INITIAL_KEYS} if same else None
         if same and not getattr(PROBLEMS[config.scene.problem], "RESUMABLE", True):
-            log.info("hydro: the %s scene restarts from t = 0 (its checkpoints do not carry external gravity)",
+            log.info("hydro: the %s scene restarts from t = 0 (its checkpoints do not carry all of its setup)",
                      config.scene.problem)
             same = False
         if same:
