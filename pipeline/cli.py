@@ -82,7 +82,7 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
     replaced = _stage_functions_or_exit(stage_functions)
     if nranks > 1:
         _setup_logging(verbose, quiet)
-        _load_or_exit(config_path)
+        _exit_if_too_many_ranks(*_load_or_exit(config_path), nranks)
         arguments = ["run", config_path, *(["--out", out_dir] if out_dir else []),
                      *(["--from", from_stage] if from_stage else []), *(f"--stage={s}" for s in stages),
                      *(["--force"] if force else []), *(["-v"] * verbose), *(["--quiet"] if quiet else []),
@@ -105,6 +105,14 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
         _run_pipeline(config_path, out_dir, from_stage, stages, force, verbose, quiet, replaced)
     finally:
         ranks.release()
+
+
+def _exit_if_too_many_ranks(config, values, nranks: int) -> None:
+    """Exit 2 with one line, before anything is written, when the mesh has fewer blocks than ranks."""
+    message = ranks.too_many_ranks(config, values, nranks)
+    if message is not None:
+        click.echo(f"error: {message}", err=True)
+        sys.exit(2)
 
 
 def _stage_functions_or_exit(given: tuple[str, ...]) -> dict[str, str]:
@@ -146,6 +154,9 @@ def _run_pipeline(config_path: str, out_dir: str | None, from_stage: str | None,
     """``impactpipe run`` in this process (rank 0 of several)."""
     _setup_logging(verbose, quiet)
     config, values = _load_or_exit(config_path)
+    comm = ranks.world()
+    if comm is not None:
+        _exit_if_too_many_ranks(config, values, comm.size)
     run_dir = Path(out_dir or config.output or Path("runs") / config.name)
     try:
         with run_lock(run_dir), runstore.run_log(run_dir):

@@ -324,6 +324,13 @@ def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
     result = impactpipe_run(path, tmp_path / "run", "--ranks", "3")
     assert result.returncode == 2
     assert "more ranks (3) than blocks (2)" in result.stderr
+    assert not (tmp_path / "run").exists()  # refused before anything was written
+    direct = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-m", "impactpipe.pipeline.cli", "run",
+                             str(path), "--out", str(tmp_path / "direct"), "-q"], env=ENV, capture_output=True,
+                            text=True, timeout=300)
+    assert direct.returncode == 2, direct.stderr
+    assert "more ranks (3) than blocks (2)" in direct.stderr
+    assert not (tmp_path / "direct").exists()
 
 
 def test_ranks_without_mpi4py_name_the_extra_to_install(monkeypatch, tmp_path):
