@@ -64,9 +64,9 @@ def tracers_enabled(config: Config) -> tuple[bool, str]:
 def central_pressure(rho: float, radius: float) -> float:
     """Lithostatic pressure at the centre of a uniform self-gravitating sphere (Pa).
 
-    P_c = (2 pi / 3) G rho^2 R^2.
+    P_c = (2 pi / 3) G rho^2 R^2 (:func:`impactpipe.hydro.problems.impact.lithostatic_pressure` at r = 0).
     """
-    return 2.0 * math.pi / 3.0 * G * rho * rho * radius * radius
+    return float(impact.lithostatic_pressure(rho, radius, 0.0))
 
 
 def derive(config: Config) -> dict[str, Any]:
@@ -110,6 +110,10 @@ def derive(config: Config) -> dict[str, Any]:
     out["self_gravity"], out["self_gravity_rule"] = self_gravity_choice(
         config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
         c_t, out["end_time"])
+    out["initial_state"] = (
+        f"target in hydrostatic equilibrium under its own gravity: lithostatic pressure (2 pi / 3) G rho^2 "
+        f"(R^2 - r^2), {central_pressure(rho_t, scene.target.radius):.3g} Pa at the centre (self-gravity on)"
+        if out["self_gravity"] else "both bodies at their reference density and p = 0 (self-gravity off)")
     out["domain"] = impact_domain(config, geom, m_t + m_p, out["end_time"])
     if out["domain"] is not None:
         out["handoff_block_edge"], out["handoff_block_edge_rule"] = handoff_block_edge(
