@@ -366,7 +366,7 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
             floors[b, FLOOR_TENSILE_LIMIT] += 1
     if interior and flag != 0:
         floors[b, FLOOR_EOS_CLAMP] += 1
-    c2k = signal_speed_squared(c2b, rk, shear) if sheared else c2b
+    c2k = signal_speed_squared(c2b, rk, shear, rho0_m) if sheared else c2b
     r = W_MAT + W_STRIDE * m
     sc[i, r] = a
     sc[i, r + 1] = rk

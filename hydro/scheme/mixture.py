@@ -47,13 +47,19 @@ MATERIAL_ROWS = 6
 
 
 @njit(cache=True, inline="always")
-def signal_speed_squared(c2_bulk, rho, shear):
+def signal_speed_squared(c2_bulk, rho, shear, rho0):
     """Longitudinal signal speed squared c_K^2 + 4 G / (3 rho) (m^2/s^2).
 
     c2_bulk: bulk sound speed squared (m^2/s^2); rho: material density (kg/m^3);
     shear: the material's row of the shear table, G = shear[0] + shear[1] K (Pa) with the
     bulk modulus K = rho c_K^2 (:mod:`impactpipe.hydro.strength.parameters`); zeros without strength.
+    Material expanded below DISTENDED_FRACTION of its reference density ``rho0`` (kg/m^3)
+    carries no deviatoric stress (the strength update gives it none), so no shear wave: its
+    signal speed is the bulk one.  (A constant G would otherwise give fragments and spray
+    of density rho a speed sqrt(4 G / (3 rho)) without bound as rho falls.)
     """
+    if rho < DISTENDED_FRACTION * rho0:
+        return c2_bulk
     g = shear[0] + shear[1] * rho * max(c2_bulk, 0.0)
     if g > 0.0:
         return c2_bulk + 4.0 * g / (3.0 * rho)
@@ -100,12 +106,13 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
     ek = are / ar
     pk, c2k, flag = pressure_sound_speed(kind, params, table, rk, ek)
     p_min = -tensile_strength
-    if rk < DISTENDED_FRACTION * reference_density(kind, params, table):
+    rho0 = reference_density(kind, params, table)
+    if rk < DISTENDED_FRACTION * rho0:
         p_min = 0.0
     limited = pk < p_min
     if limited:
         pk = p_min
-    return True, rk, ek, pk, c2k, signal_speed_squared(c2k, rk, shear), flag, limited
+    return True, rk, ek, pk, c2k, signal_speed_squared(c2k, rk, shear, rho0), flag, limited
 
 
 @njit(cache=True, inline="always")

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed_in_line
+from impactpipe.hydro.eos import pressure_sound_speed_in_line, reference_density
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_speed_squared
 
@@ -64,6 +64,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
             row = eos_params[k]
             shear = shear_modulus[k]
             sheared = shear[0] != 0.0 or shear[1] != 0.0
+            rho0 = reference_density(kind, row, eos_table)
             for ix in range(gx, nx - gx):
                 for iy in range(gy, ny - gy):
                     for iz in range(gz, nz - gz):
@@ -76,7 +77,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] / ar
                         pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, rk, ek)
-                        w[2, ix, iy, iz] += ar * (signal_speed_squared(c2, rk, shear) if sheared else c2)
+                        w[2, ix, iy, iz] += ar * (signal_speed_squared(c2, rk, shear, rho0) if sheared else c2)
         rate = 0.0
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):

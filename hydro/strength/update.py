@@ -42,7 +42,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed_in_line, temperature_in_line
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
-from impactpipe.hydro.scheme.mixture import ALPHA_MIN
+from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
 from impactpipe.hydro.strength.parameters import NONE, P_BD, P_BP, ROCK
@@ -66,8 +66,9 @@ AMT_PLASTIC_WORK = 0
 NSAMOUNT = 1
 AMOUNT_NAMES = ("stress_work",)
 
-#: Material below this fraction of its reference density carries no deviatoric stress.
-STRENGTH_MIN_DENSITY_FRACTION = 0.5
+#: Material below this fraction of its reference density carries no deviatoric stress (the
+#: sweeps' and the time step's signal speed drop the shear term there too).
+STRENGTH_MIN_DENSITY_FRACTION = DISTENDED_FRACTION
 
 
 def stress_slots(ndim: int) -> int:
@@ -80,12 +81,15 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, work, lo, hi)
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
     blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards).
 
-    A cell holds material when rho = sum_k alpha_k rho_k > 0 and phi = sum_k alpha_k >=
-    PHI_VOID; its velocity is v = (rho v) / rho (m/s) and its fill min(phi, sum_k alpha_k
-    rho_k / rho0_k) (``rho0[M]`` the materials' reference densities, kg/m^3; materials
-    without one, rho0 = 0, count by volume): material expanded far below rho0 fills a cell
-    by volume but is as light as a spray, and the stress tractions scale with it.  Other
-    cells get velocity, fill and stress 0.
+    A cell's fill is min(phi, sum_k alpha_k rho_k / rho0_k), phi = sum_k alpha_k
+    (``rho0[M]`` the materials' reference densities, kg/m^3; materials without one, rho0 = 0,
+    count by volume): material expanded far below rho0 fills a cell by volume but is as light
+    as a spray, and the stress tractions scale with it, so its acceleration stays that of a
+    full cell.  A cell holds material when rho = sum_k alpha_k rho_k > 0 and its fill is at
+    least PHI_VOID; its velocity is v = (rho v) / rho (m/s).  Other cells (void, and spray
+    thinner than PHI_VOID by mass) get velocity, fill and stress 0: no traction acts on them.
+    (A fill floored at PHI_VOID instead overstated the traction on thinner spray by its ratio
+    to the true fill and drove cells of 1e-6 kg/m^3 to 1e5 m/s in a laboratory impact.)
 
     Mixture stress S = sum_k alpha_k S_k (Pa), S_k = (alpha_k rho_k S_k) / (alpha_k rho_k)
     from the transported amounts ``arhoq``; cells without the material and strengthless
@@ -112,14 +116,15 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, work, lo, hi)
                         phi += alpha[b, k, ix, iy, iz]
                         r0 = rho0[k]
                         solid += ar / r0 if r0 > 0.0 else alpha[b, k, ix, iy, iz]
-                    if not (rho > 0.0 and phi >= PHI_VOID):
+                    fill = min(phi, solid)
+                    if not (rho > 0.0 and fill >= PHI_VOID):
                         for d in range(3):
                             work[b, WK_V + d, ix, iy, iz] = 0.0
                         work[b, WK_PHI, ix, iy, iz] = 0.0
                         continue
                     for d in range(3):
                         work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
-                    work[b, WK_PHI, ix, iy, iz] = max(min(phi, solid), PHI_VOID)
+                    work[b, WK_PHI, ix, iy, iz] = fill
                     for k in range(nmat):
                         ar = arho[b, k, ix, iy, iz]
                         a = alpha[b, k, ix, iy, iz]
