@@ -35,6 +35,7 @@ from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
+from impactpipe.hydro.strength.parameters import GRADY_KIPP, pack_damage
 from impactpipe.hydro.scheme.directional import sweep
 from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_NAMES,
@@ -167,9 +168,20 @@ class Simulation:
         self.amounts = np.zeros((nb, NAMOUNT))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
-        self.strength = MaterialStrength(arrays, mesh, state.nmat) if arrays.enabled else None
+        damage = pack_damage([(s or {}).get("damage") for s in (self.strength_specs or [None] * state.nmat)])
+        gradual = damage.model == GRADY_KIPP
+        if (gradual & ~(self.tensile_strength > 0.0)).any():
+            k = int(np.flatnonzero(gradual & ~(self.tensile_strength > 0.0))[0])
+            raise ValueError(f"material {k}: damage model grady_kipp needs a tensile strength Y_T > 0 (the most "
+                             f"tension the intact material holds, where its yield curve closes)")
+        #: (M,) True for the materials whose tension is borne as (1 - D) of the EOS tension (Grady-Kipp
+        #: fracture, :func:`impactpipe.hydro.scheme.mixture.tension_factor`); None when there are none.
+        self.grady_kipp = gradual if gradual.any() else None
+        self.strength = MaterialStrength(arrays, mesh, state.nmat, damage) if arrays.enabled else None
         if self.strength is not None:
-            self.strength.prepare_state(state)
+            self.strength.prepare_state(state, self.eos)
+        elif self.grady_kipp is not None:
+            raise ValueError("damage model grady_kipp needs a strength model with a yield strength")
         elif state.arhoq.shape[1]:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
@@ -235,7 +247,8 @@ class Simulation:
                   st.momentum[own], st.energy[own], self.mesh.block_lo[own], self.mesh.block_dx[own],
                   self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
                   self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
-                  self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils)
+                  self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
+                  self.grady_kipp)
             failed = self.partition.first_failure(self._failure)
             if failed >= 0:
                 self._raise_sweep_failure(failed)
@@ -339,7 +352,8 @@ class Simulation:
         for axis in range(self.mesh.ndim):
             fill_state_ghosts(self.state, self.mesh, axis)
         refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
-                                                          self.tensile_strength, self.refinement, self.peak_pressure)
+                                                          self.tensile_strength, self.refinement, self.peak_pressure,
+                                                          self.grady_kipp)
         return refine, coarsen
 
     def _regrid(self) -> bool:
@@ -497,7 +511,7 @@ class Simulation:
         pressure, sound, eint, temp = (np.zeros(shape) for _ in range(4))
         cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
                             self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, pressure,
-                            sound, eint, temp)
+                            sound, eint, temp, self.grady_kipp)
         return self.partition.largest(float(pressure.max()))
 
     def snapshot(self) -> Snapshot:
@@ -511,7 +525,7 @@ class Simulation:
         pressure, sound, eint, temp = (np.zeros(shape) for _ in range(4))
         cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
                             self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength,
-                            pressure[own], sound[own], eint[own], temp[own])
+                            pressure[own], sound[own], eint[own], temp[own], self.grady_kipp)
         arho = mesh.interior(st.arho).copy()
         alpha = mesh.interior(st.alpha).copy()
         velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)

@@ -28,7 +28,9 @@ ROCK_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "Y_c", "mu_d", "T_melt", "xi", "P_bd", 
 VON_MISES_KEYS = ("yield_strength", "poisson")
 OPTIONAL_STRENGTH_KEYS = ("shear_modulus", "Y_T", "initial_damage")
 GRADY_KIPP_KEYS = ("weibull_m", "weibull_k")
-OPTIONAL_GRADY_KIPP_KEYS = ("young_modulus",)
+OPTIONAL_GRADY_KIPP_KEYS = ("young_modulus", "flaw_cross_section")
+#: Integer keys of a Grady-Kipp block: the seed and the number of flaws of each material's draw.
+FLAW_DRAW_KEYS = ("flaw_seed", "flaw_count")
 #: Thermal-softening exponent for GEO presets, which publish none (the ROCK presets use 1.2).
 GEO_DEFAULT_XI = 1.2
 
@@ -121,4 +123,8 @@ def resolve_damage(spec: dict[str, Any] | None) -> dict[str, Any]:
         if key not in params:
             raise KeyError(key)
     keep = GRADY_KIPP_KEYS + OPTIONAL_GRADY_KIPP_KEYS
-    return {"model": model, **{k: float(params[k]) for k in keep if k in params}}
+    resolved = {"model": model, **{k: float(params[k]) for k in keep if k in params}}
+    for key in FLAW_DRAW_KEYS:
+        if key in params:
+            resolved[key] = int(params[key])
+    return resolved

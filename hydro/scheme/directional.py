@@ -160,7 +160,7 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux, plain_pencils):
+          floors, amounts, failure, face_flux, plain_pencils, grady_kipp=None):
     """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -170,6 +170,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     ``face_flux[b, side, :, j1, j2]`` for refluxing (:mod:`impactpipe.hydro.amr.transfer`).
     With ``plain_pencils`` a pencil that one material fills alone takes the plain path
     (:mod:`impactpipe.hydro.scheme.plain_pencils`); without, every pencil takes the general path.
+    ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
+    (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), None in scenes without them.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
@@ -268,13 +270,13 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
-                                          shear_m, True, tensile_strength, nq, wq_row, floors, b)
+                                          shear_m, True, tensile_strength, nq, wq_row, floors, b, grady_kipp)
                     else:
                         for i in range(ncell):
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
-                                          shear_m, False, tensile_strength, nq, wq_row, floors, b)
+                                          shear_m, False, tensile_strength, nq, wq_row, floors, b, grady_kipp)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
@@ -284,7 +286,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     for i in range(ncell):
                         _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
                                      arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                                     nq, wq_row, floors)
+                                     nq, wq_row, floors, grady_kipp)
                     # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                     for i in range(1, ncell - 1):
                         _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
@@ -335,7 +337,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
 
 @njit(cache=True, inline="always")
 def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
-                  kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b):
+                  kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
     (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
@@ -347,7 +349,9 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     k's is ``ia + (k - m) cs``, ``cs`` the length of a column), ``imn``, ``im1``, ``im2`` of the
     normal and transverse momentum, ``iq`` of material m's first transported scalar (scalar j
     at ``iq + j cs``).  ``sheared``: whether material m's shear table ``shear`` is not zero
-    (without shear modulus its signal speed is the bulk sound speed, bit for bit).
+    (without shear modulus its signal speed is the bulk sound speed, bit for bit).  A Grady-Kipp
+    material (``grady_kipp[m]``) bears (1 - D) of its EOS tension, as in
+    :func:`impactpipe.hydro.scheme.mixture.material_state`.
     """
     a = alpha_f[ia]
     ar = arho_f[ia]
@@ -357,6 +361,9 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     ytk = tensile_strength[m]
     if nq > 0 and ar > 0.0:
         ytk = tension_left(ytk, arhoq_f[iq + (nq - 1) * cs], ar)
+        if grady_kipp is not None:
+            if grady_kipp[m] and pk < 0.0:
+                pk *= tension_left(1.0, arhoq_f[iq + (nq - 1) * cs], ar)
     p_min = -ytk
     if rk < DISTENDED_FRACTION * rho0_m:
         p_min = 0.0
@@ -403,7 +410,7 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
 
 @njit(cache=True, inline="always")
 def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, arhoq, mom, eos_kind, eos_params,
-                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors):
+                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors, grady_kipp):
     """Step 1 for cell i of the pencil: the cell values of the W rows.
 
     The mixture and per-material states from :func:`impactpipe.hydro.scheme.mixture.mixture_state`
@@ -414,7 +421,7 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
         alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-        False, sc, W_MAT, i)
+        False, sc, W_MAT, i, grady_kipp)
     if interior and clamps > 0:
         floors[b, FLOOR_EOS_CLAMP] += clamps
     if interior and limits > 0:

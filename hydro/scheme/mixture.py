@@ -10,7 +10,11 @@ then (:func:`material_state`)
     c_k^2 = c_K,k^2 + 4 G_k / (3 rho_k)               (:func:`signal_speed_squared`)
 
 with P_k, c_K,k the material's EOS pressure and bulk sound speed, Y_T,k its tensile strength,
-D_k its damage (:func:`damaged_tensile_strength`) and G_k its shear modulus.  The cell's
+D_k its damage (:func:`damaged_tensile_strength`) and G_k its shear modulus.  A material whose
+damage grows by Grady-Kipp (``grady_kipp[k]``, docs/strength.md) bears (1 - D_k) of its EOS
+tension, p_k = max((1 - D_k) P_k, -Y_T,k (1 - D_k)) for P_k < 0 (:func:`tension_factor`):
+intact, it holds tension up to Y_T (where the yield curve closes), damaged, that share of it,
+none once D_k = 1; the kernels get ``grady_kipp`` None in scenes without it.  The cell's
 mixture (:func:`mixture_state`, the gather every kernel that needs the cell's pressure or
 signal speed uses: the sweeps, the time step, the cell thermodynamics of the output and the
 refinement criteria) is the equal-strain mixture, void a zero-pressure component:
@@ -89,13 +93,26 @@ def tension_left(tensile_strength, damage_amount, ar):
 
 
 @njit(cache=True, inline="always")
-def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
+def tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar):
+    """Share 1 - D_k (-) of its EOS tension that material k bears: 1 - D for a Grady-Kipp material
+    (``grady_kipp[k]``, D from the last of its ``nq`` transported scalars, ``ar`` = alpha_k rho_k
+    > 0), 1 otherwise (instant failure: full tension up to Y_T)."""
+    if grady_kipp is None:
+        return 1.0
+    if not grady_kipp[k] or nq == 0 or not ar > 0.0:
+        return 1.0
+    return tension_left(1.0, arhoq[b, nq * k + nq - 1, ix, iy, iz], ar)
+
+
+@njit(cache=True, inline="always")
+def material_state(a, ar, are, kind, params, table, shear, tensile_strength, tension_share=1.0):
     """Thermodynamic state of one material in one cell from its conserved amounts.
 
     a = alpha_k (-), ar = alpha_k rho_k (kg/m^3), are = alpha_k rho_k e_k (J/m^3).
     Returns (present, rho_k, e_k, p_k, c2_bulk, c2_signal, eos_flag, tension_limited):
     rho_k = ar / a, e_k = are / ar, p_k = max(P(rho_k, e_k), -Y_T) with Y_T =
-    ``tensile_strength`` (Pa) for rho_k >= DISTENDED_FRACTION rho0, else max(P, 0); c2_bulk
+    ``tensile_strength`` (Pa) for rho_k >= DISTENDED_FRACTION rho0, else max(P, 0), a tension
+    P < 0 first scaled by ``tension_share`` (1 - D of a Grady-Kipp material; 1 by default); c2_bulk
     the EOS bulk sound speed squared and c2_signal the time-step signal speed squared
     (:func:`signal_speed_squared` with the shear-table row ``shear``).  A material below
     ALPHA_MIN or without mass is absent (present False, zeros).
@@ -105,6 +122,8 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
     rk = ar / a
     ek = are / ar
     pk, c2k, flag = pressure_sound_speed(kind, params, table, rk, ek)
+    if tension_share != 1.0 and pk < 0.0:
+        pk *= tension_share
     p_min = -tensile_strength
     rho0 = reference_density(kind, params, table)
     if rk < DISTENDED_FRACTION * rho0:
@@ -117,13 +136,14 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength):
 
 @njit(cache=True, inline="always")
 def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
-                  tensile_strength, with_temperature, materials, row, col):
+                  tensile_strength, with_temperature, materials, row, col, grady_kipp=None):
     """The mixture state of cell (ix, iy, iz) of block b; see the module docstring.
 
     Fields are ``(NB, C, NX, NY, NZ)``: ``alpha``, ``arho``, ``arhoe`` with C = M materials,
     ``arhoq`` the transported scalars (M * NQ columns, the damage of material k in its last);
     ``eos_kind``, ``eos_params``, ``eos_table`` the packed EOS (:mod:`impactpipe.hydro.eos`),
-    ``shear_modulus`` the (M, 2) shear table, ``tensile_strength`` (M,) Y_T (Pa).
+    ``shear_modulus`` the (M, 2) shear table, ``tensile_strength`` (M,) Y_T (Pa), ``grady_kipp``
+    (M,) booleans of the Grady-Kipp materials or None (:func:`tension_factor`).
 
     Returns (rho, phi, p, K, rho e, rho T, eos_clamps, tension_limits): the sums of the
     module docstring (rho T only with ``with_temperature``, else 0) and how many present
@@ -149,7 +169,8 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
         rho += ar
         ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
-            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k], ytk)
+            a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k], ytk,
+            tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar))
         if present:
             p += a * pk
             kmod += ar * c2k

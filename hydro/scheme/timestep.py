@@ -100,12 +100,13 @@ def allocate_rate_work(threads: int, padded_shape) -> np.ndarray:
 
 @njit(cache=True, parallel=True)
 def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                        pressure, sound_speed, specific_energy, temp):
+                        pressure, sound_speed, specific_energy, temp, grady_kipp=None):
     """Interior-cell mixture thermodynamics into ``(NB, nx, ny, nz)`` outputs.
 
     From :func:`impactpipe.hydro.scheme.mixture.mixture_state`: pressure = sum_k alpha_k max(p_k,
     -Y_T,k (1 - D_k)) (Pa), the material pressures limited by the tensile strengths left by
-    the damage D_k as in the sweeps; sound_speed = sqrt(sum_k alpha_k rho_k c_k^2 / rho) (m/s),
+    the damage D_k as in the sweeps (Grady-Kipp materials, ``grady_kipp``: (1 - D_k) of their
+    tension); sound_speed = sqrt(sum_k alpha_k rho_k c_k^2 / rho) (m/s),
     the equal-strain mixture's; specific_energy = sum_k alpha_k rho_k e_k / rho (J/kg);
     temp = sum_k alpha_k rho_k T_k / rho (K).  Void cells get zeros.
     """
@@ -119,7 +120,7 @@ def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_tab
                 for iz in range(gz, nz - gz):
                     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
                         alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
-                        tensile_strength, True, None, 0, 0)
+                        tensile_strength, True, None, 0, 0, grady_kipp)
                     jx = ix - gx
                     jy = iy - gy
                     jz = iz - gz

@@ -25,6 +25,24 @@ law is not extended by a random number of extra flaws.  With equal cells about o
 ln N draws stays empty (N (1 - 1/N)^(N ln N) -> 1); cells with a small weight w_i (partly
 filled surface cells) stay empty more often: they have count 0 and no tensile flaw.
 
+In the hydro stage a cell's flaws travel with the material (the state's ``arhoq``, mass
+weighted like the stress) as a local Weibull law per unit mass (:func:`flaw_law_per_mass`):
+
+    n_act,m(eps) = min(max(a eps^m - b, 0), n_m)        (flaws per kg active at strain eps)
+
+the straight line in eps^m through the cell's first flaw (1 active at eps_min) and its last
+(n at eps_max), a = (n - 1) / (M (eps_max^m - eps_min^m)), b = max(a M eps_min^m - 1, 0) / M,
+n_m = n / M, M = rho0 v f the cell's material mass (a cell with one flaw takes the body's slope,
+a = k / rho0; a cell without flaws has a = b = n_m = 0).  b >= 0 keeps every flaw inactive
+without strain: a cell whose first flaw lies within one flaw spacing of zero strain takes the
+line through the origin instead (below its first flaw, at most one flaw early).  The three are amounts per unit mass,
+so transport, mixing, AMR restriction and prolongation conserve sum(M a), sum(M b) and the
+flaw count sum(M n_m): a part of a cell gets its share of the cell's law (1/8 of the law to
+each of 8 children), and a mixture of two cells gets the sum of their laws wherever neither is
+cut off (below its first flaw or above its last); only those cut-offs are not additive.
+The discrete steps of the cell's law at eps_min and eps_max become ramps one flaw spacing
+wide (below eps_min and above eps_max, the partial flaw of the continuum law).
+
 The flaws are drawn in chunks of :data:`CHUNK` with numpy (no Python loop per flaw or per cell).
 """
 
@@ -101,3 +119,38 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
     eps_min = np.where(has, activation_strain(np.where(has, first, 1), body_volume, weibull_m, weibull_k), 0.0)
     eps_max = np.where(has, activation_strain(np.where(has, last, 1), body_volume, weibull_m, weibull_k), 0.0)
     return CellFlaws(eps_min, eps_max, count)
+
+
+class FlawLaw(NamedTuple):
+    """The local Weibull law per unit mass of each cell (module docstring): slope a, offset b and
+    flaw count n_m, all in flaws per kg (a per unit eps^m)."""
+
+    slope: np.ndarray
+    offset: np.ndarray
+    count: np.ndarray
+
+
+def flaw_law_per_mass(flaws: CellFlaws, material_mass: np.ndarray, weibull_m: float, weibull_k: float,
+                      reference_density: float) -> FlawLaw:
+    """The cells' local Weibull laws per unit mass from their drawn flaws (module docstring).
+
+    Args:
+        flaws: each cell's eps_min, eps_max and count (:func:`assign_flaws`).
+        material_mass: (N,) the body's mass in each cell M = rho0 v f (kg); cells with flaws need M > 0.
+        weibull_m, weibull_k: the body's Weibull law (-, m^-3).
+        reference_density: rho0 (kg/m^3), for the body's slope k / rho0 of cells with one flaw.
+    """
+    mass = np.asarray(material_mass, dtype=float).ravel()
+    count = np.asarray(flaws.count, dtype=float)
+    has = count > 0
+    if (mass[has] <= 0.0).any():
+        raise ValueError("a cell with flaws needs a positive material mass")
+    lo = np.asarray(flaws.eps_min, dtype=float) ** weibull_m
+    hi = np.asarray(flaws.eps_max, dtype=float) ** weibull_m
+    safe_mass = np.where(has, mass, 1.0)
+    several = count > 1
+    slope = np.where(several, (count - 1.0) / np.where(several, hi - lo, 1.0) / safe_mass,
+                     weibull_k / reference_density)
+    slope = np.where(has, slope, 0.0)
+    offset = np.where(has, np.maximum(slope * lo - 1.0 / safe_mass, 0.0), 0.0)
+    return FlawLaw(slope, offset, np.where(has, count / safe_mass, 0.0))

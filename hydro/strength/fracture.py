@@ -33,6 +33,15 @@ Weibull law n(eps) = k eps^m (Benz & Asphaug 1994).  Per step of dt (s) and mate
 
 Damaged material (:func:`damaged_pressure`, :func:`damaged_deviator`) carries (1 - D) of
 the deviatoric stress and of tension and the full pressure in compression.
+
+In the hydro stage the flaws travel with the material as a local Weibull law per unit mass
+(:func:`active_flaws_per_mass`; :mod:`impactpipe.hydro.strength.flaws`,
+:func:`~impactpipe.hydro.strength.flaws.flaw_law_per_mass`), and the rate is written with the
+density of active flaws, n_act / v = rho n_act,m (:func:`damage_growth_rate_of_density`):
+
+    d(D^(1/3))/dt = c_g (4 pi rho n_act,m / 3)^(1/3)
+
+the same rate as n_act^(1/3) c_g / R_s for the n_act = rho v n_act,m flaws of any volume v.
 """
 
 from __future__ import annotations
@@ -82,9 +91,9 @@ def largest_principal_stress(pressure, sxx, syy, szz, sxy, sxz, syz):
     b = syy - q
     c = szz - q
     r2 = (a * a + b * b + c * c + 2.0 * off) / 6.0
-    if r2 <= 0.0:
-        return q - pressure
     r = math.sqrt(r2)
+    if r2 * r <= 0.0:  # isotropic, or so nearly that r^3 underflows
+        return q - pressure
     det = (a * (b * c - syz * syz) - sxy * (sxy * c - syz * sxz) + sxz * (sxy * syz - b * sxz)) / (r2 * r)
     half = min(max(0.5 * det, -1.0), 1.0)
     return q + 2.0 * r * math.cos(math.acos(half) / 3.0) - pressure
@@ -160,3 +169,25 @@ def damaged_pressure(pressure, damage):
 def damaged_deviator(deviatoric_stress, damage):
     """Deviatoric stress component (Pa) borne by material of damage D: (1 - D) S."""
     return (1.0 - damage) * deviatoric_stress
+
+
+@njit(cache=True, inline="always")
+def active_flaws_per_mass(strain, slope, offset, count, weibull_m):
+    """Active flaws per unit mass (1/kg) at tensile ``strain`` eps (-) from the transported local law:
+
+        n_act,m = min(max(a eps^m - b, 0), n_m)
+
+    with the slope a (1/kg), offset b (1/kg) and count n_m (1/kg) per unit mass of
+    :func:`impactpipe.hydro.strength.flaws.flaw_law_per_mass`; 0 without tension."""
+    if strain <= 0.0 or count <= 0.0:
+        return 0.0
+    return min(max(slope * strain ** weibull_m - offset, 0.0), count)
+
+
+@njit(cache=True, inline="always")
+def damage_growth_rate_of_density(active_density, crack_growth_speed):
+    """d(D^(1/3))/dt = c_g (4 pi n / 3)^(1/3) (1/s) for n active flaws per unit volume (m^-3):
+    n_act^(1/3) c_g / R_s of :func:`damage_growth_rate` for the n_act = n v flaws of a volume v."""
+    if active_density <= 0.0:
+        return 0.0
+    return crack_growth_speed * (4.0 * math.pi * active_density / 3.0) ** (1.0 / 3.0)

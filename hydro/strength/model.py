@@ -25,6 +25,19 @@ half kicks is neutral for elastic waves up to the CFL limit; updating it before 
 It exists only when some material has a yield model; a strengthless scene allocates none
 of its arrays and runs none of its kernels.
 
+Grady-Kipp fracture (a material whose damage model is ``grady_kipp``,
+:func:`impactpipe.hydro.strength.parameters.pack_damage`): the state carries NFLAW more
+scalars per material, the cells' local Weibull laws per unit mass
+(:mod:`impactpipe.hydro.strength.update`), drawn by :meth:`MaterialStrength.prepare_state`
+when the state is new (not from a checkpoint): per Grady-Kipp material k, its flaws are
+assigned over the cells it fills (:func:`impactpipe.hydro.strength.flaws.assign_flaws`, body
+volume V = sum v_i alpha_k, weight v_i alpha_k, n_tot = N ln N or the block's ``flaw_count``) with the generator
+``numpy.random.default_rng([flaw_seed, k])``.  On a 1-D mesh a cell of width dx holds the flaws
+of the volume dx A, A the block's ``flaw_cross_section`` (m^2, default 1): the flaws per unit
+mass do not depend on A, their sampling does (a cell holds k A dx eps^m flaws below eps, and a
+fixed ``flaw_count`` reaches the strain (n_tot / (k A L))^(1/m) over a length L).  A material made of several bodies (two plates
+of one material) draws one law over their union, which has the statistics of each part.
+
 Rough walls (:meth:`MaterialStrength.set_rough_wall`): a reflecting domain face can be made
 no-slip for the stress.  Its ghosts then mirror the tangential velocity with the sign
 flipped (the velocity is zero on the wall, so the velocity gradient sees the shear against
@@ -46,10 +59,14 @@ from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
-from impactpipe.hydro.strength.parameters import DAMAGE0, StrengthArrays
+from impactpipe.hydro.eos import reference_density
+from impactpipe.hydro.strength.flaws import assign_flaws, flaw_law_per_mass
+from impactpipe.hydro.strength.parameters import (
+    DAMAGE0, GRADY_KIPP, NONE, WEIBULL_K, WEIBULL_M, DamageArrays, StrengthArrays, pack_damage,
+)
 from impactpipe.hydro.strength.update import (
-    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, cell_velocity_and_stress,
-    stress_slots, update_stress,
+    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NFLAW, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, cell_velocity_and_stress,
+    scalar_slots, stress_slots, update_stress,
 )
 
 #: Work slots whose sign flips in a reflecting ghost, per wall-normal axis (velocity and shear stress).
@@ -65,14 +82,23 @@ class MaterialStrength:
         arrays: packed strength parameters (:func:`impactpipe.hydro.strength.parameters.pack_strength`).
         mesh: the block mesh.
         nmat: number of materials M.
+        damage: packed tensile damage models (:func:`impactpipe.hydro.strength.parameters.pack_damage`);
+            instant failure for every material when None.  A Grady-Kipp material needs a yield model.
     """
 
-    def __init__(self, arrays: StrengthArrays, mesh: BlockMesh, nmat: int):
+    def __init__(self, arrays: StrengthArrays, mesh: BlockMesh, nmat: int, damage: DamageArrays | None = None):
         self.arrays = arrays
         self.mesh = mesh
         self.nmat = nmat
+        self.damage = damage if damage is not None else pack_damage([None] * nmat)
+        gradual = self.damage.model == GRADY_KIPP
+        if (gradual & (arrays.model == NONE)).any():
+            k = int(np.flatnonzero(gradual & (arrays.model == NONE))[0])
+            raise ValueError(f"material {k}: damage model grady_kipp needs a strength model with a yield strength")
+        #: whether flaws are carried (some material fractures by Grady-Kipp)
+        self.fracture = self.damage.fracture
         self.ns = stress_slots(mesh.ndim)
-        self.nq = self.ns + 2
+        self.nq = scalar_slots(mesh.ndim, self.fracture)
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
         self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
@@ -104,15 +130,42 @@ class MaterialStrength:
         self.counts = summed_rows(self.counts, mesh.nblocks)
         self.amounts = summed_rows(self.amounts, mesh.nblocks)
 
-    def prepare_state(self, state: HydroState) -> None:
+    def prepare_state(self, state: HydroState, eos=None) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
-        initial damage from the parameters) unless it already has them (a checkpoint)."""
+        initial damage from the parameters) and, with Grady-Kipp fracture, the flaws of each
+        Grady-Kipp material drawn over its cells (module docstring; needs the packed ``eos`` for
+        the reference densities), unless it already has them (a checkpoint)."""
         want = self.nmat * self.nq
         if state.arhoq.shape[1] == want:
             return
         state.arhoq = np.zeros((self.mesh.nblocks, want) + self.mesh.padded_shape)
         for k in range(self.nmat):
-            state.arhoq[:, k * self.nq + self.ns + 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
+            state.arhoq[:, k * self.nq + self.nq - 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
+        for k in np.flatnonzero(self.damage.model == GRADY_KIPP):
+            self._draw_flaws(state, int(k), eos)
+
+    def _draw_flaws(self, state: HydroState, k: int, eos) -> None:
+        """Flaws of material k over the cells it fills, as mass-weighted flaw laws in ``state.arhoq``."""
+        mesh = self.mesh
+        fill = mesh.interior(state.alpha)[:, k]
+        mass = mesh.interior(state.arho)[:, k]
+        volume = mesh.cell_volumes() * (self.damage.cross_section[k] if mesh.ndim == 1 else 1.0)
+        cells = np.flatnonzero((fill > 0.0) & (mass > 0.0))
+        if cells.size == 0:
+            return
+        m, kw = self.damage.params[k, WEIBULL_M], self.damage.params[k, WEIBULL_K]
+        material_volume = volume.ravel()[cells] * fill.ravel()[cells]
+        flaws = assign_flaws(material_volume, float(material_volume.sum()), m, kw,
+                             np.random.default_rng([int(self.damage.seed[k]), k]),
+                             n_flaws=int(self.damage.flaw_count[k]) or None)
+        rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
+        cell_mass = volume.ravel()[cells] * mass.ravel()[cells]
+        law = flaw_law_per_mass(flaws, cell_mass, m, kw, rho0)
+        first = k * self.nq + self.ns + 1
+        for j, per_mass in enumerate(law):
+            amount = np.zeros(fill.size)
+            amount[cells] = per_mass * mass.ravel()[cells]
+            mesh.interior(state.arhoq)[:, first + j] = amount.reshape(fill.shape)
 
     def load_stress(self, state: HydroState, eos, partition) -> None:
         """Cell velocities, fills and the transported mixture stress S^n (from ``arhoq``) of the
@@ -120,7 +173,7 @@ class MaterialStrength:
         work arrays, then their ghosts: what the first half kick (:meth:`kick`) uses."""
         lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._reference_densities(eos),
-                                 self.arrays.model, self.work, lo, hi)
+                                 self.arrays.model, self.ns, self.work, lo, hi)
         for axis in range(self.mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns))
 
@@ -135,9 +188,16 @@ class MaterialStrength:
         cell_velocities(state.arho, state.momentum, self.work, lo, hi)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_V, WK_V + 3))
-        update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
-                      mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table, self._reference_densities(eos),
-                      a.model, a.params, a.shear, a.tensile_strength, self.work, self.counts, self.amounts, lo, hi)
+        if self.fracture:
+            update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
+                          mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
+                          self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
+                          self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params)
+        else:
+            update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
+                          mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
+                          self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
+                          self.counts, self.amounts, lo, hi)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns))
 
@@ -238,7 +298,7 @@ class MaterialStrength:
             for j in range(self.ns):
                 stress[j] += np.where(ar > 0.0, alpha[:, k] * arhoq[:, k * self.nq + j] / safe, 0.0)
             eps += arhoq[:, k * self.nq + self.ns]
-            dmg += arhoq[:, k * self.nq + self.ns + 1]
+            dmg += arhoq[:, k * self.nq + self.nq - 1]
             mass += ar
         safe = np.where(mass > 0.0, mass, 1.0)
         out = {f"deviatoric_stress_{n}": stress[j] for j, n in enumerate(names)}

@@ -118,20 +118,36 @@ class DamageArrays(NamedTuple):
 
     model: (M,) int64 damage model codes (INSTANT, GRADY_KIPP); params: (M, NDAMAGE) rows of
     Weibull m (-), Weibull k (m^-3) and Young's modulus E (Pa; 0: E = 9 K G / (3 K + G) from
-    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`).
+    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`); seed: (M,)
+    int64 seed of each material's flaw draw (``flaw_seed``, default 0); flaw_count: (M,) int64
+    number of flaws drawn for each material (``flaw_count``; 0: N ln N for its N cells,
+    :func:`impactpipe.hydro.strength.flaws.default_flaw_count`); cross_section: (M,) the area (m^2)
+    of the bar a 1-D mesh stands for in the flaw draw (``flaw_cross_section``, default 1): a 1-D
+    cell of width dx holds the flaws of the volume dx A.
     """
 
     model: np.ndarray
     params: np.ndarray
+    seed: np.ndarray
+    flaw_count: np.ndarray
+    cross_section: np.ndarray
+
+    @property
+    def fracture(self) -> bool:
+        """True when some material's tensile damage follows Grady-Kipp (flaws are carried)."""
+        return bool((self.model == GRADY_KIPP).any())
 
 
 def pack_damage(specs: list[dict | None]) -> DamageArrays:
     """Pack resolved damage blocks (one per material, None = instant tensile failure) into
     :class:`DamageArrays`; raises ValueError for an unknown model or a parameter out of range
-    (m > 0, k > 0, E >= 0)."""
+    (m > 0, k > 0, E >= 0, flaw_seed >= 0, flaw_count >= 0, flaw_cross_section > 0)."""
     m = len(specs)
     model = np.zeros(m, dtype=np.int64)
     params = np.zeros((m, NDAMAGE))
+    seed = np.zeros(m, dtype=np.int64)
+    flaw_count = np.zeros(m, dtype=np.int64)
+    cross_section = np.ones(m)
     for k, spec in enumerate(specs):
         spec = spec or {"model": "instant"}
         name = spec.get("model", "instant")
@@ -149,4 +165,12 @@ def pack_damage(specs: list[dict | None]) -> DamageArrays:
         params[k, YOUNG] = float(spec.get("young_modulus", 0.0))
         if params[k, YOUNG] < 0.0:
             raise ValueError(f"material {k}: young_modulus must be >= 0 (got {params[k, YOUNG]:g})")
-    return DamageArrays(model, params)
+        seed[k] = int(spec.get("flaw_seed", 0))
+        flaw_count[k] = int(spec.get("flaw_count", 0))
+        for key, value in (("flaw_seed", seed[k]), ("flaw_count", flaw_count[k])):
+            if value < 0:
+                raise ValueError(f"material {k}: {key} must be >= 0 (got {value})")
+        cross_section[k] = float(spec.get("flaw_cross_section", 1.0))
+        if not cross_section[k] > 0.0:
+            raise ValueError(f"material {k}: flaw_cross_section must be > 0 (got {cross_section[k]:g})")
+    return DamageArrays(model, params, seed, flaw_count, cross_section)

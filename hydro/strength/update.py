@@ -5,7 +5,16 @@ Per-material scalars live in the state's ``arhoq[NB, M * NQ, ...]`` as mass-weig
 alpha_k rho_k q_k,j (transported by the sweeps with the material's mass flux), slot j of
 material k at ``k * NQ + j``: the deviatoric stress components (Pa; NS = 3, 4 or 6 of
 (xx, yy, zz, xy, xz, yz) in 1, 2 or 3 dimensions; in 2d-cylindrical slot 2 is the hoop
-component S_thth), the equivalent plastic strain (-) at ``NS`` and the damage D (-) at ``NS + 1``.
+component S_thth), the equivalent plastic strain (-) at ``NS``, with Grady-Kipp fracture in the
+scene (some material's damage model ``grady_kipp``) its flaws at ``NS + 1 .. NS + NFLAW``, and
+the damage D (-) last, at ``NQ - 1`` (NQ = NS + 2, or NS + 2 + NFLAW with fracture;
+:func:`scalar_slots`).  The flaws are the cell's local Weibull law per unit mass
+(:mod:`impactpipe.hydro.strength.flaws`, :func:`~impactpipe.hydro.strength.flaws.flaw_law_per_mass`):
+slope a (``FLAW_SLOPE``), offset b (``FLAW_OFFSET``) and count n_m (``FLAW_COUNT``), flaws per kg,
+n_act,m(eps) = min(max(a eps^m - b, 0), n_m).  Stored as alpha_k rho_k a etc. (flaws per m^3 of
+cell), they are amounts like the others: the sweeps, the AMR transfers, the regrid and the
+reflecting (mirror-plane) ghosts move them with the mass and conserve the flaw count; a
+mixture of two cells' material gets the sum of their laws where neither is cut off.
 
 Velocity gradient L_ij = d v_i / d x_j (1/s) from the cell velocities: central differences,
 one-sided next to a void cell, zero between two void cells; in 2d-cylindrical the hoop
@@ -17,11 +26,25 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    (the tensile taper of :mod:`impactpipe.hydro.strength.yield_strength` with Y_T (1 - D)).
    The sweeps limit its mean stress to -Y_T (1 - D), zero once failed, and open void
    instead of stretching it (docs/hydro.md, "Tensile limit";
-   :func:`impactpipe.hydro.scheme.mixture.damaged_tensile_strength`);
+   :func:`impactpipe.hydro.scheme.mixture.damaged_tensile_strength`).
+   Grady-Kipp materials (``damage_model[k] == GRADY_KIPP``) do not fail at a fixed stress:
+   the matrix pressure p_m = max(p_k, -Y_T) (p_k itself without Y_T) is borne as
+   p_b = p_m in compression and (1 - D) p_m in tension (as the sweeps do,
+   :func:`impactpipe.hydro.scheme.mixture.damaged_tension`); from the largest principal
+   stress of -p_b I + S the damage grows by one step of
+   :func:`impactpipe.hydro.strength.fracture.damage_step` at the rate
+   c_g (4 pi rho_k n_act,m / 3)^(1/3), n_act,m the active flaws per kg at the matrix strain
+   sigma_max / ((1 - D) E) (:mod:`impactpipe.hydro.strength.fracture`); the stored deviator
+   (the one the material bears) is scaled by (1 - D_new) / (1 - D_old) and the Jaumann update
+   uses the shear modulus (1 - D) G, so S stays (1 - D) times the intact matrix's
+   (von Mises, GEO; ROCK carries its damage in its yield curve instead, Y = (1 - D) Y_i + D Y_d,
+   and keeps S and G).  ``grady_kipp_fractured`` counts the steps where D reached 1;
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
 4. Y = yield_strength(p_held, T_k, D) at the pressure the material bears,
    p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed
-   material at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0), T_k from the EOS, and
+   material at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0; Grady-Kipp:
+   von Mises and GEO yield at (1 - D) Y(p_m, T_k, 0), the damaged share of the intact
+   matrix's strength, ROCK at Y(p_b, T_k, D)), T_k from the EOS, and
    Y = 0 for material expanded below STRENGTH_MIN_DENSITY_FRACTION of its reference density
    (fragmented or vapour: a deviatoric stress held by it would put S:D / rho_k of work into
    very little mass); radial return to sqrt(3 J2) <= Y (``yield_return``), equivalent
@@ -45,7 +68,11 @@ from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
-from impactpipe.hydro.strength.parameters import NONE, P_BD, P_BP, ROCK
+from impactpipe.hydro.strength.fracture import (
+    active_flaws_per_mass, crack_speed, damage_growth_rate_of_density, damage_step, damaged_pressure,
+    largest_principal_stress, tensile_strain, young_modulus,
+)
+from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG
 from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
@@ -60,8 +87,9 @@ NWORK = 10
 CNT_YIELD = 0
 CNT_TENSILE_FAILURE = 1
 CNT_LOW_DENSITY = 2
-NCOUNT = 3
-COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density")
+CNT_FRACTURED = 3
+NCOUNT = 4
+COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density", "grady_kipp_fractured")
 AMT_PLASTIC_WORK = 0
 NSAMOUNT = 1
 AMOUNT_NAMES = ("stress_work",)
@@ -71,13 +99,26 @@ AMOUNT_NAMES = ("stress_work",)
 STRENGTH_MIN_DENSITY_FRACTION = DISTENDED_FRACTION
 
 
+#: Flaw slots after the plastic strain (at NS + 1 + FLAW_*), present with Grady-Kipp fracture.
+FLAW_SLOPE = 0
+FLAW_OFFSET = 1
+FLAW_COUNT = 2
+NFLAW = 3
+
+
 def stress_slots(ndim: int) -> int:
     """Number of stored deviatoric stress components NS in ``ndim`` dimensions."""
     return {1: 3, 2: 4, 3: 6}[ndim]
 
 
+def scalar_slots(ndim: int, fracture: bool) -> int:
+    """Transported scalars per material NQ: NS stress components, plastic strain, damage, and
+    with Grady-Kipp ``fracture`` the NFLAW flaw slots."""
+    return stress_slots(ndim) + 2 + (NFLAW if fracture else 0)
+
+
 @njit(cache=True, parallel=True)
-def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, work, lo, hi):
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
     blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards).
 
@@ -92,12 +133,11 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, work, lo, hi)
     to the true fill and drove cells of 1e-6 kg/m^3 to 1e5 m/s in a laboratory impact.)
 
     Mixture stress S = sum_k alpha_k S_k (Pa), S_k = (alpha_k rho_k S_k) / (alpha_k rho_k)
-    from the transported amounts ``arhoq``; cells without the material and strengthless
+    from the transported amounts ``arhoq`` (its first ``ns`` slots per material); cells without the material and strengthless
     materials add nothing.  This is the stress the first half of the momentum kick uses.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
-    ns = nq - 2
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
@@ -182,20 +222,47 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
     return 0.0
 
 
+@njit(cache=True, inline="always")
+def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_bulk, shear_modulus, arhoq, b, first,
+                       ix, iy, iz, inv_mass, weibull_m, young, dt):
+    """Damage after one Grady-Kipp step of ``dt`` (s) (module docstring, step 2).
+
+    ``pressure`` the borne pressure p_b and S the borne deviator (Pa), rho the material density
+    (kg/m^3), c2_bulk its EOS sound speed squared (m^2/s^2), ``shear_modulus`` the intact G
+    (Pa); the flaw law per kg is read from ``arhoq[b, first .. first + NFLAW - 1]`` times
+    ``inv_mass`` = 1 / (alpha_k rho_k).  E = ``young`` (Pa), or 9 K G / (3 K + G) when 0;
+    the crack speed is 0.4 of the intact longitudinal speed sqrt(c_K^2 + 4 G / (3 rho)).
+    """
+    bulk = rho * max(c2_bulk, 0.0)
+    e = young if young > 0.0 else young_modulus(shear_modulus, bulk)
+    sigma_max = largest_principal_stress(pressure, sxx, syy, szz, sxy, sxz, syz)
+    strain = tensile_strain(sigma_max, damage, e)
+    if strain <= 0.0:
+        return damage
+    n_active = active_flaws_per_mass(strain, arhoq[b, first + FLAW_SLOPE, ix, iy, iz] * inv_mass,
+                                     arhoq[b, first + FLAW_OFFSET, ix, iy, iz] * inv_mass,
+                                     arhoq[b, first + FLAW_COUNT, ix, iy, iz] * inv_mass, weibull_m)
+    c_p = (max(c2_bulk, 0.0) + 4.0 * shear_modulus / (3.0 * rho)) ** 0.5
+    return damage_step(damage, damage_growth_rate_of_density(rho * n_active, crack_speed(c_p)), dt)
+
+
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
-                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi):
+                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
+                  damage_model=None, damage_params=None):
     """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``;
     see the module docstring.
     ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
-    reference_densities`).
+    reference_densities`).  ``damage_model[M]``, ``damage_params[M, NDAMAGE]``: the tensile
+    damage models and their Weibull parameters (:func:`impactpipe.hydro.strength.parameters.
+    pack_damage`); None where every material fails instantly (then ``arhoq`` has no flaw slots).
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its stress slots are written for the interior cells.  Counters accumulate per block.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
-    ns = nq - 2
+    ns = 3 if ndim == 1 else (4 if ndim == 2 else 6)
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
@@ -249,16 +316,37 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         sxz = arhoq[b, base + 4, ix, iy, iz] * inv if ns > 4 else 0.0
                         syz = arhoq[b, base + 5, ix, iy, iz] * inv if ns > 5 else 0.0
                         eps_p = arhoq[b, base + ns, ix, iy, iz] * inv
-                        dmg = arhoq[b, base + ns + 1, ix, iy, iz] * inv
+                        dmg = arhoq[b, base + nq - 1, ix, iy, iz] * inv
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] * inv
                         pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                        # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
-                        if pk < -tensile_strength[k] * (1.0 - dmg):
+                        g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0)
+                        gradual = False
+                        if damage_model is not None:
+                            gradual = damage_model[k] == GRADY_KIPP
+                        p_matrix = pk
+                        if gradual:
+                            # Grady-Kipp: damage grows from the active flaws; S and G soften with it
+                            if tensile_strength[k] > 0.0:
+                                p_matrix = max(pk, -tensile_strength[k])
+                            d_new = _grady_kipp_damage(dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy,
+                                                       sxz, syz, rk, c2b, g, arhoq, b, base + ns + 1, ix, iy, iz,
+                                                       inv, damage_params[k, WEIBULL_M], damage_params[k, YOUNG], dt)
+                            if d_new > dmg:
+                                if model[k] != ROCK:
+                                    keep = (1.0 - d_new) / (1.0 - dmg)
+                                    sxx, syy, szz, sxy, sxz, syz = (sxx * keep, syy * keep, szz * keep, sxy * keep,
+                                                                    sxz * keep, syz * keep)
+                                if d_new >= 1.0:
+                                    counts[b, CNT_FRACTURED] += 1
+                                dmg = d_new
+                            if model[k] != ROCK:
+                                g *= 1.0 - dmg
+                        elif pk < -tensile_strength[k] * (1.0 - dmg):
+                            # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
                             if dmg < 1.0:
                                 counts[b, CNT_TENSILE_FAILURE] += 1
                                 dmg = 1.0
-                        g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0)
                         sxx0, syy0, szz0, sxy0, sxz0, syz0 = sxx, syy, szz, sxy, sxz, syz
                         sxx, syy, szz, sxy, sxz, syz = jaumann_update(
                             sxx, syy, szz, sxy, sxz, syz, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz, dt, g)
@@ -268,9 +356,16 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             sxy = 0.0
                         # the mean stress the material bears: no more tension than it still holds,
                         # as in the sweeps, which open void instead of stretching it further
-                        p_held = max(pk, -tensile_strength[k] * (1.0 - dmg))
                         tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                        y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk, dmg))
+                        if gradual and model[k] != ROCK:
+                            p_held = damaged_pressure(p_matrix, dmg)
+                            y = (1.0 - dmg) * equivalent_yield_stress(
+                                model[k], yield_strength(model[k], params[k], p_matrix, tk, 0.0))
+                        else:
+                            p_held = damaged_pressure(p_matrix, dmg) if gradual else max(
+                                pk, -tensile_strength[k] * (1.0 - dmg))
+                            y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk,
+                                                                                 dmg))
                         if rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
@@ -296,7 +391,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             arhoq[b, base + 4, ix, iy, iz] = ar * sxz
                             arhoq[b, base + 5, ix, iy, iz] = ar * syz
                         arhoq[b, base + ns, ix, iy, iz] = ar * eps_p
-                        arhoq[b, base + ns + 1, ix, iy, iz] = ar * dmg
+                        arhoq[b, base + nq - 1, ix, iy, iz] = ar * dmg
                         work[b, WK_S, ix, iy, iz] += a * sxx
                         work[b, WK_S + 1, ix, iy, iz] += a * syy
                         work[b, WK_S + 2, ix, iy, iz] += a * szz
