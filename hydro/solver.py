@@ -179,7 +179,10 @@ class Simulation:
         self.grady_kipp = gradual if gradual.any() else None
         self.strength = MaterialStrength(arrays, mesh, state.nmat, damage) if arrays.enabled else None
         if self.strength is not None:
-            self.strength.prepare_state(state, self.eos)
+            self.strength.prepare_state(state)
+            for k, strains in self.strength.flaw_strains.items():  # recorded, so a checkpoint resumes with them
+                self.strength_specs[k] = {**self.strength_specs[k],
+                                          "damage": {**self.strength_specs[k]["damage"], "flaw_strains": strains}}
         elif self.grady_kipp is not None:
             raise ValueError("damage model grady_kipp needs a strength model with a yield strength")
         elif state.arhoq.shape[1]:

@@ -26,22 +26,24 @@ ln N draws stays empty (N (1 - 1/N)^(N ln N) -> 1); cells with a small weight w_
 filled surface cells) stay empty more often: they have count 0 and no tensile flaw.
 
 In the hydro stage a cell's flaws travel with the material (the state's ``arhoq``, mass
-weighted like the stress) as a local Weibull law per unit mass (:func:`flaw_law_per_mass`):
+weighted like the stress) as its cumulative law per unit mass at J = FLAW_NODES node strains
+eps_0 < ... < eps_(J-1) (:func:`flaw_nodes`, :func:`flaw_law_per_mass`):
 
-    n_act,m(eps) = min(max(a eps^m - b, 0), n_m)        (flaws per kg active at strain eps)
+    C_j = (number of the cell's flaws with eps <= eps_j) / M         (flaws per kg)
 
-the straight line in eps^m through the cell's first flaw (1 active at eps_min) and its last
-(n at eps_max), a = (n - 1) / (M (eps_max^m - eps_min^m)), b = max(a M eps_min^m - 1, 0) / M,
-n_m = n / M, M = rho0 v f the cell's material mass (a cell with one flaw takes the body's slope,
-a = k / rho0; a cell without flaws has a = b = n_m = 0).  b >= 0 keeps every flaw inactive
-without strain: a cell whose first flaw lies within one flaw spacing of zero strain takes the
-line through the origin instead (below its first flaw, at most one flaw early).  The three are amounts per unit mass,
-so transport, mixing, AMR restriction and prolongation conserve sum(M a), sum(M b) and the
-flaw count sum(M n_m): a part of a cell gets its share of the cell's law (1/8 of the law to
-each of 8 children), and a mixture of two cells gets the sum of their laws wherever neither is
-cut off (below its first flaw or above its last); only those cut-offs are not additive.
-The discrete steps of the cell's law at eps_min and eps_max become ramps one flaw spacing
-wide (below eps_min and above eps_max, the partial flaw of the continuum law).
+M = rho0 v f the cell's material mass.  Between nodes the law is linear in eps^m (the Weibull
+law's own variable: given that a flaw lies between two nodes, it lies anywhere in eps^m with
+equal probability), from 0 at zero strain to C_0 at eps_0, and C_(J-1) (every flaw) beyond the
+last node (:func:`impactpipe.hydro.strength.fracture.cumulative_flaws`).  The C_j are amounts
+per unit mass, and the law is linear in them: transport, mixing, AMR restriction and
+prolongation conserve sum(M C_j), the body's number of flaws below each node, exactly; a part
+of a cell gets its share of the cell's law and a mixture of two cells' material the sum of their
+laws, at every strain.  (A law kept as each cell's weakest and strongest flaw is not additive:
+an averaged weakest strain loses the weak flaws a mixture holds.)  The nodes are geometric in
+eps^m from the body's weakest flaw eps_1 = (1 / (k V))^(1/m) to its strongest
+eps_n = (n_tot / (k V))^(1/m), J of them: (n_tot)^(1/(J - 1)) flaws per node interval of the
+whole body's law, and a cell's flaw is placed within a factor (n_tot)^(1/(m (J - 1))) in strain
+(1.21 for 1e5 flaws, m = 8.5, J = 8).
 
 The flaws are drawn in chunks of :data:`CHUNK` with numpy (no Python loop per flaw or per cell).
 """
@@ -52,17 +54,21 @@ from typing import NamedTuple
 
 import numpy as np
 
+from impactpipe.hydro.strength.parameters import FLAW_NODES
+
 #: Flaws drawn per chunk (bounds the memory of the draw, not its result).
 CHUNK = 1 << 22
 
 
 class CellFlaws(NamedTuple):
     """The flaws of each cell of a body: smallest and largest activation strain (-, 0 where the
-    cell has none) and the number of flaws (int64)."""
+    cell has none), the number of flaws (int64) and, when node strains were given, the number of
+    flaws at or below each node (N, J) int64 (else None)."""
 
     eps_min: np.ndarray
     eps_max: np.ndarray
     count: np.ndarray
+    below: np.ndarray | None = None
 
 
 def default_flaw_count(n_cells: int) -> int:
@@ -75,9 +81,17 @@ def activation_strain(j: np.ndarray, body_volume: float, weibull_m: float, weibu
     return (np.asarray(j, dtype=float) / (weibull_k * body_volume)) ** (1.0 / weibull_m)
 
 
+def flaw_nodes(body_volume: float, n_flaws: int, weibull_m: float, weibull_k: float,
+               nodes: int = FLAW_NODES) -> np.ndarray:
+    """Node strains (-) of the cumulative law: geometric in eps^m from the body's weakest flaw
+    (j = 1) to its strongest (j = n_tot) of :func:`activation_strain`."""
+    j = np.asarray(n_flaws, dtype=float) ** (np.arange(nodes) / (nodes - 1))
+    return activation_strain(j, body_volume, weibull_m, weibull_k)
+
+
 def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, weibull_k: float,
                  rng: np.random.Generator, fill: np.ndarray | None = None,
-                 n_flaws: int | None = None) -> CellFlaws:
+                 n_flaws: int | None = None, node_strains: np.ndarray | None = None) -> CellFlaws:
     """Draw the body's flaws and assign each to a cell weighted by its material volume.
 
     Args:
@@ -88,9 +102,10 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
         rng: the random generator (seeded by the caller).
         fill: optional (N,) fraction of each cell the body fills (0 .. 1); 1 when omitted.
         n_flaws: number of flaws n_tot; :func:`default_flaw_count` (N ln N) when omitted.
+        node_strains: optional (J,) increasing strains; each cell's flaws at or below each are counted.
 
     Returns:
-        :class:`CellFlaws` with each cell's eps_min, eps_max and flaw count.
+        :class:`CellFlaws` with each cell's eps_min, eps_max, flaw count (and counts below the nodes).
     """
     weight = np.asarray(cell_volume, dtype=float).ravel()
     if fill is not None:
@@ -108,6 +123,10 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
     first = np.full(n_cells, n_tot + 1, dtype=np.int64)
     last = np.zeros(n_cells, dtype=np.int64)
     count = np.zeros(n_cells, dtype=np.int64)
+    # the rank of the last flaw at or below each node: eps_j <= eps_node <=> j <= k V eps_node^m
+    node_rank = None if node_strains is None else np.floor(
+        weibull_k * body_volume * np.asarray(node_strains, dtype=float) ** weibull_m * (1.0 + 1e-12)).astype(np.int64)
+    below = None if node_rank is None else np.zeros((n_cells, node_rank.size), dtype=np.int64)
     for start in range(1, n_tot + 1, CHUNK):
         j = np.arange(start, min(start + CHUNK, n_tot + 1), dtype=np.int64)
         cell = np.searchsorted(cumulative, rng.random(j.size), side="right")
@@ -115,42 +134,23 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
         count += np.bincount(cell, minlength=n_cells)
         np.minimum.at(first, cell, j)
         np.maximum.at(last, cell, j)
+        if below is not None:
+            for node, rank in enumerate(node_rank):
+                below[:, node] += np.bincount(cell[j <= rank], minlength=n_cells)
     has = count > 0
     eps_min = np.where(has, activation_strain(np.where(has, first, 1), body_volume, weibull_m, weibull_k), 0.0)
     eps_max = np.where(has, activation_strain(np.where(has, last, 1), body_volume, weibull_m, weibull_k), 0.0)
-    return CellFlaws(eps_min, eps_max, count)
+    return CellFlaws(eps_min, eps_max, count, below)
 
 
-class FlawLaw(NamedTuple):
-    """The local Weibull law per unit mass of each cell (module docstring): slope a, offset b and
-    flaw count n_m, all in flaws per kg (a per unit eps^m)."""
-
-    slope: np.ndarray
-    offset: np.ndarray
-    count: np.ndarray
-
-
-def flaw_law_per_mass(flaws: CellFlaws, material_mass: np.ndarray, weibull_m: float, weibull_k: float,
-                      reference_density: float) -> FlawLaw:
-    """The cells' local Weibull laws per unit mass from their drawn flaws (module docstring).
-
-    Args:
-        flaws: each cell's eps_min, eps_max and count (:func:`assign_flaws`).
-        material_mass: (N,) the body's mass in each cell M = rho0 v f (kg); cells with flaws need M > 0.
-        weibull_m, weibull_k: the body's Weibull law (-, m^-3).
-        reference_density: rho0 (kg/m^3), for the body's slope k / rho0 of cells with one flaw.
-    """
+def flaw_law_per_mass(flaws: CellFlaws, material_mass: np.ndarray) -> np.ndarray:
+    """The cells' cumulative laws per unit mass C_j = below_j / M (flaws per kg; (N, J), module
+    docstring) from flaws drawn with node strains; ``material_mass`` (N,) the body's mass in each
+    cell M = rho0 v f (kg), positive where a cell holds flaws."""
+    if flaws.below is None:
+        raise ValueError("the flaws were drawn without node strains")
     mass = np.asarray(material_mass, dtype=float).ravel()
-    count = np.asarray(flaws.count, dtype=float)
-    has = count > 0
+    has = flaws.count > 0
     if (mass[has] <= 0.0).any():
         raise ValueError("a cell with flaws needs a positive material mass")
-    lo = np.asarray(flaws.eps_min, dtype=float) ** weibull_m
-    hi = np.asarray(flaws.eps_max, dtype=float) ** weibull_m
-    safe_mass = np.where(has, mass, 1.0)
-    several = count > 1
-    slope = np.where(several, (count - 1.0) / np.where(several, hi - lo, 1.0) / safe_mass,
-                     weibull_k / reference_density)
-    slope = np.where(has, slope, 0.0)
-    offset = np.where(has, np.maximum(slope * lo - 1.0 / safe_mass, 0.0), 0.0)
-    return FlawLaw(slope, offset, np.where(has, count / safe_mass, 0.0))
+    return np.where(has[:, None], flaws.below / np.where(has, mass, 1.0)[:, None], 0.0)

@@ -34,8 +34,8 @@ Weibull law n(eps) = k eps^m (Benz & Asphaug 1994).  Per step of dt (s) and mate
 Damaged material (:func:`damaged_pressure`, :func:`damaged_deviator`) carries (1 - D) of
 the deviatoric stress and of tension and the full pressure in compression.
 
-In the hydro stage the flaws travel with the material as a local Weibull law per unit mass
-(:func:`active_flaws_per_mass`; :mod:`impactpipe.hydro.strength.flaws`,
+In the hydro stage the flaws travel with the material as a cumulative law per unit mass at
+node strains (:func:`cumulative_flaws`; :mod:`impactpipe.hydro.strength.flaws`,
 :func:`~impactpipe.hydro.strength.flaws.flaw_law_per_mass`), and the rate is written with the
 density of active flaws, n_act / v = rho n_act,m (:func:`damage_growth_rate_of_density`):
 
@@ -172,16 +172,25 @@ def damaged_deviator(deviatoric_stress, damage):
 
 
 @njit(cache=True, inline="always")
-def active_flaws_per_mass(strain, slope, offset, count, weibull_m):
-    """Active flaws per unit mass (1/kg) at tensile ``strain`` eps (-) from the transported local law:
+def cumulative_flaws(x, node_x, law, first, b, ix, iy, iz, scale):
+    """Active flaws per unit mass (1/kg) at x = eps^m from a cumulative law at nodes.
 
-        n_act,m = min(max(a eps^m - b, 0), n_m)
-
-    with the slope a (1/kg), offset b (1/kg) and count n_m (1/kg) per unit mass of
-    :func:`impactpipe.hydro.strength.flaws.flaw_law_per_mass`; 0 without tension."""
-    if strain <= 0.0 or count <= 0.0:
+    ``node_x`` (J,) the nodes' eps_j^m, increasing; the law's values C_j = ``scale`` times
+    ``law[b, first + j, ix, iy, iz]`` (the state's mass-weighted amounts times 1 / (alpha rho)).
+    Linear in x between nodes, from 0 at x = 0, C_(J-1) beyond the last node
+    (:mod:`impactpipe.hydro.strength.flaws`).
+    """
+    if x <= 0.0:
         return 0.0
-    return min(max(slope * strain ** weibull_m - offset, 0.0), count)
+    x_lo = 0.0
+    c_lo = 0.0
+    for j in range(node_x.shape[0]):
+        c = law[b, first + j, ix, iy, iz] * scale
+        if x <= node_x[j]:
+            return c_lo + (c - c_lo) * (x - x_lo) / (node_x[j] - x_lo)
+        x_lo = node_x[j]
+        c_lo = c
+    return c_lo
 
 
 @njit(cache=True, inline="always")

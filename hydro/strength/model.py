@@ -31,7 +31,9 @@ scalars per material, the cells' local Weibull laws per unit mass
 (:mod:`impactpipe.hydro.strength.update`), drawn by :meth:`MaterialStrength.prepare_state`
 when the state is new (not from a checkpoint): per Grady-Kipp material k, its flaws are
 assigned over the cells it fills (:func:`impactpipe.hydro.strength.flaws.assign_flaws`, body
-volume V = sum v_i alpha_k, weight v_i alpha_k, n_tot = N ln N or the block's ``flaw_count``) with the generator
+volume V = sum v_i alpha_k, weight v_i alpha_k, n_tot = N ln N or the block's ``flaw_count``,
+counted below the law's node strains, :func:`impactpipe.hydro.strength.flaws.flaw_nodes` of the
+draw unless the block gives ``flaw_strains``) with the generator
 ``numpy.random.default_rng([flaw_seed, k])``.  On a 1-D mesh a cell of width dx holds the flaws
 of the volume dx A, A the block's ``flaw_cross_section`` (m^2, default 1): the flaws per unit
 mass do not depend on A, their sampling does (a cell holds k A dx eps^m flaws below eps, and a
@@ -59,10 +61,9 @@ from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
-from impactpipe.hydro.eos import reference_density
-from impactpipe.hydro.strength.flaws import assign_flaws, flaw_law_per_mass
+from impactpipe.hydro.strength.flaws import assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes
 from impactpipe.hydro.strength.parameters import (
-    DAMAGE0, GRADY_KIPP, NONE, WEIBULL_K, WEIBULL_M, DamageArrays, StrengthArrays, pack_damage,
+    DAMAGE0, GRADY_KIPP, NODE0, NONE, WEIBULL_K, WEIBULL_M, DamageArrays, StrengthArrays, pack_damage,
 )
 from impactpipe.hydro.strength.update import (
     AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NFLAW, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, cell_velocity_and_stress,
@@ -97,6 +98,8 @@ class MaterialStrength:
             raise ValueError(f"material {k}: damage model grady_kipp needs a strength model with a yield strength")
         #: whether flaws are carried (some material fractures by Grady-Kipp)
         self.fracture = self.damage.fracture
+        #: node strains (-) of each Grady-Kipp material's flaw law drawn by :meth:`prepare_state`
+        self.flaw_strains: dict[int, list[float]] = {}
         self.ns = stress_slots(mesh.ndim)
         self.nq = scalar_slots(mesh.ndim, self.fracture)
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
@@ -130,11 +133,11 @@ class MaterialStrength:
         self.counts = summed_rows(self.counts, mesh.nblocks)
         self.amounts = summed_rows(self.amounts, mesh.nblocks)
 
-    def prepare_state(self, state: HydroState, eos=None) -> None:
+    def prepare_state(self, state: HydroState) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
         initial damage from the parameters) and, with Grady-Kipp fracture, the flaws of each
-        Grady-Kipp material drawn over its cells (module docstring; needs the packed ``eos`` for
-        the reference densities), unless it already has them (a checkpoint)."""
+        Grady-Kipp material drawn over its cells (module docstring), unless it already has them
+        (a checkpoint)."""
         want = self.nmat * self.nq
         if state.arhoq.shape[1] == want:
             return
@@ -142,10 +145,13 @@ class MaterialStrength:
         for k in range(self.nmat):
             state.arhoq[:, k * self.nq + self.nq - 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
         for k in np.flatnonzero(self.damage.model == GRADY_KIPP):
-            self._draw_flaws(state, int(k), eos)
+            self._draw_flaws(state, int(k))
 
-    def _draw_flaws(self, state: HydroState, k: int, eos) -> None:
-        """Flaws of material k over the cells it fills, as mass-weighted flaw laws in ``state.arhoq``."""
+    def _draw_flaws(self, state: HydroState, k: int) -> None:
+        """Flaws of material k over the cells it fills, as mass-weighted cumulative flaw laws in
+        ``state.arhoq``; the node strains are the block's ``flaw_strains`` or, without them,
+        :func:`impactpipe.hydro.strength.flaws.flaw_nodes` of this draw (then recorded in
+        :attr:`flaw_strains` and the damage parameters)."""
         mesh = self.mesh
         fill = mesh.interior(state.alpha)[:, k]
         mass = mesh.interior(state.arho)[:, k]
@@ -155,16 +161,21 @@ class MaterialStrength:
             return
         m, kw = self.damage.params[k, WEIBULL_M], self.damage.params[k, WEIBULL_K]
         material_volume = volume.ravel()[cells] * fill.ravel()[cells]
-        flaws = assign_flaws(material_volume, float(material_volume.sum()), m, kw,
-                             np.random.default_rng([int(self.damage.seed[k]), k]),
-                             n_flaws=int(self.damage.flaw_count[k]) or None)
-        rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
-        cell_mass = volume.ravel()[cells] * mass.ravel()[cells]
-        law = flaw_law_per_mass(flaws, cell_mass, m, kw, rho0)
+        body_volume = float(material_volume.sum())
+        n_tot = int(self.damage.flaw_count[k]) or default_flaw_count(cells.size)
+        if (self.damage.params[k, NODE0:] > 0.0).all():
+            strains = self.damage.params[k, NODE0:] ** (1.0 / m)
+        else:
+            strains = flaw_nodes(body_volume, n_tot, m, kw)
+            self.damage.params[k, NODE0:] = strains ** m
+        self.flaw_strains[k] = [float(e) for e in strains]
+        flaws = assign_flaws(material_volume, body_volume, m, kw, np.random.default_rng([int(self.damage.seed[k]), k]),
+                             n_flaws=n_tot, node_strains=strains)
+        law = flaw_law_per_mass(flaws, volume.ravel()[cells] * mass.ravel()[cells])
         first = k * self.nq + self.ns + 1
-        for j, per_mass in enumerate(law):
+        for j in range(NFLAW):
             amount = np.zeros(fill.size)
-            amount[cells] = per_mass * mass.ravel()[cells]
+            amount[cells] = law[:, j] * mass.ravel()[cells]
             mesh.interior(state.arhoq)[:, first + j] = amount.reshape(fill.shape)
 
     def load_stress(self, state: HydroState, eos, partition) -> None:

@@ -108,17 +108,21 @@ INSTANT = 0
 GRADY_KIPP = 1
 DAMAGE_CODES = {"instant": INSTANT, "grady_kipp": GRADY_KIPP}
 
-# damage parameter row slots
-WEIBULL_M, WEIBULL_K, YOUNG = range(3)
-NDAMAGE = 3
+# damage parameter row slots: Weibull m, k, Young's modulus, then the FLAW_NODES node strains'
+# eps_j^m of the cumulative flaw law (impactpipe.hydro.strength.flaws)
+WEIBULL_M, WEIBULL_K, YOUNG, NODE0 = range(4)
+FLAW_NODES = 8
+NDAMAGE = NODE0 + FLAW_NODES
 
 
 class DamageArrays(NamedTuple):
     """Tensile-fracture parameters of M materials for the kernels.
 
     model: (M,) int64 damage model codes (INSTANT, GRADY_KIPP); params: (M, NDAMAGE) rows of
-    Weibull m (-), Weibull k (m^-3) and Young's modulus E (Pa; 0: E = 9 K G / (3 K + G) from
-    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`); seed: (M,)
+    Weibull m (-), Weibull k (m^-3), Young's modulus E (Pa; 0: E = 9 K G / (3 K + G) from
+    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`) and the
+    FLAW_NODES node strains eps_j^m of the flaw law (``flaw_strains`` eps_j; zeros until the
+    flaws are drawn, :class:`impactpipe.hydro.strength.model.MaterialStrength`); seed: (M,)
     int64 seed of each material's flaw draw (``flaw_seed``, default 0); flaw_count: (M,) int64
     number of flaws drawn for each material (``flaw_count``; 0: N ln N for its N cells,
     :func:`impactpipe.hydro.strength.flaws.default_flaw_count`); cross_section: (M,) the area (m^2)
@@ -170,6 +174,11 @@ def pack_damage(specs: list[dict | None]) -> DamageArrays:
         for key, value in (("flaw_seed", seed[k]), ("flaw_count", flaw_count[k])):
             if value < 0:
                 raise ValueError(f"material {k}: {key} must be >= 0 (got {value})")
+        if "flaw_strains" in spec:
+            strains = np.asarray(spec["flaw_strains"], dtype=float)
+            if strains.shape != (FLAW_NODES,) or not (strains > 0.0).all() or not (np.diff(strains) > 0.0).all():
+                raise ValueError(f"material {k}: flaw_strains must be {FLAW_NODES} increasing strains > 0")
+            params[k, NODE0:] = strains ** params[k, WEIBULL_M]
         cross_section[k] = float(spec.get("flaw_cross_section", 1.0))
         if not cross_section[k] > 0.0:
             raise ValueError(f"material {k}: flaw_cross_section must be > 0 (got {cross_section[k]:g})")

@@ -8,13 +8,13 @@ material k at ``k * NQ + j``: the deviatoric stress components (Pa; NS = 3, 4 or
 component S_thth), the equivalent plastic strain (-) at ``NS``, with Grady-Kipp fracture in the
 scene (some material's damage model ``grady_kipp``) its flaws at ``NS + 1 .. NS + NFLAW``, and
 the damage D (-) last, at ``NQ - 1`` (NQ = NS + 2, or NS + 2 + NFLAW with fracture;
-:func:`scalar_slots`).  The flaws are the cell's local Weibull law per unit mass
-(:mod:`impactpipe.hydro.strength.flaws`, :func:`~impactpipe.hydro.strength.flaws.flaw_law_per_mass`):
-slope a (``FLAW_SLOPE``), offset b (``FLAW_OFFSET``) and count n_m (``FLAW_COUNT``), flaws per kg,
-n_act,m(eps) = min(max(a eps^m - b, 0), n_m).  Stored as alpha_k rho_k a etc. (flaws per m^3 of
-cell), they are amounts like the others: the sweeps, the AMR transfers, the regrid and the
-reflecting (mirror-plane) ghosts move them with the mass and conserve the flaw count; a
-mixture of two cells' material gets the sum of their laws where neither is cut off.
+:func:`scalar_slots`).  The flaws are the cell's cumulative law per unit mass at the
+material's NFLAW node strains eps_j (:mod:`impactpipe.hydro.strength.flaws`,
+:func:`~impactpipe.hydro.strength.flaws.flaw_law_per_mass`): C_j, the flaws per kg active at
+eps_j.  Stored as alpha_k rho_k C_j (flaws per m^3 of cell), they are amounts like the others:
+the sweeps, the AMR transfers, the regrid and the reflecting (mirror-plane) ghosts move them
+with the mass and conserve the body's flaws below every node; the law of a mixture is the sum
+of its parts' laws.
 
 Velocity gradient L_ij = d v_i / d x_j (1/s) from the cell velocities: central differences,
 one-sided next to a void cell, zero between two void cells; in 2d-cylindrical the hoop
@@ -69,10 +69,12 @@ from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
 from impactpipe.hydro.strength.fracture import (
-    active_flaws_per_mass, crack_speed, damage_growth_rate_of_density, damage_step, damaged_pressure,
+    crack_speed, cumulative_flaws, damage_growth_rate_of_density, damage_step, damaged_pressure,
     largest_principal_stress, tensile_strain, young_modulus,
 )
-from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG
+from impactpipe.hydro.strength.parameters import (
+    FLAW_NODES, GRADY_KIPP, NODE0, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG,
+)
 from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
@@ -99,11 +101,8 @@ AMOUNT_NAMES = ("stress_work",)
 STRENGTH_MIN_DENSITY_FRACTION = DISTENDED_FRACTION
 
 
-#: Flaw slots after the plastic strain (at NS + 1 + FLAW_*), present with Grady-Kipp fracture.
-FLAW_SLOPE = 0
-FLAW_OFFSET = 1
-FLAW_COUNT = 2
-NFLAW = 3
+#: Flaw slots after the plastic strain (NS + 1 .. NS + NFLAW), present with Grady-Kipp fracture.
+NFLAW = FLAW_NODES
 
 
 def stress_slots(ndim: int) -> int:
@@ -224,13 +223,13 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
 
 @njit(cache=True, inline="always")
 def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_bulk, shear_modulus, arhoq, b, first,
-                       ix, iy, iz, inv_mass, weibull_m, young, dt):
+                       ix, iy, iz, inv_mass, weibull_m, young, node_x, dt):
     """Damage after one Grady-Kipp step of ``dt`` (s) (module docstring, step 2).
 
     ``pressure`` the borne pressure p_b and S the borne deviator (Pa), rho the material density
     (kg/m^3), c2_bulk its EOS sound speed squared (m^2/s^2), ``shear_modulus`` the intact G
     (Pa); the flaw law per kg is read from ``arhoq[b, first .. first + NFLAW - 1]`` times
-    ``inv_mass`` = 1 / (alpha_k rho_k).  E = ``young`` (Pa), or 9 K G / (3 K + G) when 0;
+    ``inv_mass`` = 1 / (alpha_k rho_k), at the nodes eps_j^m = ``node_x``.  E = ``young`` (Pa), or 9 K G / (3 K + G) when 0;
     the crack speed is 0.4 of the intact longitudinal speed sqrt(c_K^2 + 4 G / (3 rho)).
     """
     bulk = rho * max(c2_bulk, 0.0)
@@ -239,9 +238,7 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
     strain = tensile_strain(sigma_max, damage, e)
     if strain <= 0.0:
         return damage
-    n_active = active_flaws_per_mass(strain, arhoq[b, first + FLAW_SLOPE, ix, iy, iz] * inv_mass,
-                                     arhoq[b, first + FLAW_OFFSET, ix, iy, iz] * inv_mass,
-                                     arhoq[b, first + FLAW_COUNT, ix, iy, iz] * inv_mass, weibull_m)
+    n_active = cumulative_flaws(strain ** weibull_m, node_x, arhoq, first, b, ix, iy, iz, inv_mass)
     c_p = (max(c2_bulk, 0.0) + 4.0 * shear_modulus / (3.0 * rho)) ** 0.5
     return damage_step(damage, damage_growth_rate_of_density(rho * n_active, crack_speed(c_p)), dt)
 
@@ -331,7 +328,8 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                 p_matrix = max(pk, -tensile_strength[k])
                             d_new = _grady_kipp_damage(dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy,
                                                        sxz, syz, rk, c2b, g, arhoq, b, base + ns + 1, ix, iy, iz,
-                                                       inv, damage_params[k, WEIBULL_M], damage_params[k, YOUNG], dt)
+                                                       inv, damage_params[k, WEIBULL_M], damage_params[k, YOUNG],
+                                                       damage_params[k, NODE0:], dt)
                             if d_new > dmg:
                                 if model[k] != ROCK:
                                     keep = (1.0 - d_new) / (1.0 - dmg)
