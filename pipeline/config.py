@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from impactpipe.hydro.amr.regrid import RefinementRule
 from impactpipe.hydro.problems import PROBLEMS, column_collapse
 from impactpipe.hydro.problems.parameters import Parameter, Record
+from impactpipe.hydro.strength.parameters import has_yield
 
 from . import presets
 
@@ -120,6 +121,17 @@ class TableEOS(Strict):
 EOSSpec = Annotated[Union[IdealGasEOS, TillotsonEOS, MieGruneisenEOS, TableEOS], Field(discriminator="model")]
 
 
+class DamageSpec(Strict):
+    model: Literal["instant", "grady_kipp"] = "instant"
+    preset: str | None = None
+    weibull_m: float | None = Field(None, gt=0, description="Weibull exponent m of the flaw law n = k eps^m")
+    weibull_k: float | None = Field(None, gt=0, description="Weibull coefficient k of the flaw law (m^-3)")
+    young_modulus: float | None = Field(None, gt=0, description="Young's modulus for the tensile strain (Pa)")
+    flaw_seed: int | None = Field(None, ge=0, description="seed of the material's flaw draw")
+    flaw_count: int | None = Field(None, ge=1, description="flaws drawn for the material (default N ln N)")
+    flaw_cross_section: float | None = Field(None, gt=0, description="area a 1-D mesh stands for in the draw (m^2)")
+
+
 class StrengthSpec(Strict):
     model: Literal["none", "von_mises", "geo", "rock"] = "none"
     preset: str | None = None
@@ -137,6 +149,14 @@ class StrengthSpec(Strict):
     P_bd: float | None = Field(None, ge=0, description="brittle-ductile transition pressure (Pa)")
     P_bp: float | None = Field(None, ge=0, description="brittle-plastic transition pressure (Pa)")
     initial_damage: float | None = Field(None, ge=0, le=1, description="damage D at t = 0 (rock model)")
+    damage: DamageSpec | None = Field(None, description="tensile damage: a grady_kipp block, or the name of a "
+                                                        "grady_kipp preset; instant failure at Y_T if absent")
+
+    @field_validator("damage", mode="before")
+    @classmethod
+    def _damage_preset_name(cls, value: Any) -> Any:
+        """``damage: basalt`` stands for ``{model: grady_kipp, preset: basalt}``."""
+        return _damage_block(value) if isinstance(value, str) else value
 
 
 class Material(Strict):
@@ -399,17 +419,29 @@ class Config(Strict):
             eos = mat.eos.model_dump(exclude={"model", "preset"})
             if mat.eos.model == "table":
                 eos["path"] = str((self._source_dir / mat.eos.path).resolve())
+            strength = presets.resolve_strength(
+                mat.strength.model, mat.strength.preset,
+                mat.strength.model_dump(exclude={"model", "preset", "damage"}))
+            if mat.strength.damage is not None:
+                strength["damage"] = presets.resolve_damage(_damage_block(mat.strength.damage))
             out[name] = {
                 "eos": presets.resolve_eos(mat.eos.model, getattr(mat.eos, "preset", None), eos),
-                "strength": presets.resolve_strength(
-                    mat.strength.model, mat.strength.preset, mat.strength.model_dump(exclude={"model", "preset"})
-                ),
+                "strength": strength,
             }
         return out
 
     def scene_materials(self) -> list[str]:
         """Names of the materials the scene uses, in order of appearance."""
         return _scene_material_refs(self.scene.model_dump())
+
+
+def _damage_block(damage: Any) -> dict[str, Any]:
+    """A strength spec's ``damage`` as a block: a preset name stands for ``{model: grady_kipp, preset: name}``."""
+    if isinstance(damage, str):
+        return {"model": "grady_kipp", "preset": damage}
+    if isinstance(damage, BaseModel):
+        return damage.model_dump(exclude_none=True)
+    return dict(damage)
 
 
 def _scene_material_refs(scene: dict[str, Any]) -> list[str]:
@@ -641,7 +673,43 @@ def _material_errors(name: str, mat: dict[str, Any], source_dir: Path) -> list[t
             except KeyError as exc:
                 errors.append((("materials", name, "strength"),
                                f"missing parameter {exc.args[0]} for model {smodel} (give it or name a preset)"))
+    if strength.get("damage") is not None:
+        errors.extend(_damage_errors(name, strength))
     return errors
+
+
+def _damage_errors(name: str, strength: dict[str, Any]) -> list[tuple[tuple, str]]:
+    """Errors of a strength spec's ``damage`` (a block or a preset name): unknown preset, missing
+    Weibull parameters, Grady-Kipp on a material without a yield strength or without Y_T."""
+    loc = ("materials", name, "strength", "damage")
+    damage = strength["damage"]
+    if not isinstance(damage, (str, dict)):
+        return []
+    block = _damage_block(damage)
+    if block.get("model", "instant") != "grady_kipp" or set(block) - set(DamageSpec.model_fields):
+        return []
+    choices = presets.damage_presets("grady_kipp")
+    preset = block.get("preset")
+    if preset is not None and preset not in choices:
+        return [(loc if isinstance(damage, str) else loc + ("preset",),
+                 f"unknown grady_kipp preset '{preset}' (allowed: {', '.join(choices)}){_did_you_mean(str(preset), choices)}")]
+    try:
+        presets.resolve_damage(block)
+    except KeyError as exc:
+        return [(loc, f"missing parameter {exc.args[0]} for model grady_kipp (give it or name a preset)")]
+    smodel = strength.get("model", "none")
+    try:
+        resolved = presets.resolve_strength(smodel, strength.get("preset"),
+                                            {k: v for k, v in strength.items() if k not in ("model", "preset", "damage")})
+    except (KeyError, TypeError):
+        return []
+    if not has_yield(resolved):
+        return [(loc, f"grady_kipp needs a strength model with a yield strength (model is {smodel}): "
+                      f"give the material a von_mises, geo or rock strength, or remove damage")]
+    if not resolved.get("Y_T", 0.0) > 0.0:
+        return [(loc, "grady_kipp needs strength.Y_T > 0, the most tension the intact material holds "
+                      "(where its yield curve closes); fracture usually relieves the tension well below it")]
+    return []
 
 
 # --------------------------------------------------------------------------- error reporting

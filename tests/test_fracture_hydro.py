@@ -242,3 +242,22 @@ def test_flaw_law_per_mass_counts_each_cells_flaws_below_the_nodes():
     assert ((law[:, 0] * mass > 0.5) == (weakest_below & (flaws.count > 0))).all()
     with pytest.raises(ValueError):
         flaw_law_per_mass(assign_flaws(cells, volume, M_BASALT, K_BASALT, rng), mass)
+
+
+def test_checkpoint_resumes_fracture_bit_for_bit(tmp_path):
+    """The flaws are state and their node strains are in the saved strength spec: a spall run saved
+    mid-way (damage growing) and resumed ends bit for bit where the uninterrupted run does."""
+    material = lab_basalt({"flaw_count": 20_000, "flaw_seed": 2, "flaw_cross_section": 1.0e-8})
+    params = {"flyer": {"material": "basalt", "velocity": 6.0, "thickness": FLYER},
+              "target": {"material": "basalt", "thickness": TARGET}, "cells": 104, "margin": 0.1}
+    sim = PROBLEMS["planar_impact"].setup(params, {"basalt": material})
+    sim.run(4.4e-6)
+    sim.save_checkpoint(tmp_path / "c.h5")
+    sim.run(5.0e-6)
+    resumed = Simulation.from_checkpoint(tmp_path / "c.h5")
+    assert resumed.strength.flaw_strains == {} and resumed.grady_kipp is not None
+    assert (resumed.strength.damage.params == sim.strength.damage.params).all()
+    resumed.run(5.0e-6)
+    assert sim.floor_counts["grady_kipp_fractured"] > 0
+    for name, array in sim.state.arrays().items():
+        assert np.array_equal(array, resumed.state.arrays()[name]), name
