@@ -91,7 +91,10 @@ class Simulation:
         strength: resolved strength specs, one per material (None or model "none" =
             strengthless; :mod:`impactpipe.hydro.strength.parameters`).  When some material
             has a yield model, the deviatoric stress is stored, transported and updated every
-            step and the signal speed is the longitudinal one (docs/strength.md).
+            step and the signal speed is the longitudinal one (docs/strength.md).  A spec's
+            ``damage`` block (:func:`impactpipe.hydro.strength.parameters.pack_damage`) makes
+            the material's tensile damage Grady-Kipp: flaws drawn and carried, (1 - D) of its
+            tension borne (:attr:`grady_kipp`); its ``flaw_strains`` are recorded here when drawn.
         time: initial time (s).
         tracers: Lagrangian tracers carried with the flow, or None.  Any object with
             ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
