@@ -261,3 +261,37 @@ def test_checkpoint_resumes_fracture_bit_for_bit(tmp_path):
     assert sim.floor_counts["grady_kipp_fractured"] > 0
     for name, array in sim.state.arrays().items():
         assert np.array_equal(array, resumed.state.arrays()[name]), name
+
+
+def test_adaptive_mesh_carries_the_flaws_through_regrids():
+    """The spall scene on a 2-level adaptive mesh (finest 200 cells): the plates' flaws below every
+    node strain are conserved through the regrids (prolongation, restriction, remap) to round-off,
+    and the first failure inside the target is where the uniform mesh puts it, within two finest
+    cells.  Measured: 21 regrids; 9.98 mm at 4.55 us (finest dx 0.11 mm)."""
+    material = lab_basalt({"flaw_count": 100_000, "flaw_seed": 1, "flaw_cross_section": 1.0e-8})
+    sim = PROBLEMS["planar_impact"].setup({"flyer": {"material": "basalt", "velocity": 6.0, "thickness": FLYER},
+                                           "target": {"material": "basalt", "thickness": TARGET}, "cells": 208,
+                                           "margin": 0.1, "levels": 2}, {"basalt": material})
+
+    def flaws_below_nodes():
+        mesh, st = sim.mesh, sim.strength
+        vol = mesh.cell_volumes()
+        q = mesh.interior(sim.state.arhoq)
+        return np.array([(q[:, st.ns + 1 + j] * vol).sum() for j in range(FLAW_NODES)])
+
+    start = flaws_below_nodes()
+    first = None
+    while sim.time < 6.0e-6:
+        sim.step(dt_max=6.0e-6 - sim.time)
+        if first is None:
+            mesh, nq = sim.mesh, sim.strength.nq
+            x = mesh.cell_centers()[:, 0].reshape(-1)
+            arho = mesh.interior(sim.state.arho)[:, 0].reshape(-1)
+            damage = mesh.interior(sim.state.arhoq)[:, nq - 1].reshape(-1) / np.where(arho > 0.0, arho, 1.0)
+            broken = (x > 1.0e-3) & (damage >= 1.0)
+            if broken.any():
+                first = (sim.time, float(x[broken].mean()))
+    assert sim.regrids > 0
+    assert flaws_below_nodes() == pytest.approx(start, rel=1e-10)
+    dx = float(sim.mesh.block_dx[:, 0].min())
+    assert first is not None and abs(first[1] - (TARGET - FLYER)) <= 2.0 * dx
