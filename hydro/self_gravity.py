@@ -136,6 +136,21 @@ def _cell_volume(geometry, r_lo, dx0, dx1, dx2):
     return dx0 * dx1 * dx2
 
 
+@njit(cache=True, inline="always")
+def _cell_mass(arho, geometry, ndim, block_lo, block_dx, b, ix, iy, iz, gx, gy, gz):
+    """(mass (kg), centre x, y, z (m)) of interior cell (ix, iy, iz) of block b (padded indices,
+    ``gx, gy, gz`` the ghost widths): sum_k alpha_k rho_k times the cell volume (annulus in r-z)."""
+    dx0 = block_dx[b, 0]
+    dx1 = block_dx[b, 1] if ndim > 1 else 1.0
+    dx2 = block_dx[b, 2] if ndim > 2 else 1.0
+    r_lo = block_lo[b, 0] + (ix - gx) * dx0
+    rho = 0.0
+    for k in range(arho.shape[1]):
+        rho += arho[b, k, ix, iy, iz]
+    return (rho * _cell_volume(geometry, r_lo, dx0, dx1, dx2), r_lo + 0.5 * dx0,
+            block_lo[b, 1] + (iy - gy + 0.5) * dx1, block_lo[b, 2] + (iz - gz + 0.5) * dx2)
+
+
 @njit(cache=True, parallel=True)
 def block_mass_moments(arho, block_lo, block_dx, geometry, ndim, out):
     """Per block: mass (kg), mass x position (3 components, kg m) and the largest cell mass
@@ -145,26 +160,15 @@ def block_mass_moments(arho, block_lo, block_dx, geometry, ndim, out):
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     for b in prange(nb):
-        dx0 = block_dx[b, 0]
-        dx1 = block_dx[b, 1] if ndim > 1 else 1.0
-        dx2 = block_dx[b, 2] if ndim > 2 else 1.0
         mass = 0.0
         mx = 0.0
         my = 0.0
         mz = 0.0
         largest = 0.0
         for ix in range(gx, nx - gx):
-            r_lo = block_lo[b, 0] + (ix - gx) * dx0
-            vol = _cell_volume(geometry, r_lo, dx0, dx1, dx2)
-            x = r_lo + 0.5 * dx0
             for iy in range(gy, ny - gy):
-                y = block_lo[b, 1] + (iy - gy + 0.5) * dx1
                 for iz in range(gz, nz - gz):
-                    z = block_lo[b, 2] + (iz - gz + 0.5) * dx2
-                    rho = 0.0
-                    for k in range(nmat):
-                        rho += arho[b, k, ix, iy, iz]
-                    m = rho * vol
+                    m, x, y, z = _cell_mass(arho, geometry, ndim, block_lo, block_dx, b, ix, iy, iz, gx, gy, gz)
                     mass += m
                     largest = max(largest, m)
                     if geometry == CYLINDRICAL:
@@ -217,23 +221,12 @@ def shell_moments(arho, block_lo, block_dx, geometry, ndim, center, shell, order
     for b in prange(lo, hi):
         t = numba.get_thread_id()
         harm = work[t]
-        dx0 = block_dx[b, 0]
-        dx1 = block_dx[b, 1] if ndim > 1 else 1.0
-        dx2 = block_dx[b, 2] if ndim > 2 else 1.0
         for ix in range(gx, nx - gx):
-            r_lo = block_lo[b, 0] + (ix - gx) * dx0
-            vol = _cell_volume(geometry, r_lo, dx0, dx1, dx2)
-            x = r_lo + 0.5 * dx0
             for iy in range(gy, ny - gy):
-                y = block_lo[b, 1] + (iy - gy + 0.5) * dx1
                 for iz in range(gz, nz - gz):
-                    z = block_lo[b, 2] + (iz - gz + 0.5) * dx2
-                    rho = 0.0
-                    for k in range(nmat):
-                        rho += arho[b, k, ix, iy, iz]
-                    if rho <= 0.0:
+                    m, x, y, z = _cell_mass(arho, geometry, ndim, block_lo, block_dx, b, ix, iy, iz, gx, gy, gz)
+                    if m <= 0.0:
                         continue
-                    m = rho * vol
                     r, mu, cp, sp = _spherical(geometry, x, y, z, center)
                     j = min(int(r / shell), nshell - 1)
                     reff = max(r, shell)

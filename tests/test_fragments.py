@@ -20,6 +20,7 @@ from impactpipe.pipeline.config import load_config
 from impactpipe.pipeline.fragments import snapshot_fragments
 from impactpipe.pipeline.stages import resolved_yaml
 from impactpipe.storage import write_text_atomic
+from test_impact_3d import TINY
 
 
 def grid(shape, width=1.0):
@@ -127,22 +128,9 @@ def test_a_half_domain_fragment_is_joined_with_its_mirror_image():
     np.testing.assert_allclose(broken.mass, [2 * 2700.0 * 48] * 2)
 
 
-TINY_STRENGTH = """
-name: fragments-tiny
-scene:
-  problem: impact
-  target:     {material: basalt, radius: 1.0e3}
-  projectile: {material: basalt, radius: 2.0e2}
-  impact:     {velocity: 1.0e3, angle: 45}
-materials:
-  basalt:
-    eos: {model: tillotson, preset: basalt}
-    strength: {model: geo, preset: weak}
-hydro:
-  cells_per_projectile_radius: 2
-  block_cells: 4
-  end_time: 0.2
-"""
+#: The small 45-degree 3d impact of test_impact_3d with GEO strength (a run with a damage field).
+TINY_STRENGTH = TINY.replace("    eos: {model: tillotson, preset: basalt}\n",
+                             "    eos: {model: tillotson, preset: basalt}\n    strength: {model: geo, preset: weak}\n")
 
 
 def test_fragments_command_prints_writes_and_plots(tmp_path):
