@@ -8,6 +8,9 @@ Cases:
   2d-cyl-strength    the same impact with GEO 'strong' strength in both bodies (the cost of
                      strength is the ratio of its rate to 2d-cyl-tillotson's; the ratio is
                      reported as strength_cost_ratio)
+  2d-cyl-fracture    the same impact with GEO 'strong' strength and Grady-Kipp fracture
+                     (the basalt Weibull preset) in both bodies (its rate over
+                     2d-cyl-strength's, instant failure, is reported as fracture_cost_ratio)
   3d-two-material    3d periodic box, two ideal gases (a dense sphere), 128^3 (--quick 48^3)
 
 The box cases take a uniform mesh's default blocks (64^2 and 16^3 at full size, 32^2 and 8^3
@@ -46,7 +49,7 @@ import numpy as np
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.problems.common import preset_material
-from impactpipe.pipeline.presets import resolve_strength
+from impactpipe.pipeline.presets import resolve_damage, resolve_strength
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
@@ -77,10 +80,12 @@ def build(case: str, quick: bool, block_cells: int | None = None) -> Simulation:
     if case == "2d-ideal-gas":
         n = 256 if quick else 512
         return _smooth_box("2d-planar", [n, n], block_cells, 1)
-    if case in ("2d-cyl-tillotson", "2d-cyl-strength"):
+    if case in ("2d-cyl-tillotson", "2d-cyl-strength", "2d-cyl-fracture"):
         materials = {"basalt": preset_material("basalt")}
-        if case == "2d-cyl-strength":
+        if case != "2d-cyl-tillotson":
             materials["basalt"]["strength"] = resolve_strength("geo", "strong", {})
+        if case == "2d-cyl-fracture":
+            materials["basalt"]["strength"]["damage"] = resolve_damage({"model": "grady_kipp", "preset": "basalt"})
         params = {"target": {"material": "basalt", "radius": 1000.0},
                   "projectile": {"material": "basalt", "radius": 250.0, "velocity": 2000.0},
                   "cells_per_projectile_radius": 25 if quick else 100}
@@ -159,9 +164,12 @@ def main() -> None:
                 if r["case"] == case and r["threads"] == 2:
                     r["speedup_2_threads"] = rates[2] / rates[1]
     plain = {r["threads"]: r["cell_updates_per_s"] for r in results if r["case"] == "2d-cyl-tillotson"}
+    instant = {r["threads"]: r["cell_updates_per_s"] for r in results if r["case"] == "2d-cyl-strength"}
     for r in results:
         if r["case"] == "2d-cyl-strength" and r["threads"] in plain:
             r["strength_cost_ratio"] = plain[r["threads"]] / r["cell_updates_per_s"]
+        if r["case"] == "2d-cyl-fracture" and r["threads"] in instant:
+            r["fracture_cost_ratio"] = instant[r["threads"]] / r["cell_updates_per_s"]
     report = {"load_average": os.getloadavg(), "cpu_count": os.cpu_count(), "results": results}
     if args.json:
         print(json.dumps(report, indent=2))
