@@ -141,7 +141,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="smaller meshes")
     parser.add_argument("--steps", type=int, default=10, help="timed steps per case (default 10)")
     parser.add_argument("--cases", nargs="*",
-                        default=["2d-ideal-gas", "2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material"])
+                        default=["2d-ideal-gas", "2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material"],
+                        help="cases to run (also 2d-cyl-fracture)")
     parser.add_argument("--reference", metavar="SCRIPT", help="reference kernel run before each measurement")
     parser.add_argument("--reference-size", type=int, default=512, help="its mesh size N (default 512)")
     parser.add_argument("--block-cells", type=int, help="block edge of the box cases (default: the uniform mesh's own)")
