@@ -28,7 +28,7 @@ CROSSING_TIMES_TO_HANDOFF = 4.0
 SELF_GRAVITY_STRENGTH_FACTOR = 10.0
 #: ...and gravity to add more than this fraction of the escape speed during the hydro stage: the
 #: 50 km target of configs/large_body.yaml (3.9 %) has a Q*_D 28 % higher with it than without
-#: (docs/validation.md), the 10 km reference cases (0.7-1.2 %) are the reference study's, without.
+#: (docs/validation.md); the 10 km reference cases (0.7-1.2 %) stay without it, as the reference study ran them.
 SELF_GRAVITY_VELOCITY_FRACTION = 0.02
 
 
