@@ -109,7 +109,9 @@ def run_cmd(config_path: str, out_dir: str | None, from_stage: str | None, stage
 
 def _exit_if_too_many_ranks(config, values, nranks: int) -> None:
     """Exit 2 with one line, before anything is written, when the mesh has fewer blocks than ranks."""
-    message = ranks.too_many_ranks(config, values, nranks)
+    from .adapters.hydro import too_many_ranks
+
+    message = too_many_ranks(config, values, nranks)
     if message is not None:
         click.echo(f"error: {message}", err=True)
         sys.exit(2)

@@ -160,29 +160,6 @@ def world():
     return _world["comm"]
 
 
-def too_many_ranks(config, values: dict[str, Any], nranks: int) -> str | None:
-    """Why ``nranks`` ranks cannot share the hydro stage's mesh at t = 0 (more ranks than
-    blocks), or None.  The root blocks are counted from the derived domain; the initial mesh
-    (whose refinement adds blocks) is built only when they are fewer than the ranks."""
-    if nranks <= 1:
-        return None
-    domain = values.get("domain")
-    if domain:
-        per_root = domain["block_cells"] * 2 ** (int(values["levels"]) - 1)
-        roots = 1
-        for cells in domain["cells"]:
-            roots *= max(int(cells) // per_root, 1)
-        if roots >= nranks:
-            return None
-    from .adapters.hydro import build_simulation
-
-    blocks = build_simulation(config, values).mesh.nblocks
-    if blocks >= nranks:
-        return None
-    return (f"--ranks {nranks}: more ranks ({nranks}) than blocks ({blocks}) in the hydro mesh at t = 0; "
-            f"use at most {blocks} ranks or a finer mesh")
-
-
 def send_order(order: dict | None) -> None:
     """Rank 0: tell the other ranks what to do (the hydro stage's order, or None: exit)."""
     comm = _world["comm"]

@@ -88,6 +88,27 @@ def build_simulation(config, values: dict[str, Any]) -> Simulation:
     return PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
 
 
+def too_many_ranks(config, values: dict[str, Any], nranks: int) -> str | None:
+    """Why ``nranks`` ranks cannot share the hydro stage's mesh at t = 0 (more ranks than
+    blocks), or None.  The root blocks are counted from the derived domain; the initial mesh
+    (whose refinement adds blocks) is built only when they are fewer than the ranks."""
+    if nranks <= 1:
+        return None
+    domain = values.get("domain")
+    if domain:
+        per_root = domain["block_cells"] * 2 ** (int(values["levels"]) - 1)
+        roots = 1
+        for cells in domain["cells"]:
+            roots *= max(int(cells) // per_root, 1)
+        if roots >= nranks:
+            return None
+    blocks = build_simulation(config, values).mesh.nblocks
+    if blocks >= nranks:
+        return None
+    return (f"--ranks {nranks}: more ranks ({nranks}) than blocks ({blocks}) in the hydro mesh at t = 0; "
+            f"use at most {blocks} ranks or a finer mesh")
+
+
 def add_tracers(sim: Simulation, config, end_time: float) -> None:
     """Place the impact scene's tracers (:func:`impactpipe.hydro.problems.impact.tracer_positions`)."""
     scene = config.scene
