@@ -380,6 +380,8 @@ class SelfGravity:
         threads = numba.config.NUMBA_NUM_THREADS
         self._harm = np.zeros((threads, nh))
         self._phi = np.zeros(0)
+        #: Per-thread integer inner and outer shell moments, kept between steps.
+        self._moments = np.zeros((2, 0, 0, 0), dtype=np.int64)
         self._rows = np.zeros((0, 5))
         self._block_work = np.zeros(0)
         self._block_potential = np.zeros(0)
@@ -429,14 +431,14 @@ class SelfGravity:
         powers = np.arange(self.order + 1)
         quantum_in = largest * self._bounds * QUANTUM * radii[1:, None] ** powers
         quantum_out = largest * self._bounds * QUANTUM * np.maximum(radii[:-1], shell)[:, None] ** -(powers + 1.0)
-        threads = self._harm.shape[0]
-        nh = self._harm.shape[1]
-        inner = np.zeros((threads, nshell, nh), dtype=np.int64)
-        outer = np.zeros((threads, nshell, nh), dtype=np.int64)
+        shape = self._harm.shape[:1] + (nshell,) + self._harm.shape[1:]
+        if self._moments.shape[1:] != shape:
+            self._moments = np.zeros((2,) + shape, dtype=np.int64)
+        self._moments[:] = 0
         shell_moments(state.arho, mesh.block_lo, mesh.block_dx, self.geometry_code, self.ndim, self.center, shell,
-                      self.order, quantum_in, quantum_out, lo, hi, self._harm, inner, outer)
-        inner = inner.sum(axis=0)
-        outer = outer.sum(axis=0)
+                      self.order, quantum_in, quantum_out, lo, hi, self._harm, self._moments[0], self._moments[1])
+        inner = self._moments[0].sum(axis=0)
+        outer = self._moments[1].sum(axis=0)
         if partition is not None:
             partition.sum_integers(inner)
             partition.sum_integers(outer)

@@ -482,10 +482,8 @@ def _qstar_fit(group: list[dict], by: str, label: str, out: Path, suffix: str, r
                    "a read-only run is plotted this way.")
 def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool, out_path: str | None) -> None:
     """Write a PNG of a hydro snapshot field (with block outlines) or of the tracers' peak pressures."""
-    import h5py
-    import numpy as np
-
-    from impactpipe.hydro.output.io import read_snapshot, read_tracers
+    from impactpipe.hydro.output.io import read_tracers
+    from impactpipe.hydro.output.lookup import find_snapshot
     from impactpipe.hydro.output.plots import FIELDS, plot_peak_pressure_along_axis_ray, plot_snapshot
 
     path = Path(run_dir) / "hydro.h5"
@@ -506,10 +504,7 @@ def plot_cmd(run_dir: str, field: str, at_time: float | None, tracer_plot: bool,
     if field not in FIELDS:
         click.echo(f"--field: unknown field '{field}' (allowed: {', '.join(FIELDS)})", err=True)
         sys.exit(2)
-    with h5py.File(path, "r") as f:
-        times = np.array([f["snapshots"][name].attrs["time"] for name in sorted(f["snapshots"])])
-    index = len(times) - 1 if at_time is None else int(np.argmin(np.abs(times - at_time)))
-    snapshot = read_snapshot(path, index)
+    snapshot, index = find_snapshot(path, time=at_time)
     target = _figure_path(run_dir, out_path, f"{field}_t{snapshot.time:.4g}s.png")
     with _writable(target, out_path):
         plot_snapshot(target, snapshot, field)
@@ -541,9 +536,9 @@ def _writable(target: Path, out_path: str | None):
 @click.option("--time", "at_time", type=float, help="Snapshot time (s); the nearest snapshot is used (default: last).")
 @click.option("--material", "materials", multiple=True,
               help="Material of the body that breaks (repeatable; default: the target's material).")
-@click.option("--max-damage", type=float, default=0.99, show_default=True,
+@click.option("--max-damage", type=click.FloatRange(0.0, 1.0, min_open=True), default=0.99, show_default=True,
               help="Cells at or above this damage are broken and join no fragment.")
-@click.option("--min-fill", type=float, default=0.5, show_default=True,
+@click.option("--min-fill", type=click.FloatRange(0.0, 1.0, min_open=True), default=0.5, show_default=True,
               help="Least volume fraction of the body's materials in a fragment's cell.")
 @click.option("--experiment", type=click.Choice(["none", "nakamura-fujiwara"]), default="none", show_default=True,
               help="Print and plot a laboratory experiment's fragments beside the run's.")

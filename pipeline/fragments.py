@@ -1,6 +1,7 @@
 """``impactpipe fragments RUN_DIR``: the intact fragments of a run's target in a hydro snapshot.
 
-Reads a snapshot of ``hydro.h5`` (the last, or the one nearest ``time``), joins a 3d
+Reads a snapshot of ``hydro.h5`` (the last, or the one nearest ``time``;
+:func:`impactpipe.hydro.output.lookup.find_snapshot`), joins a 3d
 half-domain snapshot with its mirror image across y = 0
 (:func:`impactpipe.handoff.mirror.mirror_across_y0`, so that a fragment cut by the symmetry
 plane counts once, whole), flattens its leaf cells and finds the fragments
@@ -16,23 +17,16 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from impactpipe import storage
 from impactpipe.analysis.fragments import Fragments, find_fragments, intact_cells
 from impactpipe.analysis.io import write_analysis
 from impactpipe.handoff.mirror import mirror_across_y0
-from impactpipe.hydro.output.io import read_snapshot
+from impactpipe.hydro.output.lookup import find_snapshot
 from impactpipe.hydro.output.snapshot import Snapshot
 
 FRAGMENTS_FILE = "fragments.h5"
-
-
-def snapshot_times(path: Path) -> np.ndarray:
-    """Times (s) of the snapshots in ``hydro.h5``, in order."""
-    with h5py.File(path, "r") as fh:
-        return np.array([fh["snapshots"][name].attrs["time"] for name in sorted(fh["snapshots"])])
 
 
 def body_cells(snapshot: Snapshot, materials: list[int]) -> dict[str, np.ndarray]:
@@ -81,16 +75,12 @@ def run_fragments(run_dir: Path, material_names: list[str], half_domain: bool, a
     """
     started = storage.utc_now()
     t0 = time.perf_counter()
-    path = run_dir / "hydro.h5"
-    first = read_snapshot(path, 0)
+    first, _ = find_snapshot(run_dir, index=0)
     unknown = [name for name in material_names if name not in first.material_names]
     if unknown:
         raise ValueError(f"material {', '.join(unknown)} not in the run (materials: {', '.join(first.material_names)})")
     materials = [first.material_names.index(name) for name in material_names]
-    index = -1
-    if at_time is not None:
-        index = int(np.argmin(np.abs(snapshot_times(path) - at_time)))
-    snapshot = read_snapshot(path, index)
+    snapshot, _ = find_snapshot(run_dir, time=at_time)
     target_mass = body_mass(first, materials) * (2.0 if half_domain else 1.0)
     fragments = snapshot_fragments(snapshot, materials, half_domain, min_fill, max_damage)
     content = {"fragments": fragments.as_datasets(target_mass),
