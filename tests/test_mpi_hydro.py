@@ -296,8 +296,9 @@ def test_the_traffic_counters_count_the_bytes_and_messages_of_one_step(tmp_path)
 
 def test_a_killed_rank_stops_every_rank_with_a_clear_message_and_the_same_command_resumes(serial, tmp_path):
     """Checkpoints every step; rank 1 dies (SIGKILL) in the 8th: mpiexec ends rank 0, the
-    launcher names what happened, the checkpoint of step 7 is intact, and the same command
-    resumes it to the single-process answer."""
+    launcher names what happened, a whole checkpoint of step 6 or 7 is left (rank 0 may be
+    ended while it writes the step-7 file, which the atomic write then discards), and the same
+    command resumes it to the single-process answer."""
     config = yaml.safe_load(SCENES["impact_adaptive"].read_text())
     config["hydro"]["checkpoint_wall_seconds"] = 1e-9
     path = tmp_path / "every_step.yaml"
@@ -309,7 +310,7 @@ def test_a_killed_rank_stops_every_rank_with_a_clear_message_and_the_same_comman
     assert killed.returncode not in ranks.PIPELINE_STATUSES
     assert "an MPI rank ended abnormally" in killed.stderr and "run the same command again" in killed.stderr
     with h5py.File(run_dir / "hydro.checkpoint.h5", "r") as f:
-        assert f.attrs["step_count"] == 7
+        assert f.attrs["step_count"] in (6, 7)
     resumed = impactpipe_run(path, run_dir, "--ranks", "2")
     assert resumed.returncode == 0, resumed.stderr
     assert "resuming from checkpoint at" in (run_dir / "run.log").read_text()
