@@ -36,9 +36,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.constants import G as G_SI
 from scipy.optimize import curve_fit
 
-G_SI = 6.674e-11
 ERG_PER_G = 1.0e-4  # J/kg
 
 #: Benz & Asphaug (1999) Table III, basalt: impact speed (km/s) -> (Q0 [erg/g], a, B [erg cm^3 g^-2], b)

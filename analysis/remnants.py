@@ -79,13 +79,13 @@ from typing import Any
 
 import numpy as np
 from numba import njit, prange
+from scipy.constants import G as G_SI
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 logger = logging.getLogger(__name__)
 
-G_SI = 6.674e-11
 MODES = ("aggregate", "merge")
 DEFAULT_PACKING_FRACTION = 0.64
 

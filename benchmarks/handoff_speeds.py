@@ -24,10 +24,10 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from scipy.constants import G
 
 from impactpipe.nbody.diagnostics import escape_speed_ratio, potential_energy
 
-G = 6.674e-11
 SHELLS = ((0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, np.inf))
 VIRIAL_RADII = (0.5, 0.75, 1.0)
 ESCAPE_BINS = (0.0, 0.4, 0.6, 0.8, 1.0, 2.0, np.inf)

@@ -54,12 +54,11 @@ import math
 import numba
 import numpy as np
 from numba import njit, prange
+from scipy.constants import G
 
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 
-#: Gravitational constant (m^3 kg^-1 s^-2).
-G = 6.674e-11
 #: Default expansion order L.
 DEFAULT_ORDER = 4
 #: A cell's contribution is rounded to this fraction of the largest contribution possible in its shell.

@@ -25,10 +25,10 @@ import math
 
 import numpy as np
 import rebound
+from scipy.constants import G
 from numba import njit
 from scipy.spatial import cKDTree
 
-G = 6.674e-11  # m^3 kg^-1 s^-2
 COLLISION_SEARCHES = ("linetree", "tree")
 
 

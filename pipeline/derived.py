@@ -11,6 +11,7 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy.constants import G
 
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS
@@ -21,7 +22,6 @@ from impactpipe.nbody.simulation import dynamical_time
 
 from .config import Config
 
-G = 6.674e-11
 #: Hand-off time in target sound-crossing times (R_T / c), method.md section 3.
 CROSSING_TIMES_TO_HANDOFF = 4.0
 #: Self-gravity (auto) needs the target's central pressure above this multiple of its tensile strength...

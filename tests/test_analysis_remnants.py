@@ -1,11 +1,11 @@
 """Remnant finder on constructed particle sets with known answers."""
 
 import numpy as np
+from scipy.constants import G
 import pytest
 
 from impactpipe.analysis import find_remnants, touching_groups
 
-G = 6.674e-11
 RHO = 2700.0
 R = 50.0
 M = 4.0 / 3.0 * np.pi * RHO * R**3  # one grain, kg

@@ -6,6 +6,7 @@ from dataclasses import fields
 
 import h5py
 import numpy as np
+from scipy.constants import G
 import pytest
 import rebound
 
@@ -352,7 +353,7 @@ def test_2d_axis_blocks_give_distinct_positions_off_axis():
     assert np.unique(particles.position, axis=0).shape[0] == len(particles)
     # REBOUND's tree accepts them all (it raises for two particles at one point).
     sim = rebound.Simulation()
-    sim.G = 6.674e-11
+    sim.G = G
     sim.gravity = "tree"
     sim.collision = "none"
     sim.root_size = 4.0 * np.abs(particles.position).max()

@@ -9,6 +9,7 @@ radius (coarse, so that every test stays within seconds on a shared 2-core machi
 import json
 
 import numpy as np
+from scipy.constants import G
 import pytest
 from click.testing import CliRunner
 
@@ -285,7 +286,7 @@ def test_derived_domain_and_capabilities():
     # a hand-off late enough that the escape speed carries material beyond the margin widens the box
     late = parse_config(TINY, overrides={"hydro.end_time": 500.0})
     wide = derived.derive(late)["domain"]
-    v_esc = np.sqrt(2 * 6.674e-11 * 4 / 3 * np.pi * (R_T ** 3 + 200.0 ** 3) * 2700.0 / R_T)
+    v_esc = np.sqrt(2 * G * 4 / 3 * np.pi * (R_T ** 3 + 200.0 ** 3) * 2700.0 / R_T)
     assert wide["margin"] == pytest.approx(v_esc * 500.0 / R_T, rel=1e-12) and wide["margin"] > 0.25
     assert "v_esc t_end / R_T" in wide["margin_rule"]
     full = derived.derive(parse_config(TINY, overrides={"scene.full_domain": True}))["domain"]

@@ -6,6 +6,7 @@ from dataclasses import fields
 
 import h5py
 import numpy as np
+from scipy.constants import G
 import pytest
 from test_nbody import cold_cloud, drop_sidecar_meta, sphere_radius
 
@@ -125,7 +126,6 @@ def test_box_factor_decides_whether_a_bound_satellite_is_removed_as_left_box(tmp
     """A satellite launched radially at 0.9 of its escape speed from 5 central radii rises to 5.3
     times that distance: nbody.box_factor 1.2 removes it as left_box (reported and warned
     about), 20 keeps it bound."""
-    G = 6.674e-11
     m = np.array([1e12, 1e10])
     r = sphere_radius(m)
     d = 5.0 * r[0]
@@ -145,7 +145,7 @@ def test_nbody_time_cap_is_the_smaller_of_the_two_caps_and_validate_shows_it():
     config = parse_config(CONFIG, source="n.yaml")
     values = derived.derive(config)
     t_dyn = values["nbody_dynamical_time"]
-    assert t_dyn == pytest.approx(1.0 / np.sqrt(6.674e-11 * values["target_reference_density"]), rel=1e-3)
+    assert t_dyn == pytest.approx(1.0 / np.sqrt(G * values["target_reference_density"]), rel=1e-3)
     assert values["nbody_time_cap"] == pytest.approx(2000.0 * t_dyn, rel=1e-12)
     assert "max_dynamical_times" in values["nbody_time_cap_rule"]
     capped = derived.derive(parse_config(CONFIG, source="n.yaml", overrides={"nbody.stop.max_time": 100.0}))

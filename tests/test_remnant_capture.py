@@ -5,13 +5,13 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from scipy.constants import G
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("remnant_capture", ROOT / "benchmarks" / "remnant_capture.py")
 rc = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(rc)
 
-G = 6.674e-11
 
 
 def _write_run(run: Path):
