@@ -621,10 +621,8 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
                                              f"(got {cfl:g}{'' if 'cfl' in hydro else ', the default'}): at larger "
                                              f"steps a deposit at rest under gravity does not stay at rest "
                                              f"(docs/validation.md, granular column collapse)"))
-    if scene.get("problem", "impact") != "impact" and hydro.get("end_time", "auto") != "auto":
-        errors.append((("hydro", "end_time"), f"applies to impact scenes only; the {scene.get('problem')} scene runs "
-                                              f"to scene.end_time, so this value would be ignored: remove it and "
-                                              f"set scene.end_time"))
+    if scene.get("problem", "impact") != "impact":
+        errors.extend(_impact_only_errors(str(scene.get("problem")), hydro))
     if scene.get("problem", "impact") == "impact":
         rt = (scene.get("target") or {}).get("radius") if isinstance(scene.get("target"), dict) else None
         rp = (scene.get("projectile") or {}).get("radius") if isinstance(scene.get("projectile"), dict) else None
@@ -635,6 +633,29 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
         if not isinstance(mat, dict):
             continue
         errors.extend(_material_errors(str(name), mat, source_dir))
+    return errors
+
+
+def _impact_only_errors(problem: str, hydro: dict[str, Any]) -> list[tuple[tuple, str]]:
+    """``hydro`` keys set for a scene other than an impact, which would be ignored there."""
+    errors: list[tuple[tuple, str]] = []
+    if hydro.get("end_time", "auto") != "auto":
+        errors.append((("hydro", "end_time"), f"applies to impact scenes only; the {problem} scene runs "
+                                              f"to scene.end_time, so this value would be ignored: remove it and "
+                                              f"set scene.end_time"))
+    if "cells_per_projectile_radius" in hydro:
+        errors.append((("hydro", "cells_per_projectile_radius"),
+                       f"applies to impact scenes only; the {problem} scene sets its own resolution in its "
+                       f"scene keys, so this value would be ignored: remove it"))
+    if hydro.get("self_gravity", "auto") != "auto":
+        errors.append((("hydro", "self_gravity"),
+                       f"applies to impact scenes only; the {problem} scene decides its own gravity "
+                       f"(docs/config.md, its scene table), so this value would be ignored: remove it"))
+    tracers = hydro.get("tracers") if isinstance(hydro.get("tracers"), dict) else {}
+    if tracers.get("enabled", "auto") is True:
+        errors.append((("hydro", "tracers", "enabled"),
+                       f"tracers are placed for impact scenes only; the {problem} scene has none: "
+                       f"remove it or set it to auto"))
     return errors
 
 

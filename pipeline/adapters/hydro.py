@@ -279,8 +279,6 @@ def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: s
     work.unlink(missing_ok=True)
     sim = build_simulation(config, values)
     if values["tracers"]:
-        if config.scene.problem != "impact":
-            raise ValueError("hydro.tracers.enabled: tracers are placed for impact scenes only in this version")
         add_tracers(sim, config, float(values["end_time"]))
     initial = sim.totals()
     with h5py.File(work, "w") as f:
