@@ -21,6 +21,7 @@ it closes the energy budget of a run with gravity (mesh + left - initial = work 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 import numpy as np
@@ -28,6 +29,29 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
+
+
+@njit(cache=True, inline="always")
+def cell_volume(geometry, r_lo, dx0, dx1, dx2):
+    """Volume of a cell (m^3): the annulus pi ((r_lo + dx0)^2 - r_lo^2) dx1 in 2d-cylindrical
+    (r_lo its inner radius, m), dx0 dx1 dx2 otherwise (unused axes 1 m)."""
+    if geometry == CYLINDRICAL:
+        return math.pi * ((r_lo + dx0) ** 2 - r_lo * r_lo) * dx1
+    return dx0 * dx1 * dx2
+
+
+@njit(cache=True, inline="always")
+def gravity_kick(dt, g0, g1, g2, rho, momentum, energy, b, ix, iy, iz):
+    """Kick one cell of density ``rho`` (kg/m^3) by the acceleration (g0, g1, g2) (m/s^2) over
+    ``dt`` (s): (rho u) += rho g dt, E += g . (rho u)_old dt + rho |g|^2 dt^2 / 2 (module
+    docstring).  Returns the energy density added (J/m^3)."""
+    de = (g0 * momentum[b, 0, ix, iy, iz] + g1 * momentum[b, 1, ix, iy, iz]
+          + g2 * momentum[b, 2, ix, iy, iz]) * dt + 0.5 * rho * (g0 * g0 + g1 * g1 + g2 * g2) * dt * dt
+    momentum[b, 0, ix, iy, iz] += rho * g0 * dt
+    momentum[b, 1, ix, iy, iz] += rho * g1 * dt
+    momentum[b, 2, ix, iy, iz] += rho * g2 * dt
+    energy[b, 0, ix, iy, iz] += de
+    return de
 
 
 @njit(cache=True, parallel=True)
@@ -41,18 +65,13 @@ def apply_gravity(dt, gx, gy, gz, geometry, ndim, arho, momentum, energy, block_
     lo_x = GHOST if nx > 1 else 0
     lo_y = GHOST if ny > 1 else 0
     lo_z = GHOST if nz > 1 else 0
-    half_g2_dt2 = 0.5 * (gx * gx + gy * gy + gz * gz) * dt * dt
     for b in prange(nb):
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0
         work = 0.0
         for ix in range(lo_x, nx - lo_x):
-            if geometry == CYLINDRICAL:
-                r_lo = block_lo[b, 0] + (ix - lo_x) * dx0
-                vol = 3.141592653589793 * ((r_lo + dx0) ** 2 - r_lo * r_lo) * dx1
-            else:
-                vol = dx0 * dx1 * dx2
+            vol = cell_volume(geometry, block_lo[b, 0] + (ix - lo_x) * dx0, dx0, dx1, dx2)
             for iy in range(lo_y, ny - lo_y):
                 for iz in range(lo_z, nz - lo_z):
                     rho = 0.0
@@ -60,13 +79,7 @@ def apply_gravity(dt, gx, gy, gz, geometry, ndim, arho, momentum, energy, block_
                         rho += arho[b, k, ix, iy, iz]
                     if rho <= 0.0:
                         continue
-                    de = (gx * momentum[b, 0, ix, iy, iz] + gy * momentum[b, 1, ix, iy, iz]
-                          + gz * momentum[b, 2, ix, iy, iz]) * dt + rho * half_g2_dt2
-                    momentum[b, 0, ix, iy, iz] += rho * gx * dt
-                    momentum[b, 1, ix, iy, iz] += rho * gy * dt
-                    momentum[b, 2, ix, iy, iz] += rho * gz * dt
-                    energy[b, 0, ix, iy, iz] += de
-                    work += de * vol
+                    work += gravity_kick(dt, gx, gy, gz, rho, momentum, energy, b, ix, iy, iz) * vol
         block_work[b] = work
 
 

@@ -56,6 +56,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.constants import G
 
+from impactpipe.hydro.gravity import cell_volume, gravity_kick
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -129,13 +130,6 @@ def harmonic_bounds(order: int) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _cell_volume(geometry, r_lo, dx0, dx1, dx2):
-    if geometry == CYLINDRICAL:
-        return math.pi * ((r_lo + dx0) ** 2 - r_lo * r_lo) * dx1
-    return dx0 * dx1 * dx2
-
-
-@njit(cache=True, inline="always")
 def _cell_mass(arho, geometry, ndim, block_lo, block_dx, b, ix, iy, iz, gx, gy, gz):
     """(mass (kg), centre x, y, z (m)) of interior cell (ix, iy, iz) of block b (padded indices,
     ``gx, gy, gz`` the ghost widths): sum_k alpha_k rho_k times the cell volume (annulus in r-z)."""
@@ -146,7 +140,7 @@ def _cell_mass(arho, geometry, ndim, block_lo, block_dx, b, ix, iy, iz, gx, gy, 
     rho = 0.0
     for k in range(arho.shape[1]):
         rho += arho[b, k, ix, iy, iz]
-    return (rho * _cell_volume(geometry, r_lo, dx0, dx1, dx2), r_lo + 0.5 * dx0,
+    return (rho * cell_volume(geometry, r_lo, dx0, dx1, dx2), r_lo + 0.5 * dx0,
             block_lo[b, 1] + (iy - gy + 0.5) * dx1, block_lo[b, 2] + (iz - gz + 0.5) * dx2)
 
 
@@ -316,7 +310,7 @@ def apply_self_gravity(dt, geometry, ndim, phi, arho, momentum, energy, block_lo
         pot = 0.0
         for ix in range(gx, nx - gx):
             r_lo = block_lo[b, 0] + (ix - gx) * dx0
-            vol = _cell_volume(geometry, r_lo, dx0, dx1, dx2)
+            vol = cell_volume(geometry, r_lo, dx0, dx1, dx2)
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
                     rho = 0.0
@@ -327,13 +321,7 @@ def apply_self_gravity(dt, geometry, ndim, phi, arho, momentum, energy, block_lo
                     g0 = -(phi[b, ix + 1, iy, iz] - phi[b, ix - 1, iy, iz]) / (2.0 * dx0)
                     g1 = -(phi[b, ix, iy + 1, iz] - phi[b, ix, iy - 1, iz]) / (2.0 * dx1) if ndim > 1 else 0.0
                     g2 = -(phi[b, ix, iy, iz + 1] - phi[b, ix, iy, iz - 1]) / (2.0 * dx2) if ndim > 2 else 0.0
-                    de = (g0 * momentum[b, 0, ix, iy, iz] + g1 * momentum[b, 1, ix, iy, iz]
-                          + g2 * momentum[b, 2, ix, iy, iz]) * dt + 0.5 * rho * (g0 * g0 + g1 * g1 + g2 * g2) * dt * dt
-                    momentum[b, 0, ix, iy, iz] += rho * g0 * dt
-                    momentum[b, 1, ix, iy, iz] += rho * g1 * dt
-                    momentum[b, 2, ix, iy, iz] += rho * g2 * dt
-                    energy[b, 0, ix, iy, iz] += de
-                    work += de * vol
+                    work += gravity_kick(dt, g0, g1, g2, rho, momentum, energy, b, ix, iy, iz) * vol
                     pot += 0.5 * rho * vol * phi[b, ix, iy, iz]
         block_work[b] = work
         block_potential[b] = pot
