@@ -56,7 +56,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.constants import G
 
-from impactpipe.hydro.gravity import cell_volume, gravity_kick
+from impactpipe.hydro.gravity_kick import cell_volume, gravity_kick
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 
