@@ -13,7 +13,11 @@ Conservation statements (before the velocity noise, to round-off):
 
     particle_mass + dropped_mass = mesh_mass
     particle_momentum + dropped_momentum = mesh_momentum
-    particle_radial_momentum + dropped_radial_momentum = mesh_radial_momentum   (2d-cylindrical)
+    particle_radial_momentum + dropped_radial_momentum + intact_radial_momentum
+        = mesh_radial_momentum                                                 (2d-cylindrical)
+
+(intact_radial_momentum: that of the intact fragments made single spheres on the axis,
+handoff/bodies.py; 0 without them).
 
 Kinetic energy is not conserved: a particle moves with its block's mean velocity (of the
 merged block, when finer leaves were merged first), so the energy of the velocity
@@ -61,6 +65,10 @@ BUDGET_UNITS = {
     "seed": "dimensionless",
     "block_edge": "m",
     "sphere_blocks": "dimensionless",
+    "intact_bodies": "dimensionless",
+    "intact_mass": "kg",
+    "intact_radial_momentum": "kg*m/s",
+    "intact_rings_left": "dimensionless",
 }
 
 
@@ -110,6 +118,12 @@ class HandoffBudget:
             blocks were merged first (``handoff.particle_resolution``); None otherwise.
         sphere_blocks: blocks the spheres were made from (n_blocks unless merged); None in
             files written before it was recorded.
+        intact_bodies: intact fragments made single spheres (handoff/bodies.py); they count
+            among n_particles and in every particle sum.
+        intact_mass: their mass (kg).
+        intact_radial_momentum: 2d-cylindrical, their scalar radial momentum, which the
+            spheres on the axis do not carry (kg m/s); None for 3d.
+        intact_rings_left: 2d-cylindrical fragments off the axis, left to their blocks.
     """
 
     geometry: str
@@ -147,6 +161,10 @@ class HandoffBudget:
     mirrored_y0: bool = False
     block_edge: float | None = None
     sphere_blocks: int | None = None
+    intact_bodies: int = 0
+    intact_mass: float = 0.0
+    intact_radial_momentum: float | None = None
+    intact_rings_left: int = 0
 
     @property
     def noise_momentum(self) -> np.ndarray:

@@ -41,6 +41,9 @@ Both geometries, then:
 - velocity noise: each particle gets a velocity increment of fixed magnitude
   velocity_noise x escape_speed in a direction uniform on the unit sphere (normalised
   standard-normal 3-vectors);
+- intact fragments (optional, ``intact_label``): each becomes one sphere of its mass at the
+  target's bulk density, after the blocks' spheres, and its cells leave their blocks
+  (handoff/bodies.py);
 - random numbers: one ``numpy.random.default_rng(seed)``; the ring phases are drawn first
   (block order), then the noise directions (particle order).
 """
@@ -53,6 +56,7 @@ import numpy as np
 
 from scipy.spatial import cKDTree
 
+from impactpipe.handoff.bodies import IntactBodies, split_intact_bodies
 from impactpipe.handoff.budget import HandoffBudget
 from impactpipe.handoff.mirror import mirror_across_y0
 from impactpipe.handoff.moments import block_moments, merge_fine_blocks
@@ -146,6 +150,7 @@ def blocks_to_spheres(
     mass_left_mesh: float | None = None,
     mirror_y0: bool = False,
     block_edge: float | None = None,
+    intact_label: np.ndarray | None = None,
 ) -> tuple[ParticleSet, HandoffBudget]:
     """Translate the leaf blocks of a hydro snapshot into N-body spheres.
 
@@ -174,6 +179,11 @@ def blocks_to_spheres(
             narrower than it are merged into their ancestor of this edge first
             (:func:`impactpipe.handoff.moments.merge_fine_blocks`); None takes the leaf
             blocks as they are.
+        intact_label: (NB, nx, ny, nz) int, the intact fragment of each cell (0, 1, ...) or
+            -1: each fragment becomes one sphere of its mass at ``target_bulk_density``
+            instead of a part of its blocks' spheres (:mod:`impactpipe.handoff.bodies`);
+            the ids of those spheres follow the blocks'.  Not with ``mirror_y0``: label the
+            mirrored snapshot (:func:`impactpipe.handoff.mirror.mirror_across_y0`).
 
     Returns:
         The particles (ids 1..N in block order) and the hand-off budget.
@@ -181,7 +191,12 @@ def blocks_to_spheres(
     _check_arguments(snapshot, target_bulk_density, total_mass, escape_speed, projectile_material_index,
                      min_density_fraction, min_mass_fraction, velocity_noise, mass_left_mesh)
     if mirror_y0:
+        if intact_label is not None:
+            raise ValueError("intact_label labels a whole snapshot: mirror it first and pass mirror_y0=False")
         snapshot, tracers = mirror_across_y0(snapshot, tracers)
+    bodies = None
+    if intact_label is not None:
+        snapshot, bodies = split_intact_bodies(snapshot, intact_label, target_bulk_density)
     cylindrical = snapshot.geometry == "2d-cylindrical"
     leaf_moments = block_moments(snapshot)
     moments = leaf_moments if block_edge is None else merge_fine_blocks(leaf_moments, snapshot.ndim, block_edge)
@@ -217,24 +232,45 @@ def blocks_to_spheres(
         position = moments.centre[kept].copy()
         velocity = block_velocity
     block = kept[source]
-    n_particles = block.size
 
     radius_cap = np.cbrt(3.0 * mass / (4.0 * np.pi * density_floor)) if density_floor > 0.0 else np.inf
     radius = np.minimum(sphere_radius[source], radius_cap)
     shrunk = int(np.count_nonzero(radius < sphere_radius[source]))
-    overlapping_pairs, deepest_overlap = sphere_overlaps(position, radius, sphere_radius[source])
+    radius_bound = sphere_radius[source]
+    if bodies is not None:
+        mass = np.concatenate([mass, bodies.mass])
+        position = np.concatenate([position, bodies.position])
+        velocity = np.concatenate([velocity, bodies.velocity])
+        radius = np.concatenate([radius, bodies.radius])
+        radius_bound = np.concatenate([radius_bound, bodies.radius])
+    n_particles = mass.size
+    from_block = np.arange(n_particles) < block.size
+    overlapping_pairs, deepest_overlap = sphere_overlaps(position, radius, radius_bound)
 
     direction = rng.standard_normal((n_particles, 3))
     direction /= np.linalg.norm(direction, axis=1)[:, None]
     velocity_with_noise = velocity + noise_speed * direction
 
     records = block_tracer_records(tracers, moments.lo, moments.hi, snapshot.ndim, moments.material_mass)
-    tracer_count = records.count[block]
-    peak_pressure_mean = fill_from_nearest(position, records.peak_pressure_mean[block], tracer_count > 0)
+
+    def per_particle(block_values: np.ndarray, body_value) -> np.ndarray:
+        """A per-block record for every particle; ``body_value`` for the intact bodies' spheres."""
+        out = np.empty((n_particles, *block_values.shape[1:]), dtype=block_values.dtype)
+        out[from_block] = block_values[block]
+        out[~from_block] = body_value
+        return out
+
+    tracer_count = per_particle(records.count, 0)
+    peak_pressure_mean = fill_from_nearest(position, per_particle(records.peak_pressure_mean, np.nan), tracer_count > 0)
     if projectile_material_index is None:
         projectile_fraction = np.full(n_particles, np.nan)
     else:
-        projectile_fraction = moments.material_mass[block, projectile_material_index] / moments.mass[block]
+        fraction = np.zeros(moments.mass.size)
+        np.divide(moments.material_mass[:, projectile_material_index], moments.mass, out=fraction,
+                  where=moments.mass > 0.0)
+        projectile_fraction = per_particle(fraction, np.nan)
+        if bodies is not None:
+            projectile_fraction[~from_block] = bodies.material_mass[:, projectile_material_index] / bodies.mass
 
     particles = ParticleSet(
         id=np.arange(1, n_particles + 1, dtype=np.int64),
@@ -244,11 +280,11 @@ def blocks_to_spheres(
         velocity=velocity_with_noise,
         tracer_count=tracer_count.astype(np.int64),
         peak_pressure_mean=peak_pressure_mean,
-        peak_pressure_max=records.peak_pressure_max[block],
-        origin_position=records.origin_position[block],
+        peak_pressure_max=per_particle(records.peak_pressure_max, np.nan),
+        origin_position=per_particle(records.origin_position, np.nan),
         projectile_fraction=projectile_fraction,
-        source_level=moments.level[block],
-        source_block=moments.block_id[block],
+        source_level=per_particle(moments.level, -1),
+        source_block=per_particle(moments.block_id, -1),
     )
 
     def frame_momentum(idx: np.ndarray) -> np.ndarray:
@@ -261,10 +297,15 @@ def blocks_to_spheres(
         return float(moments.momentum[idx, 0].sum()) if cylindrical else None
 
     if cylindrical:
-        unit_r = position[:, :2] / np.hypot(position[:, 0], position[:, 1])[:, None]
-        particle_radial = float((mass * (velocity[:, :2] * unit_r).sum(axis=1)).sum())
+        ring = position[from_block, :2]
+        unit_r = ring / np.hypot(ring[:, 0], ring[:, 1])[:, None]
+        particle_radial = float((mass[from_block] * (velocity[from_block, :2] * unit_r).sum(axis=1)).sum())
     else:
         particle_radial = None
+    if bodies is None:
+        bodies = IntactBodies.none(snapshot.partial_density.shape[1])
+    body_momentum = (bodies.mass[:, None] * bodies.velocity).sum(axis=0)
+    body_radial = float(bodies.radial_momentum.sum())
     n_tracers = 0 if tracers is None else len(tracers)
     tracers_used = int(records.count[kept].sum())
     all_blocks = np.arange(moments.mass.size)
@@ -273,10 +314,10 @@ def blocks_to_spheres(
         n_blocks=int(leaf_moments.mass.size),
         n_particles=int(n_particles),
         total_mass=float(total_mass),
-        mesh_mass=float(moments.mass.sum()),
-        mesh_momentum=frame_momentum(all_blocks),
-        mesh_kinetic_energy=float(moments.kinetic_energy.sum()),
-        mesh_radial_momentum=radial_momentum(all_blocks),
+        mesh_mass=float(moments.mass.sum() + bodies.mass.sum()),
+        mesh_momentum=frame_momentum(all_blocks) + body_momentum,
+        mesh_kinetic_energy=float(moments.kinetic_energy.sum() + bodies.kinetic_energy.sum()),
+        mesh_radial_momentum=None if not cylindrical else radial_momentum(all_blocks) + body_radial,
         particle_mass=float(mass.sum()),
         particle_momentum=(mass[:, None] * velocity).sum(axis=0),
         particle_momentum_with_noise=(mass[:, None] * velocity_with_noise).sum(axis=0),
@@ -304,6 +345,10 @@ def blocks_to_spheres(
         mirrored_y0=bool(mirror_y0),
         block_edge=None if block_edge is None else float(block_edge),
         sphere_blocks=int(moments.mass.size),
+        intact_bodies=bodies.count,
+        intact_mass=float(bodies.mass.sum()),
+        intact_radial_momentum=body_radial if cylindrical else None,
+        intact_rings_left=bodies.rings_left,
     )
     # A meshed body's mass differs from the analytic one by its surface discretisation
     # (~1e-4 at 10 cells per radius); more than 1 % above M_tot means a wrong total_mass.
@@ -314,6 +359,9 @@ def blocks_to_spheres(
     if block_edge is not None:
         log.info("hand-off: %d leaf blocks merged into %d blocks of edge >= %.4g m", budget.n_blocks,
                  budget.sphere_blocks, block_edge)
+    if bodies.count or bodies.rings_left:
+        log.info("hand-off: %d intact fragments (%.3e kg) made single spheres; %d off-axis fragments left to "
+                 "their blocks", bodies.count, budget.intact_mass, bodies.rings_left)
     log.info("hand-off: %d blocks -> %d particles; %d blocks dropped (%.3e kg); %d radii shrunk; "
              "%d overlapping pairs (deepest %.2f); %d tracers used", budget.sphere_blocks, n_particles,
              budget.dropped_count, budget.dropped_mass, shrunk, overlapping_pairs, deepest_overlap, tracers_used)

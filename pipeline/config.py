@@ -330,6 +330,12 @@ class Hydro(Strict):
         return v
 
 
+class IntactFragments(Strict):
+    enabled: bool = Field(False, description="make each intact fragment larger than a block one N-body sphere")
+    max_damage: float = Field(0.99, gt=0, le=1, description="cells at or above this damage are broken")
+    min_fill: float = Field(0.5, gt=0, le=1, description="least volume fraction of material in a fragment's cell")
+
+
 class Handoff(Strict):
     time: float | None = Field(None, gt=0, description="hand-off time (s): the hydro snapshot at this time; "
                                                        "default the end of the hydro stage")
@@ -342,6 +348,7 @@ class Handoff(Strict):
                                 "leaf blocks finer than that are merged into their ancestor blocks first, so the "
                                 "N-body particles are those of a coarser mesh; hydro.cells_per_projectile_radius "
                                 "divided by a power of two; default the leaf blocks as they are")
+    intact_fragments: IntactFragments = Field(default_factory=IntactFragments)
     window: list[float] | None = Field(
         None, description="hand-off window (s): two or more increasing hand-off times, after ~4 target "
                           "sound-crossing times, over which `impactpipe convergence` averages M_lr/M_T by default "
@@ -633,6 +640,14 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
         if not isinstance(mat, dict):
             continue
         errors.extend(_material_errors(str(name), mat, source_dir))
+    handoff = data.get("handoff") if isinstance(data.get("handoff"), dict) else {}
+    intact = handoff.get("intact_fragments") if isinstance(handoff.get("intact_fragments"), dict) else {}
+    if intact.get("enabled") is True and not any(
+            isinstance(m, dict) and isinstance(m.get("strength"), dict)
+            and m["strength"].get("model", "none") != "none" for m in materials.values()):
+        errors.append((("handoff", "intact_fragments", "enabled"),
+                       "needs a material with strength: fragments are cells whose damage stays below "
+                       "max_damage, and only a strength model computes damage"))
     return errors
 
 

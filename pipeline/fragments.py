@@ -66,6 +66,20 @@ def snapshot_fragments(snapshot: Snapshot, materials: list[int], half_domain: bo
     return find_fragments(cells["center"], cells["width"], cells["mass"], cells["velocity"], intact, whole.ndim)
 
 
+def intact_fragment_labels(snapshot: Snapshot, min_fill: float, max_damage: float) -> np.ndarray:
+    """(NB, nx, ny, nz) the fragment of each cell of a whole (mirrored) ``snapshot``, for the
+    hand-off's ``handoff.intact_fragments``: the fragments of all materials larger than one
+    block (fewer cells are already a block's sphere or part of one), numbered 0, 1, ... largest
+    first, -1 elsewhere."""
+    cells = body_cells(snapshot, list(range(len(snapshot.material_names))))
+    intact = intact_cells(cells["fill"], cells["damage"], min_fill, max_damage)
+    fragments = find_fragments(cells["center"], cells["width"], cells["mass"], cells["velocity"], intact,
+                               snapshot.ndim)
+    large = fragments.cells > int(np.prod(snapshot.cells_per_block))
+    renumber = np.append(np.where(large, np.cumsum(large) - 1, -1), -1)
+    return renumber[fragments.label].reshape(snapshot.pressure.shape)
+
+
 def run_fragments(run_dir: Path, material_names: list[str], half_domain: bool, at_time: float | None,
                   min_fill: float, max_damage: float, resolved_config: str) -> tuple[Fragments, float, Snapshot]:
     """Find the fragments of ``run_dir``'s hydro snapshot and write ``fragments.h5``.

@@ -129,9 +129,11 @@ def applicable_stages(config: Config) -> tuple[str, ...]:
 def stage_hashes(config: Config) -> dict[str, str]:
     """Content hash per stage, chained so a change upstream changes every hash downstream.
     ``handoff.window`` is left out: it tells the convergence tool where to hand off, not a stage
-    what to compute."""
+    what to compute; so is ``handoff.intact_fragments`` while it is off."""
     data = config.model_dump(mode="json")
     data["handoff"].pop("window")
+    if not data["handoff"]["intact_fragments"]["enabled"]:
+        data["handoff"].pop("intact_fragments")  # off: the hash of runs made before the key existed
     data["materials"] = config.resolved_materials()
     hashes: dict[str, str] = {}
     previous = ""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -13,11 +15,13 @@ from impactpipe.analysis.fragments import (
     find_fragments,
     intact_cells,
 )
+from impactpipe.handoff import read_particles
+from impactpipe.handoff.mirror import mirror_across_y0
 from impactpipe.hydro.output.io import append_snapshot
 from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.pipeline.cli import main
 from impactpipe.pipeline.config import load_config
-from impactpipe.pipeline.fragments import snapshot_fragments
+from impactpipe.pipeline.fragments import intact_fragment_labels, snapshot_fragments
 from impactpipe.pipeline.stages import resolved_yaml
 from impactpipe.storage import write_text_atomic
 from test_impact_3d import TINY
@@ -157,3 +161,59 @@ def test_fragments_command_prints_writes_and_plots(tmp_path):
     assert "1 fragment of basalt" in early.output
     wrong = CliRunner().invoke(main, ["fragments", str(run_dir), "--material", "ice"])
     assert wrong.exit_code == 2 and "material ice not in the run" in wrong.output
+
+
+def test_hand_off_labels_only_fragments_larger_than_a_block():
+    snap = mirror_across_y0(half_domain_snapshot(damage_plane=(5.0, 6.0)))[0]
+    label = intact_fragment_labels(snap, min_fill=0.5, max_damage=0.99)
+    assert label.shape == snap.pressure.shape
+    # x < 5: 5 x 8 x 4 = 160 cells, more than a 4^3 block; x > 6: 2 x 8 x 4 = 64, one block's worth.
+    x = snap.block_cell_centers()[:, 0]
+    np.testing.assert_array_equal(label, np.where(x < 5.0, 0, -1))
+
+
+#: The quickstart impact with GEO strength on a small mesh, run to its hand-off with intact fragments as bodies.
+INTACT_RUN = """name: intact
+scene:
+  problem: impact
+  target:     {material: basalt, radius: 1.0e3}
+  projectile: {material: basalt, radius: 1.0e2}
+  impact:     {velocity: 250.0, angle: 90}
+materials:
+  basalt:
+    eos: {model: tillotson, preset: basalt}
+    strength: {model: geo, preset: strong}
+hydro:
+  cells_per_projectile_radius: 2
+  block_cells: 4
+  end_time: 0.3
+  tracers: {enabled: false}
+handoff: {intact_fragments: {enabled: true}}
+nbody:
+  collision_model: merge
+  stop: {min_dynamical_times: 5, max_orbiting_fraction: 0.1}
+"""
+
+
+def test_a_run_hands_off_its_intact_fragments_as_single_spheres(tmp_path):
+    config_path = tmp_path / "intact.yaml"
+    config_path.write_text(INTACT_RUN)
+    result = CliRunner().invoke(main, ["run", str(config_path), "--out", str(tmp_path / "run"), "-q"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    budget = summary["handoff_budget"]
+    assert budget["intact_bodies"] >= 1
+    particles = read_particles(tmp_path / "run" / "handoff.h5")
+    bodies = particles.source_block == -1
+    assert bodies.sum() == budget["intact_bodies"]
+    assert particles.mass[bodies].sum() == pytest.approx(budget["intact_mass"], rel=1e-12)
+    np.testing.assert_array_equal(particles.position[bodies, :2], 0.0)
+    assert abs(budget["mass_residual"]) <= 1e-12 * budget["mesh_mass"]
+
+
+def test_intact_fragments_need_a_material_with_strength(tmp_path):
+    config_path = tmp_path / "intact.yaml"
+    config_path.write_text(INTACT_RUN.replace("    strength: {model: geo, preset: strong}\n", ""))
+    result = CliRunner().invoke(main, ["validate", str(config_path)])
+    assert result.exit_code == 2
+    assert "handoff.intact_fragments.enabled: needs a material with strength" in result.output

@@ -17,6 +17,7 @@ from impactpipe.handoff.spheres import blocks_to_spheres
 from impactpipe.handoff.store import write_particles
 
 from .. import derived
+from ..fragments import intact_fragment_labels
 from ..stages import StageContext
 
 
@@ -38,6 +39,14 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     # A half-domain 3d run computed y >= 0 only: the hand-off mirrors it, and the masses it
     # refers to are the full body's (twice the run's).
     halves = 2.0 if values["domain"]["half_domain"] else 1.0
+    mirror = values["domain"]["half_domain"]
+    intact_label = None
+    intact = config.handoff.intact_fragments
+    if intact.enabled:
+        if mirror:
+            snapshot, tracers = mirror_across_y0(snapshot, tracers)
+            mirror = False
+        intact_label = intact_fragment_labels(snapshot, intact.min_fill, intact.max_damage)
     particles, budget = blocks_to_spheres(
         snapshot,
         tracers,
@@ -50,12 +59,13 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
         velocity_noise=config.handoff.velocity_noise,
         seed=config.handoff.seed,
         mass_left_mesh=halves * mass_left,
-        mirror_y0=values["domain"]["half_domain"],
+        mirror_y0=mirror,
         block_edge=values.get("handoff_block_edge"),
+        intact_label=intact_label,
     )
     target_energy = None
     if config.scene.problem == "impact":
-        whole = mirror_across_y0(snapshot)[0] if values["domain"]["half_domain"] else snapshot
+        whole = mirror_across_y0(snapshot)[0] if mirror else snapshot
         target_energy = target_kinetic_energy(whole, config.scene.target.radius)
     if len(particles) == 0:
         raise RuntimeError(f"hand-off at t = {snapshot.time:.6g} s produced no particle "
