@@ -69,6 +69,12 @@ class IntactBodies:
         """Number of fragments made single spheres."""
         return int(self.mass.size)
 
+    @property
+    def internal_kinetic_energy(self) -> float:
+        """Kinetic energy of the motion inside the fragments, which their spheres do not carry (J):
+        sum_c m_c |v_c|^2 / 2 - sum_f m_f |v_f|^2 / 2 (in 2d-cylindrical, with their radial motion)."""
+        return float(self.kinetic_energy.sum() - 0.5 * (self.mass * (self.velocity**2).sum(axis=1)).sum())
+
 
 def split_intact_bodies(snapshot: Snapshot, label: np.ndarray, bulk_density: float) -> tuple[Snapshot, IntactBodies]:
     """(the snapshot without the fragments' cells, the fragments as spheres); module docstring.

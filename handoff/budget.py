@@ -69,6 +69,7 @@ BUDGET_UNITS = {
     "intact_mass": "kg",
     "intact_radial_momentum": "kg*m/s",
     "intact_rings_left": "dimensionless",
+    "intact_internal_kinetic_energy": "J",
 }
 
 
@@ -124,6 +125,9 @@ class HandoffBudget:
         intact_radial_momentum: 2d-cylindrical, their scalar radial momentum, which the
             spheres on the axis do not carry (kg m/s); None for 3d.
         intact_rings_left: 2d-cylindrical fragments off the axis, left to their blocks.
+        intact_internal_kinetic_energy: the kinetic energy of the motion inside those fragments
+            (J), part of ``unresolved_kinetic_energy``: large against the fragments' binding
+            energy, it says they were not moving as rigid bodies.
     """
 
     geometry: str
@@ -165,6 +169,7 @@ class HandoffBudget:
     intact_mass: float = 0.0
     intact_radial_momentum: float | None = None
     intact_rings_left: int = 0
+    intact_internal_kinetic_energy: float = 0.0
 
     @property
     def noise_momentum(self) -> np.ndarray:

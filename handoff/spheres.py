@@ -349,6 +349,7 @@ def blocks_to_spheres(
         intact_mass=float(bodies.mass.sum()),
         intact_radial_momentum=body_radial if cylindrical else None,
         intact_rings_left=bodies.rings_left,
+        intact_internal_kinetic_energy=bodies.internal_kinetic_energy,
     )
     # A meshed body's mass differs from the analytic one by its surface discretisation
     # (~1e-4 at 10 cells per radius); more than 1 % above M_tot means a wrong total_mass.
@@ -360,8 +361,9 @@ def blocks_to_spheres(
         log.info("hand-off: %d leaf blocks merged into %d blocks of edge >= %.4g m", budget.n_blocks,
                  budget.sphere_blocks, block_edge)
     if bodies.count or bodies.rings_left:
-        log.info("hand-off: %d intact fragments (%.3e kg) made single spheres; %d off-axis fragments left to "
-                 "their blocks", bodies.count, budget.intact_mass, bodies.rings_left)
+        log.info("hand-off: %d intact fragments (%.3e kg) made single spheres, discarding %.3e J of motion "
+                 "inside them; %d off-axis fragments left to their blocks", bodies.count, budget.intact_mass,
+                 budget.intact_internal_kinetic_energy, bodies.rings_left)
     log.info("hand-off: %d blocks -> %d particles; %d blocks dropped (%.3e kg); %d radii shrunk; "
              "%d overlapping pairs (deepest %.2f); %d tracers used", budget.sphere_blocks, n_particles,
              budget.dropped_count, budget.dropped_mass, shrunk, overlapping_pairs, deepest_overlap, tracers_used)

@@ -49,6 +49,9 @@ def test_3d_fragment_is_one_sphere_and_the_budget_still_closes():
     assert budget.mesh_kinetic_energy == pytest.approx(mesh_ke, rel=1e-12)
     # One sphere moving with the fragment's mean velocity carries less kinetic energy than its cells.
     assert budget.unresolved_kinetic_energy > plain_budget.unresolved_kinetic_energy
+    cell_ke = 0.5 * ((snap.partial_density.sum(axis=1) * snap.block_cell_volumes())[label == 0]
+                     * (np.moveaxis(snap.velocity, 1, -1)[label == 0] ** 2).sum(axis=1)).sum()
+    assert budget.intact_internal_kinetic_energy == pytest.approx(cell_ke - 0.5 * (p**2).sum() / m, rel=1e-9)
     assert len(particles) < len(plain) + 1
 
 
