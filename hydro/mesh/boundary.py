@@ -41,6 +41,16 @@ def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component, lo
 
 
 @njit(cache=True, parallel=True)
+def fill_ghosts_where(field, neighbor, neighbor_level, axis, ghost, lo, hi, wanted):
+    """:func:`fill_ghosts` of a field without sign flips for the blocks ``b`` of ``lo .. hi - 1``
+    with ``wanted[b]`` != 0 only (the strength step's work arrays: a block without material
+    reads none of its ghosts)."""
+    for b in prange(lo, hi):
+        if wanted[b] != 0:
+            _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, -1)
+
+
+@njit(cache=True, parallel=True)
 def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
                            hi):
     """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the
@@ -112,14 +122,21 @@ def _hi(npad, ghost):
     return npad - ghost if npad > 1 else 1
 
 
-def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = -1) -> None:
+def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = -1,
+                      wanted: np.ndarray | None = None) -> None:
     """Fill the ghosts of one field along ``axis``; coarse/fine faces by restriction and copies.
 
     For fields that are not conserved amounts (velocities, stresses of the strength step):
     coarse ghosts get the volume-weighted fine means, fine ghosts a copy of the coarse cell.
+    ``wanted[NB]``: on a uniform mesh, fill only the same-level ghosts of the blocks where it
+    is not 0 (without sign flips; :func:`fill_ghosts_where`); an adaptive mesh fills every
+    block's, since its prolongation reads the coarse blocks' ghosts.
     """
     g = int(mesh.ghost[axis])
     if g == 0:
+        return
+    if wanted is not None and not mesh.adaptive:
+        fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, wanted)
         return
     fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, axis, g, flip_component, 0, mesh.nblocks)
     if mesh.adaptive:

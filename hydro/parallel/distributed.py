@@ -28,7 +28,9 @@ import numpy as np
 
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
-from impactpipe.hydro.mesh.boundary import fill_field_ghosts, fill_ghosts, fill_state_ghost_slabs, fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import (
+    fill_field_ghosts, fill_ghosts, fill_ghosts_where, fill_state_ghost_slabs, fill_state_ghosts,
+)
 
 from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, owned_ranges, owners,
                             plan_routes)
@@ -52,11 +54,13 @@ class WholeMesh:
         """Fill the ghosts of every block along ``axis``."""
         fill_state_ghosts(state, mesh, axis)
 
-    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice) -> None:
+    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+                          wanted: np.ndarray | None = None) -> None:
         """Fill the ghosts of the ``components`` of a derived field (velocities, stresses) of
-        every block along ``axis``, without sign flips
+        every block along ``axis`` (on a uniform mesh only of the blocks where ``wanted[b]`` is
+        not 0, when given), without sign flips
         (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`)."""
-        fill_field_ghosts(field[:, components], mesh, axis)
+        fill_field_ghosts(field[:, components], mesh, axis, wanted=wanted)
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """(largest signal rate (1/s), first block with a non-finite rate or -1) over every process."""
@@ -160,9 +164,11 @@ class BlockRanges(WholeMesh):
             prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
                                  mesh.ndim)
 
-    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice) -> None:
+    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+                          wanted: np.ndarray | None = None) -> None:
         """Receive the neighbours' strips of the ``components`` of ``field`` along ``axis``, then
-        fill the owned blocks' ghosts of those components."""
+        fill the owned blocks' ghosts of those components (on a uniform mesh only of the blocks
+        where ``wanted[b]`` is not 0, when given)."""
         g = int(mesh.ghost[axis])
         if g == 0:
             return
@@ -171,7 +177,11 @@ class BlockRanges(WholeMesh):
             plans = self.plans(mesh, axis)
             exchange_strips(self.comm, plans["restrict_routes"], (field,), RESTRICT_TAG + axis, self.traffic,
                             components)
-        fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
+        if wanted is not None and not mesh.adaptive:
+            fill_ghosts_where(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
+                              wanted)
+        else:
+            fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
         if mesh.adaptive:
             restrict_ghosts(field[:, components], plans["restrict"], plans["restrict_weight"])
             exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, self.traffic,

@@ -27,7 +27,10 @@ included) is added to the boundary counters like the sweeps' fluxes.  Through a 
 whose neighbour is at another refinement level the amounts -dt A S_id (momentum) and
 -dt A S_id v_i (energy) are stored in ``face_flux[d]`` (the sweeps' column layout, momentum
 from column ``col0``) so that the coarse side can be refluxed
-(:func:`impactpipe.hydro.amr.transfer.reflux`).
+(:func:`impactpipe.hydro.amr.transfer.reflux`).  On 1-D and 2-D meshes the stress has no
+S_zd components (their work slots stay zero), so the kernel neither reads them nor the
+third velocity, and leaves the third momentum alone: the same sums without the terms
+that are zero.
 """
 
 from __future__ import annotations
@@ -51,6 +54,26 @@ def stress_slot(i, j):
     return 5
 
 
+@njit(cache=True, inline="always")
+def _face_geometry(cylindrical, d, r0, i, dx0, dx1, dx2, h):
+    """(A_lo / V, A_hi / V (1/m), A_lo, A_hi (m^2)) of the low and high faces along axis ``d``
+    of a cell in row ``i`` (interior index along axis 0) of a block whose axis-0 edge is at
+    ``r0`` (m), cell sizes ``dx0 .. dx2`` (m), ``h`` the size along ``d``."""
+    pi = 3.141592653589793
+    if cylindrical and d == 0:
+        r_lo = r0 + i * dx0
+        r_hi = r_lo + dx0
+        return (2.0 * r_lo / (r_hi * r_hi - r_lo * r_lo), 2.0 * r_hi / (r_hi * r_hi - r_lo * r_lo),
+                2.0 * pi * r_lo * dx1, 2.0 * pi * r_hi * dx1)
+    if cylindrical:
+        r_lo = r0 + i * dx0
+        r_hi = r_lo + dx0
+        ring = pi * (r_hi * r_hi - r_lo * r_lo)
+        return 1.0 / dx1, 1.0 / dx1, ring, ring
+    area = dx0 * dx1 * dx2 / h
+    return 1.0 / h, 1.0 / h, area, area
+
+
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
                             boundary, face_flux, col0, lo, hi):
@@ -61,12 +84,19 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    pi = 3.141592653589793
     for b in prange(lo, hi):
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0
         for ix in range(gx, nx - gx):
+            # the faces' geometry depends on ix alone: once per row of cells
+            geo0 = _face_geometry(cylindrical, 0, block_lo[b, 0], ix - gx, dx0, dx1, dx2, block_dx[b, 0])
+            geo1 = geo0
+            geo2 = geo0
+            if ndim > 1:
+                geo1 = _face_geometry(cylindrical, 1, block_lo[b, 0], ix - gx, dx0, dx1, dx2, block_dx[b, 1])
+            if ndim > 2:
+                geo2 = _face_geometry(cylindrical, 2, block_lo[b, 0], ix - gx, dx0, dx1, dx2, block_dx[b, 2])
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
                     phi_c = work[b, WK_PHI, ix, iy, iz]
@@ -78,26 +108,7 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
                     d_e = 0.0
                     for d in range(ndim):
                         # face areas over the cell volume (1/m) and physical face areas (m^2)
-                        if cylindrical and d == 0:
-                            r_lo = block_lo[b, 0] + (ix - gx) * dx0
-                            r_hi = r_lo + dx0
-                            inv_lo = 2.0 * r_lo / (r_hi * r_hi - r_lo * r_lo)
-                            inv_hi = 2.0 * r_hi / (r_hi * r_hi - r_lo * r_lo)
-                            area_lo = 2.0 * pi * r_lo * dx1
-                            area_hi = 2.0 * pi * r_hi * dx1
-                        elif cylindrical:
-                            r_lo = block_lo[b, 0] + (ix - gx) * dx0
-                            r_hi = r_lo + dx0
-                            inv_lo = 1.0 / dx1
-                            inv_hi = inv_lo
-                            area_lo = pi * (r_hi * r_hi - r_lo * r_lo)
-                            area_hi = area_lo
-                        else:
-                            h = block_dx[b, d]
-                            inv_lo = 1.0 / h
-                            inv_hi = inv_lo
-                            area_lo = dx0 * dx1 * dx2 / h
-                            area_hi = area_lo
+                        inv_lo, inv_hi, area_lo, area_hi = geo0 if d == 0 else (geo1 if d == 1 else geo2)
                         for side in range(2):
                             jx, jy, jz = ix, iy, iz
                             step = 1 if side == 1 else -1
@@ -110,17 +121,22 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
                             phi_n = work[b, WK_PHI, jx, jy, jz]
                             if phi_n <= 0.0:
                                 continue
-                            wc = 0.5 * min(phi_c, phi_n) / phi_c
-                            wn = 0.5 * min(phi_c, phi_n) / phi_n
+                            # 0.5 min(phi_c, phi_n) / phi: exactly 0.5 on the emptier side (no division)
+                            shared = min(phi_c, phi_n)
+                            wc = 0.5 if shared == phi_c else 0.5 * shared / phi_c
+                            wn = 0.5 if shared == phi_n else 0.5 * shared / phi_n
                             t0 = (wc * work[b, WK_S + stress_slot(0, d), ix, iy, iz]
                                   + wn * work[b, WK_S + stress_slot(0, d), jx, jy, jz])
                             t1 = (wc * work[b, WK_S + stress_slot(1, d), ix, iy, iz]
                                   + wn * work[b, WK_S + stress_slot(1, d), jx, jy, jz])
-                            t2 = (wc * work[b, WK_S + stress_slot(2, d), ix, iy, iz]
-                                  + wn * work[b, WK_S + stress_slot(2, d), jx, jy, jz])
                             v0 = 0.5 * (work[b, WK_V, ix, iy, iz] + work[b, WK_V, jx, jy, jz])
                             v1 = 0.5 * (work[b, WK_V + 1, ix, iy, iz] + work[b, WK_V + 1, jx, jy, jz])
-                            v2 = 0.5 * (work[b, WK_V + 2, ix, iy, iz] + work[b, WK_V + 2, jx, jy, jz])
+                            t2 = 0.0
+                            v2 = 0.0
+                            if ndim > 2:
+                                t2 = (wc * work[b, WK_S + stress_slot(2, d), ix, iy, iz]
+                                      + wn * work[b, WK_S + stress_slot(2, d), jx, jy, jz])
+                                v2 = 0.5 * (work[b, WK_V + 2, ix, iy, iz] + work[b, WK_V + 2, jx, jy, jz])
                             power = t0 * v0 + t1 * v1 + t2 * v2
                             w = dt * (inv_hi if side == 1 else -inv_lo)
                             d_mom0 += w * t0
@@ -151,5 +167,6 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
                         d_mom0 -= dt * work[b, WK_S + 2, ix, iy, iz] * 2.0 * (r_hi - r_lo) / (r_hi * r_hi - r_lo * r_lo)
                     mom[b, 0, ix, iy, iz] += d_mom0
                     mom[b, 1, ix, iy, iz] += d_mom1
-                    mom[b, 2, ix, iy, iz] += d_mom2
+                    if ndim > 2:
+                        mom[b, 2, ix, iy, iz] += d_mom2
                     energy[b, 0, ix, iy, iz] += d_e

@@ -103,6 +103,8 @@ class MaterialStrength:
         self.ns = stress_slots(mesh.ndim)
         self.nq = scalar_slots(mesh.ndim, self.fracture)
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
+        #: per block, whether it has a cell holding material at the last :meth:`load_stress` (1) or not (0)
+        self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
         self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
         self.face_flux = self._face_flux_arrays(mesh)
@@ -129,6 +131,7 @@ class MaterialStrength:
         """Follow a regrid: new work arrays; the per-block counters' totals move to block 0."""
         self.mesh = mesh
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
+        self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.face_flux = self._face_flux_arrays(mesh)
         self.counts = summed_rows(self.counts, mesh.nblocks)
         self.amounts = summed_rows(self.amounts, mesh.nblocks)
@@ -184,7 +187,7 @@ class MaterialStrength:
         work arrays, then their ghosts: what the first half kick (:meth:`kick`) uses."""
         lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._reference_densities(eos),
-                                 self.arrays.model, self.ns, self.work, lo, hi)
+                                 self.arrays.model, self.ns, self.work, lo, hi, self.holds)
         for axis in range(self.mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns))
 
@@ -253,8 +256,11 @@ class MaterialStrength:
         (coarse/fine faces: restriction and copies; neighbours of another MPI rank: received
         strips; ``partition.fill_field_ghosts``), then the wall sign flips.  A copied velocity
         or fill equals the one computed from copied conserved ghosts, so the work arrays never
-        need the state's ghosts."""
-        partition.fill_field_ghosts(self.work, self.mesh, axis, slots)
+        need the state's ghosts.  On a uniform mesh only the blocks holding material get
+        ghosts (:attr:`holds`): the stress step reads none of a void block's (every kernel
+        skips its void cells), and half of an impact's blocks are void.  Their stale ghosts
+        may be flipped at a wall; nothing reads them."""
+        partition.fill_field_ghosts(self.work, self.mesh, axis, slots, self.holds)
         for side in (0, 1):
             flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
             self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if slots.start <= c < slots.stop])

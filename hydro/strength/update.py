@@ -61,6 +61,8 @@ carry none) goes to ``work`` for the stress-divergence fluxes.
 
 from __future__ import annotations
 
+import math
+
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed_in_line, temperature_in_line
@@ -117,9 +119,11 @@ def scalar_slots(ndim: int, fracture: bool) -> int:
 
 
 @njit(cache=True, parallel=True)
-def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi):
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
-    blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards).
+    blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards), and into
+    ``holds[b]`` whether block b has a cell that holds material (1) or not (0): the kernels
+    of the stress step read no ghost of a block without one, so its ghosts need no filling.
 
     A cell's fill is min(phi, sum_k alpha_k rho_k / rho0_k), phi = sum_k alpha_k
     (``rho0[M]`` the materials' reference densities, kg/m^3; materials without one, rho0 = 0,
@@ -134,6 +138,12 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     Mixture stress S = sum_k alpha_k S_k (Pa), S_k = (alpha_k rho_k S_k) / (alpha_k rho_k)
     from the transported amounts ``arhoq`` (its first ``ns`` slots per material); cells without the material and strengthless
     materials add nothing.  This is the stress the first half of the momentum kick uses.
+
+    Only the first ``ns`` stress slots are written; the others (components a 1-D or 2-D mesh
+    does not carry) stay zero.  A cell whose fill in ``work`` is already 0 has zero velocity
+    and stress there (every kernel that writes ``work`` keeps that so), and stays untouched
+    when it is still void: most of the mesh is void in an impact, and skipping the stores
+    saves their memory traffic.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
@@ -141,11 +151,10 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     for b in prange(lo, hi):
+        held = 0
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
-                    for c in range(6):
-                        work[b, WK_S + c, ix, iy, iz] = 0.0
                     rho = 0.0
                     phi = 0.0
                     solid = 0.0
@@ -157,21 +166,59 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
                         solid += ar / r0 if r0 > 0.0 else alpha[b, k, ix, iy, iz]
                     fill = min(phi, solid)
                     if not (rho > 0.0 and fill >= PHI_VOID):
-                        for d in range(3):
-                            work[b, WK_V + d, ix, iy, iz] = 0.0
-                        work[b, WK_PHI, ix, iy, iz] = 0.0
+                        if work[b, WK_PHI, ix, iy, iz] != 0.0:
+                            for d in range(3):
+                                work[b, WK_V + d, ix, iy, iz] = 0.0
+                            work[b, WK_PHI, ix, iy, iz] = 0.0
+                            for c in range(ns):
+                                work[b, WK_S + c, ix, iy, iz] = 0.0
                         continue
+                    held = 1
                     for d in range(3):
                         work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
                     work[b, WK_PHI, ix, iy, iz] = fill
+                    s0 = s1 = s2 = s3 = s4 = s5 = 0.0
                     for k in range(nmat):
                         ar = arho[b, k, ix, iy, iz]
                         a = alpha[b, k, ix, iy, iz]
                         if model[k] == NONE or not (a > ALPHA_MIN and ar > 0.0):
                             continue
                         scale = a / ar
-                        for c in range(ns):
-                            work[b, WK_S + c, ix, iy, iz] += scale * arhoq[b, k * nq + c, ix, iy, iz]
+                        q = k * nq
+                        s0 += scale * arhoq[b, q, ix, iy, iz]
+                        s1 += scale * arhoq[b, q + 1, ix, iy, iz]
+                        s2 += scale * arhoq[b, q + 2, ix, iy, iz]
+                        if ns > 3:
+                            s3 += scale * arhoq[b, q + 3, ix, iy, iz]
+                        if ns > 4:
+                            s4 += scale * arhoq[b, q + 4, ix, iy, iz]
+                            s5 += scale * arhoq[b, q + 5, ix, iy, iz]
+                    _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5)
+        holds[b] = held
+
+
+@njit(cache=True, inline="always")
+def _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5):
+    """Write the first ``ns`` of the mixture stress components (xx, yy, zz, xy, xz, yz) (Pa) into ``work``."""
+    work[b, WK_S, ix, iy, iz] = s0
+    work[b, WK_S + 1, ix, iy, iz] = s1
+    work[b, WK_S + 2, ix, iy, iz] = s2
+    if ns > 3:
+        work[b, WK_S + 3, ix, iy, iz] = s3
+    if ns > 4:
+        work[b, WK_S + 4, ix, iy, iz] = s4
+        work[b, WK_S + 5, ix, iy, iz] = s5
+
+
+@njit(cache=True, inline="always")
+def _clear_scalars(arhoq, b, first, count, ix, iy, iz):
+    """Set ``arhoq[b, first .. first + count - 1]`` of a cell to +0.0, storing only the values
+    that are not +0.0 already (a void cell's or absent material's scalars nearly always are:
+    the skipped stores are memory traffic saved, the result is the same bit for bit)."""
+    for q in range(first, first + count):
+        v = arhoq[b, q, ix, iy, iz]
+        if v != 0.0 or math.copysign(1.0, v) < 0.0:
+            arhoq[b, q, ix, iy, iz] = 0.0
 
 
 @njit(cache=True, parallel=True)
@@ -255,7 +302,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     pack_damage`); None where every material fails instantly (then ``arhoq`` has no flaw slots).
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
-    its stress slots are written for the interior cells.  Counters accumulate per block.
+    its first ``ns`` stress slots are written for the interior cells that hold material (a
+    void cell's stay zero, as :func:`cell_velocity_and_stress` left them).  The scalars of
+    void cells and absent materials are set to zero, stored only where they are not zero
+    already.  Counters accumulate per block.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
@@ -269,12 +319,11 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
-                    for c in range(6):
-                        work[b, WK_S + c, ix, iy, iz] = 0.0
                     if work[b, WK_PHI, ix, iy, iz] <= 0.0:
-                        for q in range(nmat * nq):
-                            arhoq[b, q, ix, iy, iz] = 0.0
+                        # void: its stress in work is zero already (cell_velocity_and_stress)
+                        _clear_scalars(arhoq, b, 0, nmat * nq, ix, iy, iz)
                         continue
+                    s0 = s1 = s2 = s3 = s4 = s5 = 0.0
                     # velocity gradient L[i][j] = d v_i / d x_j
                     lxx = lxy = lxz = lyx = lyy = lyz = lzx = lzy = lzz = 0.0
                     lxx = _derivative(work, b, 0, ix, iy, iz, 0, dxs[0])
@@ -302,8 +351,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
                         if not (a > ALPHA_MIN and ar > 0.0):
-                            for j in range(nq):
-                                arhoq[b, base + j, ix, iy, iz] = 0.0
+                            _clear_scalars(arhoq, b, base, nq, ix, iy, iz)
                             continue
                         inv = 1.0 / ar
                         sxx = arhoq[b, base, ix, iy, iz] * inv
@@ -390,9 +438,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             arhoq[b, base + 5, ix, iy, iz] = ar * syz
                         arhoq[b, base + ns, ix, iy, iz] = ar * eps_p
                         arhoq[b, base + nq - 1, ix, iy, iz] = ar * dmg
-                        work[b, WK_S, ix, iy, iz] += a * sxx
-                        work[b, WK_S + 1, ix, iy, iz] += a * syy
-                        work[b, WK_S + 2, ix, iy, iz] += a * szz
-                        work[b, WK_S + 3, ix, iy, iz] += a * sxy
-                        work[b, WK_S + 4, ix, iy, iz] += a * sxz
-                        work[b, WK_S + 5, ix, iy, iz] += a * syz
+                        s0 += a * sxx
+                        s1 += a * syy
+                        s2 += a * szz
+                        s3 += a * sxy
+                        s4 += a * sxz
+                        s5 += a * syz
+                    _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5)
