@@ -94,7 +94,7 @@ def pencil_kinds(sim):
 def kind(sim, b, j1, j2=0):
     st = sim.state
     column = int(np.prod(st.alpha.shape[2:]))
-    return plain_material(st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy, b, 0, j1, j2,
+    return plain_material(st.alpha, st.arho, st.arhoe, st.momentum, st.energy, b, 0, j1, j2,
                           st.alpha.shape[2], st.alpha.ravel(), st.arho.ravel(), st.arhoe.ravel(), column)
 
 

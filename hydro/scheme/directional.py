@@ -245,7 +245,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                 # fills alone (hydro.scheme.plain_pencils), the general path otherwise
                 m = -1
                 if plain_pencils:
-                    m = plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell, alpha_f, arho_f,
+                    m = plain_material(alpha, arho, arhoe, mom, energy, b, axis, j1, j2, ncell, alpha_f, arho_f,
                                        arhoe_f, cs)
                 rho0_m = reference_density(eos_kind[m], eos_params[m], eos_table) if m >= 0 else 0.0
                 # where material m's columns and the momentum and energy of this pencil start in the
@@ -342,7 +342,9 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
     (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
     and the absent materials' rows written without an EOS call (alpha_k, zeros, Y_T,k: an
-    absent material holds no damage).
+    absent material holds no damage).  Only material m's transported scalars are gathered:
+    the plain fluxes carry no other material's, so reading those columns would be memory
+    traffic for nothing.
 
     The fields come flattened (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`), with
     the cell's flat indices: ``ia`` in material m's column of alpha, arho and arhoe (material
@@ -394,8 +396,6 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
             sc[i, r + 3] = 0.0
             sc[i, r + 4] = 0.0
             sc[i, r + 5] = tensile_strength[k]
-            for j in range(nq):
-                sc[i, wq_row + nq * k + j] = arhoq_f[iq + ((k - m) * nq + j) * cs] * 0.0
     kmod = ar * c2k
     sc[i, W_PHI] = a
     sc[i, W_C] = np.sqrt(kmod / ar)

@@ -73,11 +73,15 @@ EMPTY_PENCIL = -2
 
 
 @njit(cache=True, inline="always")
-def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncell, alpha_f, arho_f, arhoe_f, cs):
+def plain_material(alpha, arho, arhoe, mom, energy, b, axis, j1, j2, ncell, alpha_f, arho_f, arhoe_f, cs):
     """The material m that fills every cell of the pencil alone, EMPTY_PENCIL, or -1.
 
-    See the module docstring.  An empty pencil (every cell void, with zero momentum, energy
-    and transported scalars) has no fluxes and no update: the sweep leaves it as it is.
+    See the module docstring.  An empty pencil (every cell void, with zero momentum and
+    energy) has no fluxes and no update: the sweep leaves it as it is.  Its transported
+    scalars are not read: a cell without mass has none, since every kernel that removes a
+    material's last mass zeroes its scalars with it (the sweeps' floors and cleanups, the
+    stress update's void cells and absent materials), and skipping the check spares the
+    sweep a read of every scalar column of the void pencils, half of an impact's.
     ``alpha_f``, ``arho_f``, ``arhoe_f``: the first three fields flattened, ``cs`` the length
     of one column (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`).
     """
@@ -97,9 +101,6 @@ def plain_material(alpha, arho, arhoe, arhoq, mom, energy, b, axis, j1, j2, ncel
                     return -1
             for k in range(nmat):
                 if alpha[b, k, ix, iy, iz] != 0.0 or arho[b, k, ix, iy, iz] != 0.0 or arhoe[b, k, ix, iy, iz] != 0.0:
-                    return -1
-            for c in range(arhoq.shape[1]):
-                if arhoq[b, c, ix, iy, iz] != 0.0:
                     return -1
         return EMPTY_PENCIL
     offset, stride = pencil_offset(alpha.shape[2], alpha.shape[3], alpha.shape[4], axis, j1, j2)
