@@ -29,13 +29,15 @@ from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, compact, distension_field,
+                                           pack_porosity)
 from impactpipe.hydro.gravity import gravity_from_spec
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
-from impactpipe.hydro.strength.parameters import GRADY_KIPP, pack_damage
+from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, pack_damage
 from impactpipe.hydro.scheme.directional import sweep
 from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_NAMES,
@@ -95,6 +97,10 @@ class Simulation:
             ``damage`` block (:func:`impactpipe.hydro.strength.parameters.pack_damage`) makes
             the material's tensile damage Grady-Kipp: flaws drawn and carried, (1 - D) of its
             tension borne (:attr:`grady_kipp`); its ``flaw_strains`` are recorded here when drawn.
+            A porous material (an EOS spec with a ``porosity`` block of alpha0 > 1,
+            :mod:`impactpipe.hydro.eos.porosity`) carries its distension in the transported
+            scalars, compacted after each step's sweeps; it may not have a yield model (not
+            supported yet).
         time: initial time (s).
         tracers: Lagrangian tracers carried with the flow, or None.  Any object with
             ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
@@ -132,6 +138,9 @@ class Simulation:
         self.material_names = list(material_names)
         self.eos_specs = [dict(s) for s in eos_specs]
         self.eos = pack_eos(self.eos_specs)
+        #: (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`); None without
+        #: porous materials.
+        self.porosity = pack_porosity(self.eos_specs, self.eos)
         self.state = state
         self.cfl = float(cfl)
         self.strength_specs = None if strength is None else [dict(s) if s else None for s in strength]
@@ -180,7 +189,15 @@ class Simulation:
         #: (M,) True for the materials whose tension is borne as (1 - D) of the EOS tension (Grady-Kipp
         #: fracture, :func:`impactpipe.hydro.scheme.mixture.tension_factor`); None when there are none.
         self.grady_kipp = gradual if gradual.any() else None
-        self.strength = MaterialStrength(arrays, mesh, state.nmat, damage) if arrays.enabled else None
+        porous = self.porosity is not None
+        if porous and ((arrays.model != NONE) & (self.porosity[:, ALPHA0] > 1.0)).any():
+            k = int(np.flatnonzero((arrays.model != NONE) & (self.porosity[:, ALPHA0] > 1.0))[0])
+            raise ValueError(f"material {k} ({material_names[k]}): porosity with a strength model is not supported "
+                             f"(give the porous material strength model none)")
+        #: Counters of the compaction step (:data:`impactpipe.hydro.eos.porosity.COUNT_NAMES`), per block.
+        self.porosity_counts = np.zeros((nb, len(POROSITY_COUNT_NAMES)), dtype=np.int64)
+        fresh = porous and state.arhoq.shape[1] == 0
+        self.strength = MaterialStrength(arrays, mesh, state.nmat, damage, porous) if arrays.enabled else None
         if self.strength is not None:
             self.strength.prepare_state(state)
             for k, strains in self.strength.flaw_strains.items():  # recorded, so a checkpoint resumes with them
@@ -188,9 +205,14 @@ class Simulation:
                                           "damage": {**self.strength_specs[k]["damage"], "flaw_strains": strains}}
         elif self.grady_kipp is not None:
             raise ValueError("damage model grady_kipp needs a strength model with a yield strength")
-        elif state.arhoq.shape[1]:
+        elif porous and fresh:
+            state.arhoq = np.zeros((mesh.nblocks, 2 * state.nmat) + mesh.padded_shape)
+        elif state.arhoq.shape[1] and not porous:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
+        if fresh:
+            for k in range(state.nmat):
+                state.arhoq[:, nq * k + nq - 2] = self.porosity[k, ALPHA0] * state.arho[:, k]
         self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape), nq)
         self._rate_work = allocate_rate_work(numba.config.NUMBA_NUM_THREADS, mesh.padded_shape)
         self._face_flux = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim,
@@ -216,7 +238,7 @@ class Simulation:
         rates = self._rate[own]
         max_signal_rate(st.alpha[own], st.arho[own], st.arhoe[own], st.momentum[own], self.mesh.block_dx[own],
                         self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim,
-                        self._rate_work, rates)
+                        self._rate_work, rates, None if self.porosity is None else st.arhoq[own], self.porosity)
         bad = np.flatnonzero(~np.isfinite(rates))
         first_bad = (own.start or 0) + int(bad[0]) if bad.size else -1
         rate, first_bad = self.partition.combine_rate(float(rates.max()), first_bad)
@@ -254,7 +276,7 @@ class Simulation:
                   self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
                   self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
                   self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-                  self.grady_kipp)
+                  self.grady_kipp, self.porosity)
             failed = self.partition.first_failure(self._failure)
             if failed >= 0:
                 self._raise_sweep_failure(failed)
@@ -265,6 +287,9 @@ class Simulation:
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self._face_flux, st.alpha, st.arho, st.arhoe,
                        st.arhoq, st.momentum, st.energy, self.floors, self.amounts)
                 self._observe("reflux", axis)
+        if self.porosity is not None:
+            lo, hi, _ = own.indices(self.mesh.nblocks)
+            compact(st.alpha, st.arho, st.arhoq, self.porosity, self.porosity_counts, lo, hi)
         if self.strength is not None or self.gravity is not None:
             self._momentum_sources(dt)
             self._observe("sources", -1)
@@ -359,7 +384,7 @@ class Simulation:
             fill_state_ghosts(self.state, self.mesh, axis)
         refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
                                                           self.tensile_strength, self.refinement, self.peak_pressure,
-                                                          self.grady_kipp)
+                                                          self.grady_kipp, self.porosity)
         return refine, coarsen
 
     def _regrid(self) -> bool:
@@ -374,8 +399,8 @@ class Simulation:
         for axis in range(new_mesh.ndim):
             fill_state_ghosts(new_state, new_mesh, axis)
         nb = new_mesh.nblocks
-        self.boundary, self.floors, self.amounts = (summed_rows(a, nb) for a in (self.boundary, self.floors,
-                                                                                 self.amounts))
+        self.boundary, self.floors, self.amounts, self.porosity_counts = (
+            summed_rows(a, nb) for a in (self.boundary, self.floors, self.amounts, self.porosity_counts))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
         self._face_flux = allocate_face_flux(nb, new_mesh.padded_shape, new_mesh.ndim, st.nmat, st.arhoq.shape[1])
@@ -436,7 +461,7 @@ class Simulation:
         return (self.strength.counts.copy(), self.strength.amounts.copy())
 
     def _counter_arrays(self) -> tuple:
-        arrays = (self.boundary, self.floors, self.amounts)
+        arrays = (self.boundary, self.floors, self.amounts, self.porosity_counts)
         if self.strength is not None:
             arrays += (self.strength.counts, self.strength.amounts)
         return arrays
@@ -465,6 +490,8 @@ class Simulation:
         counts = {name: int(v) for name, v in zip(FLOOR_NAMES, totals)}
         if self.strength is not None:
             counts.update(self.strength.count_totals)
+        if self.porosity is not None:
+            counts.update({name: int(v) for name, v in zip(POROSITY_COUNT_NAMES, self.porosity_counts.sum(axis=0))})
         return counts
 
     @property
@@ -517,7 +544,7 @@ class Simulation:
         pressure, sound, eint, temp = (np.zeros(shape) for _ in range(4))
         cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
                             self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength, pressure,
-                            sound, eint, temp, self.grady_kipp)
+                            sound, eint, temp, self.grady_kipp, self.porosity)
         return self.partition.largest(float(pressure.max()))
 
     def snapshot(self) -> Snapshot:
@@ -531,7 +558,7 @@ class Simulation:
         pressure, sound, eint, temp = (np.zeros(shape) for _ in range(4))
         cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
                             self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength,
-                            pressure[own], sound[own], eint[own], temp[own], self.grady_kipp)
+                            pressure[own], sound[own], eint[own], temp[own], self.grady_kipp, self.porosity)
         arho = mesh.interior(st.arho).copy()
         alpha = mesh.interior(st.alpha).copy()
         velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
@@ -539,6 +566,10 @@ class Simulation:
         safe = np.where(rho > 0.0, rho, 1.0)
         velocity[own] = np.where(rho[:, None] > 0.0, mesh.interior(st.momentum)[own] / safe[:, None], 0.0)
         extra = {} if self.strength is None else self.strength.cell_fields(st, own)
+        if self.porosity is not None:
+            extra["distension"] = np.zeros(shape)
+            extra["distension"][own] = distension_field(mesh.interior(st.arho)[own], mesh.interior(st.arhoq)[own],
+                                                        self.porosity)
         self.partition.gather_to_root([pressure, sound, eint, temp, arho, alpha, velocity, *extra.values()])
         return Snapshot(
             time=self.time,
@@ -600,6 +631,8 @@ class Simulation:
                 ctr.create_dataset("amounts", data=self.amounts).attrs["names"] = json.dumps(AMOUNT_NAMES)
                 ctr.create_dataset("shear_modulus", data=self.shear_modulus)
                 ctr.create_dataset("tensile_strength", data=self.tensile_strength)
+                if self.porosity is not None:
+                    ctr.create_dataset("porosity_counts", data=self.porosity_counts)
                 if self.strength is not None:
                     ctr.create_dataset("strength_counts", data=self.strength.counts)
                     ctr.create_dataset("strength_amounts", data=self.strength.amounts)
@@ -643,6 +676,8 @@ class Simulation:
             sim.boundary[:] = fh["counters/boundary"][()]
             _load_named_columns(fh["counters/floors"], FLOOR_NAMES, sim.floors)
             _load_named_columns(fh["counters/amounts"], AMOUNT_NAMES, sim.amounts)
+            if sim.porosity is not None:
+                sim.porosity_counts[:] = fh["counters/porosity_counts"][()]
             if sim.strength is not None:
                 sim.strength.counts[:] = fh["counters/strength_counts"][()]
                 sim.strength.amounts[:] = fh["counters/strength_amounts"][()]

@@ -159,9 +159,26 @@ class StrengthSpec(Strict):
         return _damage_block(value) if isinstance(value, str) else value
 
 
+class PorositySpec(Strict):
+    """Epsilon-alpha compaction of a porous material (:mod:`impactpipe.hydro.eos.porosity`)."""
+
+    preset: str | None = None
+    alpha0: float | None = Field(None, ge=1, description="initial distension rho_solid / rho (1: no pores)")
+    eps_e: float | None = Field(None, le=0, description="volumetric strain where compaction starts (-)")
+    kappa: float | None = Field(None, gt=0, description="exponential compaction rate (-)")
+    alpha_x: float | None = Field(None, ge=1, description="distension where compaction turns to the power law (-)")
+
+
 class Material(Strict):
     eos: EOSSpec
     strength: StrengthSpec = Field(default_factory=StrengthSpec)
+    porosity: PorositySpec | None = Field(None, description="epsilon-alpha porosity: a block, or a preset name")
+
+    @field_validator("porosity", mode="before")
+    @classmethod
+    def _porosity_preset_name(cls, value: Any) -> Any:
+        """``porosity: basalt`` stands for ``{preset: basalt}``."""
+        return {"preset": value} if isinstance(value, str) else value
 
 
 # --------------------------------------------------------------------------- scene
@@ -435,6 +452,8 @@ class Config(Strict):
                 "eos": presets.resolve_eos(mat.eos.model, getattr(mat.eos, "preset", None), eos),
                 "strength": strength,
             }
+            if mat.porosity is not None:
+                out[name]["porosity"] = presets.resolve_porosity(mat.porosity.model_dump(exclude_none=True))
         return out
 
     def scene_materials(self) -> list[str]:
@@ -711,7 +730,36 @@ def _material_errors(name: str, mat: dict[str, Any], source_dir: Path) -> list[t
                                f"missing parameter {exc.args[0]} for model {smodel} (give it or name a preset)"))
     if strength.get("damage") is not None:
         errors.extend(_damage_errors(name, strength))
+    porosity = mat.get("porosity")
+    if isinstance(porosity, (dict, str)):
+        errors.extend(_porosity_errors(name, {"preset": porosity} if isinstance(porosity, str) else porosity, smodel))
     return errors
+
+
+def _porosity_errors(name: str, porosity: dict[str, Any], smodel: Any) -> list[tuple[tuple, str]]:
+    """Errors of a material's ``porosity`` block: unknown preset, missing parameters, alpha_x above
+    alpha0, porosity on a material with a strength model (not supported)."""
+    loc = ("materials", name, "porosity")
+    preset = porosity.get("preset")
+    choices = presets.porosity_presets()
+    if preset is not None and preset not in choices:
+        return [(loc + ("preset",), f"unknown porosity preset '{preset}' (allowed: {', '.join(choices)})"
+                                    f"{_did_you_mean(str(preset), choices)}")]
+    try:
+        resolved = presets.resolve_porosity(porosity)
+    except KeyError as exc:
+        return [(loc, f"missing parameter {exc.args[0]} (give it or name a preset)")]
+    except (TypeError, ValueError):
+        return []  # a value of the wrong type: the schema reports it
+    if resolved["alpha0"] < 1.0 or resolved["alpha_x"] < 1.0:
+        return []  # out of range: the schema reports it
+    if resolved["alpha_x"] > resolved["alpha0"]:
+        return [(loc + ("alpha_x",), f"must be <= alpha0 = {resolved['alpha0']:g} (got {resolved['alpha_x']:g}): "
+                                     f"compaction runs from alpha0 down through alpha_x to 1")]
+    if smodel not in (None, "none") and resolved["alpha0"] > 1.0:
+        return [(loc, f"porosity with a strength model ({smodel}) is not supported yet: give the porous material "
+                      f"strength model none")]
+    return []
 
 
 def _damage_errors(name: str, strength: dict[str, Any]) -> list[tuple[tuple, str]]:

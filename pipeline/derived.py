@@ -33,11 +33,26 @@ SELF_GRAVITY_VELOCITY_FRACTION = 0.02
 
 
 def reference_state(material: dict[str, Any]) -> tuple[float, float]:
-    """(rho0, bulk sound speed at rho0 and zero internal energy) of a resolved material (SI)."""
+    """(rho0, bulk sound speed at rho0 and zero internal energy) of a resolved material (SI).
+
+    A porous material (``porosity`` block) has the bulk density rho_s0 / alpha0 of its unstrained
+    pores and the sound speed of its solid at rho_s0 (:mod:`impactpipe.hydro.eos.porosity`)."""
     arrays = pack_eos([material["eos"]])
     rho0 = reference_density(arrays.kind[0], arrays.params[0], arrays.table)
     _, c2, _ = pressure_sound_speed(arrays.kind[0], arrays.params[0], arrays.table, rho0, 0.0)
-    return float(rho0), float(math.sqrt(c2))
+    alpha0 = float((material.get("porosity") or {}).get("alpha0", 1.0))
+    return float(rho0) / alpha0, float(math.sqrt(c2))
+
+
+def porosity_choice(materials: dict[str, dict[str, Any]]) -> tuple[bool, str]:
+    """(on, why) for porosity: on when some material has alpha0 > 1 (:mod:`impactpipe.hydro.eos.porosity`)."""
+    porous = {name: float(mat["porosity"]["alpha0"]) for name, mat in materials.items()
+              if mat.get("porosity") and float(mat["porosity"]["alpha0"]) > 1.0}
+    if not porous:
+        return False, "off: no material has a porosity block with alpha0 > 1"
+    listed = ", ".join(f"{name} alpha0 = {alpha0:g}" for name, alpha0 in porous.items())
+    return True, (f"on: {listed} > 1 (epsilon-alpha compaction; the distension rides with the material as a "
+                  f"transported scalar)")
 
 
 def geometry(config: Config) -> tuple[str, str]:
@@ -77,6 +92,7 @@ def derive(config: Config) -> dict[str, Any]:
     out: dict[str, Any] = {"geometry": geom, "geometry_rule": why}
     materials = config.resolved_materials()
     out["strength"] = {name: strength_choice(mat["strength"]) for name, mat in materials.items()}
+    out["porosity"], out["porosity_rule"] = porosity_choice(materials)
     out["tracers"], out["tracers_rule"] = tracers_enabled(config)
     out["levels"], out["levels_rule"] = mesh_levels(config, geom)
     out["mesh"] = ("uniform, one level at the finest cell size" if out["levels"] == 1 else

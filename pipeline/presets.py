@@ -1,9 +1,10 @@
 """Published material parameter sets shipped with the package, and their resolution.
 
 The data file ``data/materials.yaml`` holds Tillotson and Mie-Grueneisen EOS sets and
-the GEO / ROCK strength presets of the reference study and the Weibull flaw parameters of
-tensile fracture (SI units).  A material in a config names a preset and may override any
-parameter; :func:`resolve_eos`, :func:`resolve_strength` and :func:`resolve_damage` return
+the GEO / ROCK strength presets of the reference study, the Weibull flaw parameters of
+tensile fracture and the epsilon-alpha compaction parameters of porous materials (SI units).  A material in a config names a preset and may override any
+parameter; :func:`resolve_eos`, :func:`resolve_strength`, :func:`resolve_damage` and
+:func:`resolve_porosity` return
 the complete parameter dicts the solver consumes.
 """
 
@@ -31,6 +32,7 @@ GRADY_KIPP_KEYS = ("weibull_m", "weibull_k")
 OPTIONAL_GRADY_KIPP_KEYS = ("young_modulus", "flaw_cross_section")
 #: Integer keys of a Grady-Kipp block: the seed and the number of flaws of each material's draw.
 FLAW_DRAW_KEYS = ("flaw_seed", "flaw_count")
+POROSITY_KEYS = ("alpha0", "eps_e", "kappa", "alpha_x")
 #: Thermal-softening exponent for GEO presets, which publish none (the ROCK presets use 1.2).
 GEO_DEFAULT_XI = 1.2
 
@@ -128,3 +130,23 @@ def resolve_damage(spec: dict[str, Any] | None) -> dict[str, Any]:
         if key in params:
             resolved[key] = int(params[key])
     return resolved
+
+
+def porosity_presets() -> list[str]:
+    """Names of the porosity presets."""
+    return sorted(material_data()["porosity"])
+
+
+def resolve_porosity(spec: dict[str, Any]) -> dict[str, float]:
+    """Complete epsilon-alpha parameters of a material's ``porosity`` block: the preset's values
+    updated by the parameters given.  Raises KeyError naming the first missing parameter."""
+    spec = dict(spec)
+    preset = spec.pop("preset", None)
+    params: dict[str, Any] = {}
+    if preset is not None:
+        params.update(material_data()["porosity"][preset])
+    params.update({k: v for k, v in spec.items() if v is not None})
+    for key in POROSITY_KEYS:
+        if key not in params:
+            raise KeyError(key)
+    return {k: float(params[k]) for k in POROSITY_KEYS}

@@ -111,8 +111,9 @@ def resolved_dict(config: Config) -> dict[str, Any]:
     """
     data = config.model_dump(mode="json", exclude_none=True)
     for name, resolved in config.resolved_materials().items():
-        for part in ("eos", "strength"):
-            data["materials"][name][part].update(resolved[part])
+        for part in ("eos", "strength", "porosity"):
+            if part in resolved:
+                data["materials"][name][part].update(resolved[part])
     return data
 
 

@@ -48,12 +48,12 @@ NINDICATOR = 5
 
 @njit(cache=True, parallel=True)
 def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                     out, grady_kipp=None):
+                     out, grady_kipp=None, porosity=None):
     """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``.
 
     The mixture pressure of :func:`impactpipe.hydro.scheme.mixture.mixture_state`: p_k is limited by
     the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps (and scaled by 1 - D_k for
-    the Grady-Kipp materials of ``grady_kipp``).
+    the Grady-Kipp materials of ``grady_kipp``), porous materials (``porosity``) at their distension.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     for b in prange(nb):
@@ -62,7 +62,7 @@ def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table,
                 for iz in range(nz):
                     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
                         alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
-                        tensile_strength, False, None, 0, 0, grady_kipp)
+                        tensile_strength, False, None, 0, 0, grady_kipp, porosity)
                     out[b, ix, iy, iz] = p
 
 

@@ -84,18 +84,20 @@ class RefinementRule:
 
 def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
                 rule: RefinementRule, peak_pressure: float = 0.0,
-                grady_kipp: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+                grady_kipp: np.ndarray | None = None,
+                porosity: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
 
     The state's ghosts along every used axis must be filled.  ``peak_pressure`` is the largest
     |p| of earlier regrids: the pressure floor is ``pressure_floor`` times the largest |p|
     ever on the mesh, so the waves left behind once the impact's shock has decayed (acoustic
     noise on the scale of the event) do not keep the whole body refined.  ``grady_kipp``: the
-    materials bearing (1 - D) of their tension (:func:`impactpipe.hydro.scheme.mixture.tension_factor`).
+    materials bearing (1 - D) of their tension (:func:`impactpipe.hydro.scheme.mixture.tension_factor`);
+    ``porosity``: the porous materials' rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`) or None.
     """
     pressure = np.zeros((mesh.nblocks,) + mesh.padded_shape)
     mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,
-                     shear_modulus, tensile_strength, pressure, grady_kipp)
+                     shear_modulus, tensile_strength, pressure, grady_kipp, porosity)
     peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)).max(initial=0.0)))
     floor = rule.pressure_floor * max(peak_pressure, 1e-300)
     ind = np.zeros((mesh.nblocks, NINDICATOR))

@@ -8,6 +8,10 @@ A material's EOS is a *resolved* spec dict (presets already expanded by the conf
      "rho_iv" (optional, default 0 = classic three-region form), "cv", "T_ref" (optional)}
     {"model": "table", "path"}
 
+Any of them may carry a ``porosity`` block (the epsilon-alpha model of a porous material
+made of that solid, :mod:`impactpipe.hydro.eos.porosity`), which ``pack_eos`` leaves to
+:func:`impactpipe.hydro.eos.porosity.pack_porosity`.
+
 ``pack_eos`` turns a list of them into ``EOSArrays`` (model codes, one parameter row per
 material, one flat array holding every table).  The jitted functions below branch on the
 model code and can be called from other ``@njit`` kernels and from Python:
@@ -186,6 +190,7 @@ def pack_eos(materials):
     for index, spec in enumerate(materials):
         if not isinstance(spec, dict):
             raise ValueError(f"material {index}: EOS spec must be a dict, got {type(spec).__name__}")
+        spec = {key: value for key, value in spec.items() if key != "porosity"}  # hydro.eos.porosity's
         if "model" not in spec:
             raise ValueError(f"material {index}: missing key 'model'")
         model = spec["model"]

@@ -4,7 +4,7 @@ Each snapshot group carries the attributes ``time`` (s), ``geometry`` and
 ``material_names`` (JSON list) and one dataset per :class:`~impactpipe.hydro.output.snapshot.Snapshot`
 array, each with a ``units`` attribute (:func:`impactpipe.storage.write_dataset`).
 Extra fields go to ``extra/<name>`` with the units and description of
-:data:`EXTRA_UNITS` (the material-strength fields), or ``units = "unspecified"`` for any other.
+:data:`EXTRA_UNITS` (the material-strength fields and the distension), or ``units = "unspecified"`` for any other.
 
 Tracers go to the group ``/tracers``: one dataset per
 :class:`~impactpipe.hydro.output.snapshot.TracerSet` field and, when written from a
@@ -35,6 +35,7 @@ EXTRA_UNITS = {
     "von_mises_stress": ("Pa", "von Mises equivalent stress sqrt(3/2 S:S) of the mixture deviatoric stress"),
     "plastic_strain": ("dimensionless", "mass-weighted equivalent plastic strain of the materials with strength"),
     "damage": ("dimensionless", "mass-weighted damage D (0 intact, 1 failed) of the materials with strength"),
+    "distension": ("dimensionless", "mass-weighted distension rho_solid / rho of the porous materials (0: none)"),
 }
 
 #: Snapshot array fields with their units and descriptions.

@@ -17,7 +17,8 @@ from impactpipe.hydro.mesh.state import HydroState
 def material_list(materials: dict[str, dict], used: list[str]):
     """Names, resolved EOS specs and packed EOS of the materials in ``used`` (first-use order).
 
-    ``materials`` maps a material name to its resolved spec ``{"eos": {...}}``.
+    ``materials`` maps a material name to its resolved spec ``{"eos": {...}}``; a porous material's
+    ``porosity`` block (:mod:`impactpipe.hydro.eos.porosity`) goes into its EOS spec.
     """
     names: list[str] = []
     for name in used:
@@ -26,6 +27,9 @@ def material_list(materials: dict[str, dict], used: list[str]):
         if name not in names:
             names.append(name)
     specs = [dict(materials[name]["eos"]) for name in names]
+    for name, spec in zip(names, specs):
+        if materials[name].get("porosity"):
+            spec["porosity"] = dict(materials[name]["porosity"])
     return names, specs, pack_eos(specs)
 
 

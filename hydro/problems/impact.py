@@ -46,6 +46,7 @@ import numpy as np
 
 from impactpipe.hydro.amr.regrid import refine_to, rule_from_config
 from impactpipe.hydro.eos import pack_eos, reference_density
+from impactpipe.hydro.eos.porosity import initial_distension
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS, BlockMesh
 from impactpipe.hydro.problems.common import (
     ADAPTIVE_DEFAULTS,
@@ -229,9 +230,12 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         np.logical_or.reduce([surface_crosses(m, c, body["radius"]) for body, c, _ in bodies]), levels - 1, 0))
     state = HydroState.empty(mesh, len(names))
     for k, (body, body_centre, body_velocity) in enumerate(bodies):
-        rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
+        rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table)) / initial_distension(specs[k])
         frac = sphere_fraction(mesh, body_centre, body["radius"], p["subsamples"])
         if k == 0 and p["self_gravity"]:
+            if initial_distension(specs[k]) > 1.0:
+                raise ValueError("self-gravity with a porous target is not supported yet (its lithostatic "
+                                 "initial state would need the porous EOS): set hydro.self_gravity false")
             distance = np.sqrt((mesh.cell_centers() ** 2).sum(axis=1))
             pressure = np.where(frac > 0.0, lithostatic_pressure(rho0, body["radius"], distance), 0.0)
             state.set_material(mesh, frac, k, eos, rho0, body_velocity, pressure=pressure)

@@ -7,7 +7,8 @@ outflow ends.  ``cells`` cells of the finest level span the whole domain; with `
 the mesh is adaptive (:func:`~impactpipe.hydro.problems.common.adaptive_simulation`: the
 plates' faces refine at t = 0, then the shocks).  Until the shocks reach the free
 surfaces, the shocked states on both sides of the contact share the pressure and particle
-velocity of :func:`impactpipe.hydro.exact.impedance.planar_impact_state`.
+velocity of :func:`impactpipe.hydro.exact.impedance.planar_impact_state`.  A porous plate
+(:mod:`impactpipe.hydro.eos.porosity`) starts at its bulk density rho0 / alpha0.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, adaptive_simulation, check_geometry,
                                               material_list, merged, strength_specs, tensile_strengths)
+from impactpipe.hydro.eos.porosity import initial_distension
 from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -59,14 +61,17 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     names, specs, eos = material_list(materials, [p["flyer"]["material"], p["target"]["material"]])
     lo, hi = domain(p)
     mesh = adaptive_mesh(geometry, [lo], [hi], [p["cells"]], [("outflow", "outflow")], block_cells, p["levels"])
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos), names, specs, cfl, p["refinement"],
+    distension = [initial_distension(spec) for spec in specs]
+    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos, distension), names, specs, cfl,
+                               p["refinement"],
                                tensile_strength=tensile_strengths(materials, names),
                                strength=strength_specs(materials, names))
 
 
-def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState:
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos, distension=None) -> HydroState:
     """Both plates at their reference density (kg/m^3) with e = 0, the flyer at its ``velocity`` (m/s);
-    each cell's volume fractions are the lengths of the plates inside it over its width."""
+    each cell's volume fractions are the lengths of the plates inside it over its width.  A porous
+    material (``distension[k]`` = alpha0 > 1) starts at its bulk density rho0 / alpha0."""
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
     dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
@@ -83,5 +88,7 @@ def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState
     for plate, frac, speed in plates:
         k = names.index(plate["material"])
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
+        if distension is not None:
+            rho0 /= distension[k]
         state.set_material(mesh, frac, k, eos, rho0, np.array([speed, 0.0, 0.0]), specific_energy=0.0)
     return state

@@ -78,6 +78,7 @@ from numba import get_thread_id, njit, prange
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.eos import pressure_sound_speed_in_line
+from impactpipe.hydro.eos.porosity import ALPHA0
 from impactpipe.hydro.scheme.mixture import (ALPHA_MIN, DISTENDED_FRACTION, mixture_state, signal_speed_squared,
                                              tension_left)
 from impactpipe.hydro.scheme.riemann import UPWIND_LEFT, UPWIND_NONE
@@ -160,7 +161,7 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux, plain_pencils, grady_kipp=None):
+          floors, amounts, failure, face_flux, plain_pencils, grady_kipp=None, porosity=None):
     """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -172,6 +173,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     (:mod:`impactpipe.hydro.scheme.plain_pencils`); without, every pencil takes the general path.
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
     (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), None in scenes without them.
+    ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`),
+    None in scenes without porous materials.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
@@ -270,13 +273,15 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
-                                          shear_m, True, tensile_strength, nq, wq_row, floors, b, grady_kipp)
+                                          shear_m, True, tensile_strength, nq, wq_row, floors, b, grady_kipp,
+                                          porosity)
                     else:
                         for i in range(ncell):
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
-                                          shear_m, False, tensile_strength, nq, wq_row, floors, b, grady_kipp)
+                                          shear_m, False, tensile_strength, nq, wq_row, floors, b, grady_kipp,
+                                          porosity)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
@@ -286,7 +291,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     for i in range(ncell):
                         _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
                                      arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                                     nq, wq_row, floors, grady_kipp)
+                                     nq, wq_row, floors, grady_kipp, porosity)
                     # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                     for i in range(1, ncell - 1):
                         _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
@@ -337,7 +342,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
 
 @njit(cache=True, inline="always")
 def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
-                  kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp):
+                  kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp,
+                  porosity):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
     (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
@@ -353,13 +359,21 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     at ``iq + j cs``).  ``sheared``: whether material m's shear table ``shear`` is not zero
     (without shear modulus its signal speed is the bulk sound speed, bit for bit).  A Grady-Kipp
     material (``grady_kipp[m]``) bears (1 - D) of its EOS tension, as in
-    :func:`impactpipe.hydro.scheme.mixture.material_state`.
+    :func:`impactpipe.hydro.scheme.mixture.material_state`; a porous material (``porosity[m]``
+    alpha0 > 1, its distension the second-to-last transported scalar) has the porous pressure and
+    sound speed of that function too.
     """
     a = alpha_f[ia]
     ar = arho_f[ia]
     rk = ar / a
     ek = arhoe_f[ia] / ar
-    pk, c2b, flag = pressure_sound_speed_in_line(kind, params, eos_table, rk, ek)
+    dist = 1.0
+    if porosity is not None:
+        if porosity[m, ALPHA0] > 1.0 and ar > 0.0:
+            dist = arhoq_f[iq + (nq - 2) * cs] / ar
+    pk, c2b, flag = pressure_sound_speed_in_line(kind, params, eos_table, dist * rk, ek)
+    pk /= dist
+    rho0_m = rho0_m / dist
     ytk = tensile_strength[m]
     if nq > 0 and ar > 0.0:
         ytk = tension_left(ytk, arhoq_f[iq + (nq - 1) * cs], ar)
@@ -410,7 +424,7 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
 
 @njit(cache=True, inline="always")
 def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, arhoq, mom, eos_kind, eos_params,
-                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors, grady_kipp):
+                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors, grady_kipp, porosity):
     """Step 1 for cell i of the pencil: the cell values of the W rows.
 
     The mixture and per-material states from :func:`impactpipe.hydro.scheme.mixture.mixture_state`
@@ -421,7 +435,7 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
         alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-        False, sc, W_MAT, i, grady_kipp)
+        False, sc, W_MAT, i, grady_kipp, porosity)
     if interior and clamps > 0:
         floors[b, FLOOR_EOS_CLAMP] += clamps
     if interior and limits > 0:

@@ -36,6 +36,7 @@ from __future__ import annotations
 from numba import njit
 
 from impactpipe.hydro.eos import pressure_sound_speed, reference_density, temperature
+from impactpipe.hydro.eos.porosity import ALPHA0, cell_distension
 
 #: Volume fraction below which a material is left out of a cell's thermodynamics.
 ALPHA_MIN = 1.0e-10
@@ -105,7 +106,7 @@ def tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar):
 
 
 @njit(cache=True, inline="always")
-def material_state(a, ar, are, kind, params, table, shear, tensile_strength, tension_share=1.0):
+def material_state(a, ar, are, kind, params, table, shear, tensile_strength, tension_share=1.0, distension=1.0):
     """Thermodynamic state of one material in one cell from its conserved amounts.
 
     a = alpha_k (-), ar = alpha_k rho_k (kg/m^3), are = alpha_k rho_k e_k (J/m^3).
@@ -115,17 +116,21 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength, ten
     P < 0 first scaled by ``tension_share`` (1 - D of a Grady-Kipp material; 1 by default); c2_bulk
     the EOS bulk sound speed squared and c2_signal the time-step signal speed squared
     (:func:`signal_speed_squared` with the shear-table row ``shear``).  A material below
-    ALPHA_MIN or without mass is absent (present False, zeros).
+    ALPHA_MIN or without mass is absent (present False, zeros).  A porous material
+    (:mod:`impactpipe.hydro.eos.porosity`) of ``distension`` alpha > 1 has p_k = P(alpha rho_k, e_k) / alpha
+    and c2_bulk = c_K^2(alpha rho_k, e_k), its solid EOS at the matrix density alpha rho_k, which also
+    decides whether it is distended below DISTENDED_FRACTION rho0 (a fracture, not its pores).
     """
     if not (a > ALPHA_MIN and ar > 0.0):
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0, False
     rk = ar / a
     ek = are / ar
-    pk, c2k, flag = pressure_sound_speed(kind, params, table, rk, ek)
+    pk, c2k, flag = pressure_sound_speed(kind, params, table, distension * rk, ek)
+    pk /= distension
     if tension_share != 1.0 and pk < 0.0:
         pk *= tension_share
     p_min = -tensile_strength
-    rho0 = reference_density(kind, params, table)
+    rho0 = reference_density(kind, params, table) / distension
     if rk < DISTENDED_FRACTION * rho0:
         p_min = 0.0
     limited = pk < p_min
@@ -136,14 +141,16 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength, ten
 
 @njit(cache=True, inline="always")
 def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
-                  tensile_strength, with_temperature, materials, row, col, grady_kipp=None):
+                  tensile_strength, with_temperature, materials, row, col, grady_kipp=None, porosity=None):
     """The mixture state of cell (ix, iy, iz) of block b; see the module docstring.
 
     Fields are ``(NB, C, NX, NY, NZ)``: ``alpha``, ``arho``, ``arhoe`` with C = M materials,
     ``arhoq`` the transported scalars (M * NQ columns, the damage of material k in its last);
     ``eos_kind``, ``eos_params``, ``eos_table`` the packed EOS (:mod:`impactpipe.hydro.eos`),
     ``shear_modulus`` the (M, 2) shear table, ``tensile_strength`` (M,) Y_T (Pa), ``grady_kipp``
-    (M,) booleans of the Grady-Kipp materials or None (:func:`tension_factor`).
+    (M,) booleans of the Grady-Kipp materials or None (:func:`tension_factor`), ``porosity`` the
+    (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`) or None: a
+    porous material's distension is the second-to-last of its transported scalars.
 
     Returns (rho, phi, p, K, rho e, rho T, eos_clamps, tension_limits): the sums of the
     module docstring (rho T only with ``with_temperature``, else 0) and how many present
@@ -168,15 +175,19 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
         phi += a
         rho += ar
         ytk = damaged_tensile_strength(tensile_strength[k], arhoq, nq, b, k, ix, iy, iz, ar)
+        dist = 1.0
+        if porosity is not None:
+            if porosity[k, ALPHA0] > 1.0 and ar > 0.0:
+                dist = cell_distension(arhoq, nq, b, k, ix, iy, iz, ar)
         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
             a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k], ytk,
-            tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar))
+            tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar), dist)
         if present:
             p += a * pk
             kmod += ar * c2k
             eint += ar * ek
             if with_temperature:
-                tmass += ar * temperature(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                tmass += ar * temperature(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
             if flag != 0:
                 clamps += 1
             if limited:

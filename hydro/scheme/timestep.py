@@ -22,6 +22,7 @@ import numpy as np
 from numba import get_thread_id, njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed_in_line, reference_density
+from impactpipe.hydro.eos.porosity import ALPHA0
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_speed_squared
 
@@ -31,7 +32,7 @@ PHI_VOID = 1.0e-6
 
 @njit(cache=True, parallel=True)
 def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus, ndim, work,
-                    out):
+                    out, arhoq=None, porosity=None):
     """Per block, the largest max_d (|u_d| + c) / dx_d (1/s) over non-void interior cells, into ``out[NB]``.
 
     c = sqrt(K / rho) with the sums of :func:`impactpipe.hydro.scheme.mixture.mixture_state`,
@@ -46,11 +47,18 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     the EOS model is chosen once per material and block rather than once per cell; ideal gas
     and Tillotson are called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`).  Cells with rho <= 0 or phi < PHI_VOID carry no
     signal.  ``mom`` is the momentum density (kg/m^2/s), ``block_dx`` the cell sizes (m).
+    With ``porosity`` (the (M, NPOROSITY) rows of :func:`impactpipe.hydro.eos.porosity.pack_porosity`)
+    a porous material's sound speed is its solid's at the matrix density, alpha rho_k, the
+    distension alpha from the transported scalars ``arhoq`` (as in the gather); None, and
+    ``arhoq`` is not read.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
+    nq = 0
+    if arhoq is not None:
+        nq = arhoq.shape[1] // nmat
     for b in prange(nb):
         w = work[get_thread_id()]
         for ix in range(gx, nx - gx):
@@ -76,6 +84,13 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                             continue
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] / ar
+                        if porosity is not None:
+                            if porosity[k, ALPHA0] > 1.0:
+                                dist = arhoq[b, nq * k + nq - 2, ix, iy, iz] / ar
+                                pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, dist * rk, ek)
+                                w[2, ix, iy, iz] += ar * (signal_speed_squared(c2, rk, shear, rho0 / dist)
+                                                          if sheared else c2)
+                                continue
                         pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, rk, ek)
                         w[2, ix, iy, iz] += ar * (signal_speed_squared(c2, rk, shear, rho0) if sheared else c2)
         rate = 0.0
@@ -100,7 +115,7 @@ def allocate_rate_work(threads: int, padded_shape) -> np.ndarray:
 
 @njit(cache=True, parallel=True)
 def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                        pressure, sound_speed, specific_energy, temp, grady_kipp=None):
+                        pressure, sound_speed, specific_energy, temp, grady_kipp=None, porosity=None):
     """Interior-cell mixture thermodynamics into ``(NB, nx, ny, nz)`` outputs.
 
     From :func:`impactpipe.hydro.scheme.mixture.mixture_state`: pressure = sum_k alpha_k max(p_k,
@@ -108,7 +123,8 @@ def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_tab
     the damage D_k as in the sweeps (Grady-Kipp materials, ``grady_kipp``: (1 - D_k) of their
     tension); sound_speed = sqrt(sum_k alpha_k rho_k c_k^2 / rho) (m/s),
     the equal-strain mixture's; specific_energy = sum_k alpha_k rho_k e_k / rho (J/kg);
-    temp = sum_k alpha_k rho_k T_k / rho (K).  Void cells get zeros.
+    temp = sum_k alpha_k rho_k T_k / rho (K), porous materials (``porosity``) at their distension.  Void
+    cells get zeros.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     gx = GHOST if nx > 1 else 0
@@ -120,7 +136,7 @@ def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_tab
                 for iz in range(gz, nz - gz):
                     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
                         alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
-                        tensile_strength, True, None, 0, 0, grady_kipp)
+                        tensile_strength, True, None, 0, 0, grady_kipp, porosity)
                     jx = ix - gx
                     jy = iy - gy
                     jz = iz - gz

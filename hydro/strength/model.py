@@ -85,9 +85,12 @@ class MaterialStrength:
         nmat: number of materials M.
         damage: packed tensile damage models (:func:`impactpipe.hydro.strength.parameters.pack_damage`);
             instant failure for every material when None.  A Grady-Kipp material needs a yield model.
+        porous: whether the scene has porous materials (the state then carries each material's
+            distension before its damage, :mod:`impactpipe.hydro.eos.porosity`).
     """
 
-    def __init__(self, arrays: StrengthArrays, mesh: BlockMesh, nmat: int, damage: DamageArrays | None = None):
+    def __init__(self, arrays: StrengthArrays, mesh: BlockMesh, nmat: int, damage: DamageArrays | None = None,
+                 porous: bool = False):
         self.arrays = arrays
         self.mesh = mesh
         self.nmat = nmat
@@ -101,7 +104,7 @@ class MaterialStrength:
         #: node strains (-) of each Grady-Kipp material's flaw law drawn by :meth:`prepare_state`
         self.flaw_strains: dict[int, list[float]] = {}
         self.ns = stress_slots(mesh.ndim)
-        self.nq = scalar_slots(mesh.ndim, self.fracture)
+        self.nq = scalar_slots(mesh.ndim, self.fracture, porous)
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         #: per block, whether it has a cell holding material at the last :meth:`load_stress` (1) or not (0)
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)

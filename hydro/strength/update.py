@@ -112,10 +112,11 @@ def stress_slots(ndim: int) -> int:
     return {1: 3, 2: 4, 3: 6}[ndim]
 
 
-def scalar_slots(ndim: int, fracture: bool) -> int:
-    """Transported scalars per material NQ: NS stress components, plastic strain, damage, and
-    with Grady-Kipp ``fracture`` the NFLAW flaw slots."""
-    return stress_slots(ndim) + 2 + (NFLAW if fracture else 0)
+def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
+    """Transported scalars per material NQ: NS stress components, plastic strain, damage, with
+    Grady-Kipp ``fracture`` the NFLAW flaw slots, and in a ``porous`` scene the distension just
+    before the damage (:mod:`impactpipe.hydro.eos.porosity`)."""
+    return stress_slots(ndim) + 2 + (NFLAW if fracture else 0) + (1 if porous else 0)
 
 
 @njit(cache=True, parallel=True)

@@ -343,7 +343,8 @@ class Tracers:
         record_peaks(self.position, self.material, self._skip, self._block, unrecorded_only, sim.time, mesh.block_lo,
                       mesh.block_dx, mesh.block_index, mesh.block_level, mesh.block_cells, self._ncell, mesh.ndim,
                       self._codes, self._cells, loc.root, loc.children, st.alpha, st.arho, st.arhoe, eos.kind,
-                      eos.params, eos.table, self.peak_pressure, self.peak_pressure_time, self.peak_temperature)
+                      eos.params, eos.table, self.peak_pressure, self.peak_pressure_time, self.peak_temperature,
+                      None if sim.porosity is None else st.arhoq, sim.porosity)
 
     def _sample_history(self, time: float) -> None:
         if self.history_count == self.history_time.shape[0]:

@@ -8,6 +8,7 @@ import math
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed, temperature
+from impactpipe.hydro.eos.porosity import ALPHA0
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN
 from impactpipe.hydro.tracers.locate import PERIODIC
@@ -329,7 +330,8 @@ def _adaptive_best_cell(x, y, z, b, k, ndim, block_lo, block_dx, block_index, bl
 @njit(cache=True, parallel=True)
 def record_peaks(position, material, skip, block, unrecorded_only, time, block_lo, block_dx, block_index,
                   block_level, block_cells, ncell, ndim, codes, cells, root, children, alpha, arho, arhoe, eos_kind,
-                  eos_params, eos_table, peak_pressure, peak_pressure_time, peak_temperature):
+                  eos_params, eos_table, peak_pressure, peak_pressure_time, peak_temperature, arhoq=None,
+                  porosity=None):
     """Update the running peak pressure (Pa, with its time in s) and peak temperature (K).
 
     The tracer's cell is the containing cell when it holds the tracer's material
@@ -338,6 +340,9 @@ def record_peaks(position, material, skip, block, unrecorded_only, time, block_l
     none (material absent from the stencil) means no record this time.  There
     rho_k = arho_k / alpha_k, e_k = arhoe_k / arho_k, p_k = P_k(rho_k, e_k), T_k = T_k(rho_k, e_k).
     With ``unrecorded_only`` only tracers without a record yet (NaN peak time) are sampled.
+    A porous material (``porosity`` rows, :mod:`impactpipe.hydro.eos.porosity`; its distension
+    alpha from the transported scalars ``arhoq``) has p_k = P_k(alpha rho_k, e_k) / alpha and
+    T_k = T_k(alpha rho_k, e_k); without ``porosity`` ``arhoq`` is not read.
     """
     for t in prange(position.shape[0]):
         if skip[t] or (unrecorded_only and not math.isnan(peak_pressure_time[t])):
@@ -373,8 +378,13 @@ def record_peaks(position, material, skip, block, unrecorded_only, time, block_l
         ar = arho[cb, k, cx, cy, cz]
         rho = ar / a
         e = arhoe[cb, k, cx, cy, cz] / ar
-        p, c2, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, rho, e)
-        temp = temperature(eos_kind[k], eos_params[k], eos_table, rho, e)
+        dist = 1.0
+        if porosity is not None:
+            if porosity[k, ALPHA0] > 1.0:
+                dist = arhoq[cb, (arhoq.shape[1] // alpha.shape[1]) * (k + 1) - 2, cx, cy, cz] / ar
+        p, c2, flag = pressure_sound_speed(eos_kind[k], eos_params[k], eos_table, dist * rho, e)
+        p /= dist
+        temp = temperature(eos_kind[k], eos_params[k], eos_table, dist * rho, e)
         if math.isfinite(p) and not p <= peak_pressure[t]:
             peak_pressure[t] = p
             peak_pressure_time[t] = time
