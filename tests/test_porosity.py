@@ -8,10 +8,9 @@ from scipy.optimize import brentq
 from impactpipe.hydro import BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed
 from impactpipe.hydro.exact import porous_hugoniot, two_wave_speeds
-from impactpipe.hydro.eos.porosity import (
-    ALPHA0, EPS_C, EPS_X, RHO00, distension_of_strain, pack_porosity, porous_pressure_sound_speed,
-)
+from impactpipe.hydro.eos.porosity import ALPHA0, EPS_C, EPS_X, RHO00, distension_of_strain, pack_porosity
 from impactpipe.hydro.problems.common import preset_material
+from impactpipe.hydro.scheme.mixture import material_state
 
 BASALT = preset_material("basalt")["eos"]
 COMPACTION = {"eps_e": -1.0e-5, "kappa": 0.98}
@@ -44,10 +43,14 @@ def test_compaction_curve_is_continuous_and_monotone():
 
 
 def test_porous_pressure_is_solid_pressure_at_matrix_density_over_alpha():
+    """The mixture's material state of a porous material: P_s(alpha rho, e) / alpha and c_s^2(alpha rho, e)."""
     eos = pack_eos([BASALT])
     p_s, c2_s, _ = pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, 2900.0, 1.0e5)
-    p, c2, _ = porous_pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, 2900.0 / 1.5, 1.0e5, 1.5)
-    assert p == pytest.approx(p_s / 1.5, rel=1e-14) and c2 == c2_s
+    present, rho, e, p, c2, c2_signal, flag, limited = material_state(
+        0.5, 0.5 * 2900.0 / 1.5, 0.5 * 2900.0 / 1.5 * 1.0e5, eos.kind[0], eos.params[0], eos.table, np.zeros(2),
+        0.0, 1.0, 1.5)
+    assert present and rho == pytest.approx(2900.0 / 1.5) and e == pytest.approx(1.0e5)
+    assert p == pytest.approx(p_s / 1.5, rel=1e-14) and c2 == c2_s and c2_signal == c2_s
 
 
 @pytest.mark.parametrize("block, message", [

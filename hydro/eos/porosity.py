@@ -9,7 +9,8 @@ density; porosity phi = 1 - 1 / alpha) sets its state:
     c^2(rho, e, alpha) = dP/drho|_(e, alpha) + (P / rho^2) dP/de|_(rho, alpha)
                        = c_s^2(alpha rho, e)                               (m^2/s^2)
 
-(:func:`porous_pressure_sound_speed`; the second line is exact for any solid EOS at fixed
+(:func:`impactpipe.hydro.scheme.mixture.material_state` with its ``distension``, and the
+kernels that call the EOS in place; the second line is exact for any solid EOS at fixed
 alpha: the split scheme advances the flow at frozen alpha, so this is the stiffness the
 sweeps and the time step see).  The distension falls irreversibly with the volumetric
 strain eps_v = ln(V / V_0) of the porous material (negative in compression):
@@ -49,7 +50,7 @@ import numbers
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed_in_line, reference_density
+from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import GHOST
 
 # row slots of the packed parameters (``porosity[M, NPOROSITY]``)
@@ -120,7 +121,8 @@ def pack_porosity(specs: list[dict], eos) -> np.ndarray | None:
                 raise ValueError(f"{name}: key {key!r} {demand}, got {value!r}")
             values[key] = float(value)
         if values["alpha_x"] > values["alpha0"]:
-            raise ValueError(f"{name}: key 'alpha_x' must be <= alpha0 = {values['alpha0']:g}, got {values['alpha_x']!r}")
+            raise ValueError(f"{name}: key 'alpha_x' must be <= alpha0 = {values['alpha0']:g}, "
+                             f"got {values['alpha_x']!r}")
         if values["alpha0"] > 1.0 and not rho_s0 > 0.0:
             raise ValueError(f"{name}: a porous material needs a solid EOS with a reference density (not an ideal gas)")
         rows[k, ALPHA0] = values["alpha0"]
@@ -164,16 +166,6 @@ def distension_of_strain(row, eps_v):
         x = (row[EPS_C] - eps_v) / (row[EPS_C] - row[EPS_X])
         return 1.0 + (row[ALPHA_X] - 1.0) * x * x
     return 1.0
-
-
-@njit(cache=True, inline="always")
-def porous_pressure_sound_speed(kind, params, table, rho, e, distension):
-    """P = P_s(alpha rho, e) / alpha (Pa), c^2 = c_s^2(alpha rho, e) (m^2/s^2) and the EOS flag of
-    a material of bulk density ``rho`` (kg/m^3), specific internal energy ``e`` (J/kg) and
-    distension alpha = ``distension`` (-), its solid EOS (``kind``, ``params``, ``table``)
-    evaluated at the matrix density alpha rho."""
-    p, c2, flag = pressure_sound_speed_in_line(kind, params, table, distension * rho, e)
-    return p / distension, c2, flag
 
 
 @njit(cache=True, inline="always")
