@@ -47,3 +47,18 @@ def test_target_compacted_under_the_impact_only(porous_run):
     compacted = values < 1.5 * (1 - 1e-6)
     # the shock of a 250 m/s impact crushes part of the target, not all of it
     assert 0.0 < compacted.mean() < 1.0
+
+
+def test_validate_prints_the_porosity_choice_and_why():
+    from impactpipe.pipeline.config import load_config
+    from impactpipe.pipeline.derived import derive
+
+    porous = derive(load_config(CONFIG))
+    assert porous["porosity"] is True
+    assert porous["porosity_rule"].startswith("on: porous_basalt alpha0 = 1.5 > 1")
+    assert porous["target_reference_density"] == pytest.approx(2700.0 / 1.5)
+    solid = derive(load_config(CONFIG.parent / "quickstart.yaml"))
+    assert solid["porosity"] is False and solid["porosity_rule"].startswith("off:")
+    assert solid["target_reference_density"] == pytest.approx(2700.0)
+    result = CliRunner().invoke(main, ["validate", str(CONFIG)])
+    assert result.exit_code == 0 and "porosity_rule: 'on: porous_basalt alpha0 = 1.5" in result.output
