@@ -105,10 +105,15 @@ def test_porous_hugoniot_against_analytic(alpha0, target_pressure):
     # the front where the pressure rises through half its plateau value, within 3 cells of U t
     half = np.flatnonzero(p > 0.5 * p_exact)
     assert abs(x[half.max()] - front) < 3.0 * sim.mesh.min_cell_size()
-    # conservation (the wall does no work, nothing leaves): mass to round-off, energy up to what the
+    # conservation (the wall does no work, nothing leaves): mass and momentum to round-off, energy up to what the
     # floors added or removed (counted), as for solid materials (tests/test_hydro_conservation.py)
     after = sim.totals()
     assert after["mass_with_outflow"] == pytest.approx(before["mass"], rel=1e-12)
+    # momentum with the wall's impulse (counted as outflow), up to what the floors removed (counted magnitudes)
+    removed = (sim.floor_amounts["momentum_removed_by_void_cleanup"]
+               + sim.floor_amounts["momentum_removed_by_velocity_limit"])
+    change = abs(after["momentum_with_outflow"][0] - before["momentum"][0])
+    assert change <= removed + 1e-12 * abs(before["momentum"][0])
     added = sim.floor_amounts["energy_added_by_floors"] - sim.floor_amounts["energy_removed_by_void_cleanup"]
     assert abs(after["energy_with_outflow"] - before["energy"] - added) < 1e-12 * before["energy"]
 
