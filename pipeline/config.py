@@ -618,6 +618,10 @@ def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
     node[keys[-1]] = value
 
 
+#: Scenes whose setup starts a porous material at its bulk density rho_s0 / alpha0 (docs/eos.md, "Porosity").
+POROUS_PROBLEMS = ("impact", "planar_impact")
+
+
 def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple, str]]:
     """Cross-field checks on the raw config mapping: materials, presets, table files, sizes.
 
@@ -659,6 +663,11 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
         if not isinstance(mat, dict):
             continue
         errors.extend(_material_errors(str(name), mat, source_dir))
+        problem = scene.get("problem", "impact")
+        if mat.get("porosity") is not None and problem not in POROUS_PROBLEMS:
+            errors.append((("materials", name, "porosity"),
+                           f"the {problem} scene does not start porous materials at their bulk density; porosity "
+                           f"runs in the {' and '.join(POROUS_PROBLEMS)} scenes"))
     handoff = data.get("handoff") if isinstance(data.get("handoff"), dict) else {}
     intact = handoff.get("intact_fragments") if isinstance(handoff.get("intact_fragments"), dict) else {}
     if intact.get("enabled") is True and not any(
