@@ -75,12 +75,6 @@ KEYS = (
 COUNT_NAMES = ("distension_floor",)
 
 
-def porous(spec: dict) -> bool:
-    """Whether a resolved EOS spec describes a porous material (a ``porosity`` block with alpha0 > 1)."""
-    block = spec.get("porosity")
-    return bool(block) and float(block.get("alpha0", 1.0)) > 1.0
-
-
 def initial_distension(spec: dict) -> float:
     """The initial distension alpha_0 (-) of a resolved EOS spec, 1 without porosity."""
     block = spec.get("porosity")
