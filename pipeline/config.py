@@ -130,6 +130,8 @@ class DamageSpec(Strict):
     flaw_seed: int | None = Field(None, ge=0, description="seed of the material's flaw draw")
     flaw_count: int | None = Field(None, ge=1, description="flaws drawn for the material (default N ln N)")
     flaw_cross_section: float | None = Field(None, gt=0, description="area a 1-D mesh stands for in the draw (m^2)")
+    active_flaw_limit: bool | None = Field(None, description="damage at most the fraction of a cell's flaws that "
+                                                             "are active, D <= n_act / n_tot (default true)")
 
 
 class StrengthSpec(Strict):

@@ -32,6 +32,8 @@ GRADY_KIPP_KEYS = ("weibull_m", "weibull_k")
 OPTIONAL_GRADY_KIPP_KEYS = ("young_modulus", "flaw_cross_section")
 #: Integer keys of a Grady-Kipp block: the seed and the number of flaws of each material's draw.
 FLAW_DRAW_KEYS = ("flaw_seed", "flaw_count")
+#: Boolean keys of a Grady-Kipp block: the limit D <= n_act / n_tot (Benz & Asphaug 1995).
+GRADY_KIPP_SWITCHES = ("active_flaw_limit",)
 POROSITY_KEYS = ("alpha0", "eps_e", "kappa", "alpha_x")
 #: Thermal-softening exponent for GEO presets, which publish none (the ROCK presets use 1.2).
 GEO_DEFAULT_XI = 1.2
@@ -129,6 +131,9 @@ def resolve_damage(spec: dict[str, Any] | None) -> dict[str, Any]:
     for key in FLAW_DRAW_KEYS:
         if key in params:
             resolved[key] = int(params[key])
+    for key in GRADY_KIPP_SWITCHES:
+        if key in params:
+            resolved[key] = bool(params[key])
     return resolved
 
 

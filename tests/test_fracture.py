@@ -13,10 +13,12 @@ from scipy import stats
 
 from impactpipe.hydro.strength.flaws import activation_strain, assign_flaws, default_flaw_count
 from impactpipe.hydro.strength.fracture import (
-    active_flaws, crack_speed, crack_sphere_radius, damage_step, damaged_deviator, damaged_pressure,
+    active_flaws, active_fraction, crack_speed, crack_sphere_radius, damage_step, damaged_deviator, damaged_pressure,
     grady_kipp_damage, largest_principal_stress, tensile_strain, young_modulus,
 )
-from impactpipe.hydro.strength.parameters import GRADY_KIPP, INSTANT, WEIBULL_K, WEIBULL_M, YOUNG, pack_damage
+from impactpipe.hydro.strength.parameters import (
+    ACTIVE_LIMIT, GRADY_KIPP, INSTANT, WEIBULL_K, WEIBULL_M, YOUNG, pack_damage,
+)
 from impactpipe.pipeline.presets import resolve_damage
 
 # basalt (Benz & Asphaug 1994; method.md 2.4)
@@ -145,11 +147,52 @@ def test_local_weibull_law_and_damage_step():
     assert damage_step(0.3, 1e3, 1e6) == 1.0
     assert damage_step(0.3, 0.0, 1e6) == pytest.approx(0.3)
     # no damage in compression, none without active flaws; full damage is final
-    assert grady_kipp_damage(0.0, -1e8, 5e10, 1e-5, 1e-3, 10, 8.5, 2e3, 0.1, 1.0) == 0.0
-    assert grady_kipp_damage(0.0, 1e5, 5e10, 1e-5, 1e-3, 10, 8.5, 2e3, 0.1, 1.0) == 0.0
-    assert grady_kipp_damage(0.0, 1e6, 5e10, 1e-5, 1e-3, 10, 8.5, 2e3, 0.1, 1.0) == 1.0
+    assert grady_kipp_damage(0.0, -1e8, 5e10, 1e-5, 1e-3, 10, 8.5, 2e3, 0.1, 1.0, False) == 0.0
+    assert grady_kipp_damage(0.0, 1e5, 5e10, 1e-5, 1e-3, 10, 8.5, 2e3, 0.1, 1.0, False) == 0.0
+    assert grady_kipp_damage(0.0, 1e6, 5e10, 1e-5, 1e-3, 10, 8.5, 2e3, 0.1, 1.0, False) == 1.0
     assert tensile_strain(1e7, 0.5, 5e10) == pytest.approx(4e-4)
     assert tensile_strain(1e7, 1.0, 5e10) == 0.0
+
+
+def test_active_flaw_limit_caps_the_damage_at_the_active_share_of_the_flaws():
+    """Benz & Asphaug (1995): a cell with n_act of its n_tot flaws active holds at most
+    D = n_act / n_tot.  A cell of 10 flaws between eps_min = 1e-4 and eps_max = 2e-4 under the
+    constant strain where its local law has n_act = 1 + 8 (eps^m - eps_min^m) / (eps_max^m -
+    eps_min^m) = 4 active: D = (rate t)^3 with rate = 4^(1/3) c_g / R_s up to t = 0.4^(1/3) / rate,
+    then D = 0.4 exactly; it keeps 0.4 when the stress is gone and grows to 1 once the strain
+    passes the strongest flaw.  Without the limit the same cell breaks (D = 1) at t = 1 / rate."""
+    m, young, count, c_g, radius = 8.5, 5e10, 10, 2e3, 1e-3
+    eps_min, eps_max = 1e-4, 2e-4
+    strain = (eps_min ** m + 3.0 / 8.0 * (eps_max ** m - eps_min ** m)) ** (1.0 / m)
+    assert active_flaws(strain, eps_min, eps_max, count, m) == pytest.approx(4.0)
+    assert active_fraction(4.0, 10.0) == pytest.approx(0.4)
+    assert active_fraction(0.0, 10.0) == 0.0 and active_fraction(3.0, 0.0) == 0.0
+    assert active_fraction(12.0, 10.0) == 1.0
+    sigma = young * strain
+    rate = 4.0 ** (1.0 / 3.0) * c_g / radius
+    t_cap = 0.4 ** (1.0 / 3.0) / rate
+    dt = t_cap / 50.0
+    limited, free = 0.0, 0.0
+    for step in range(1, 101):
+        limited = grady_kipp_damage(limited, sigma * (1.0 - limited), young, eps_min, eps_max, count, m, c_g, radius,
+                                    dt, True)
+        free = grady_kipp_damage(free, sigma * (1.0 - free), young, eps_min, eps_max, count, m, c_g, radius, dt,
+                                 False)
+        want = min((rate * step * dt) ** 3, 0.4)
+        assert limited == pytest.approx(want, rel=1e-9)
+        assert free == pytest.approx(min((rate * step * dt) ** 3, 1.0), rel=1e-9)
+    assert limited == pytest.approx(0.4, rel=1e-12) and free == 1.0
+    # the tension gone: the damage stays; past the strongest flaw: it grows to 1
+    assert grady_kipp_damage(limited, 0.0, young, eps_min, eps_max, count, m, c_g, radius, dt, True) == limited
+    assert grady_kipp_damage(limited, 0.1 * sigma, young, eps_min, eps_max, count, m, c_g, radius, dt, True) == limited
+    broken = limited
+    for _ in range(100):
+        broken = grady_kipp_damage(broken, 1.01 * young * eps_max * (1.0 - broken), young, eps_min, eps_max, count, m,
+                                   c_g, radius, dt, True)
+    assert broken == 1.0
+    # the step itself: capped at the limit, never lowered by it
+    assert damage_step(0.0, 2.0, 0.25, 0.064) == pytest.approx(0.064)
+    assert damage_step(0.3, 2.0, 0.25, 0.1) == 0.3
 
 
 def test_elastic_constants_and_damaged_stress():
@@ -204,7 +247,8 @@ def fragmentation_stress(strain_rate, young, eps_min, eps_max, count, m, sphere_
             n_active = active_flaws(tensile_strain(sigma, damage, young), eps_min, eps_max, count, m)
             damage = damage_step(damage, n_active * C_G / sphere_radius, dt)
         else:
-            damage = grady_kipp_damage(damage, sigma, young, eps_min, eps_max, count, m, C_G, sphere_radius, dt)
+            damage = grady_kipp_damage(damage, sigma, young, eps_min, eps_max, count, m, C_G, sphere_radius, dt,
+                                       False)
         t += dt
     return peak
 
@@ -268,6 +312,10 @@ def test_damage_block_presets_and_validation():
     assert list(arrays.model) == [INSTANT, GRADY_KIPP, GRADY_KIPP]
     assert arrays.params[1, WEIBULL_M] == 8.5 and arrays.params[1, WEIBULL_K] == 3.0e39
     assert arrays.params[1, YOUNG] == 53.1e9 and arrays.params[2, YOUNG] == 0.0
+    # the active-flaw limit is on unless switched off
+    assert arrays.params[1, ACTIVE_LIMIT] == 1.0
+    off = resolve_damage({"model": "grady_kipp", "preset": "basalt", "active_flaw_limit": False})
+    assert off["active_flaw_limit"] is False and pack_damage([off]).params[0, ACTIVE_LIMIT] == 0.0
     for bad in ({"model": "weibull"}, {"model": "grady_kipp", "weibull_m": 8.5},
                 {"model": "grady_kipp", "weibull_m": 0.0, "weibull_k": 1e39},
                 {"model": "grady_kipp", "weibull_m": 8.5, "weibull_k": 1e39, "young_modulus": -1.0}):

@@ -28,8 +28,22 @@ Weibull law n(eps) = k eps^m (Benz & Asphaug 1994).  Per step of dt (s) and mate
    first power (method.md 2.4 as written), the rate grows with the cell volume (n_act ~ k v
    eps^m) and the bar's fragmentation stress as eps_dot^(1/(m+1)) instead (measured in the same
    test);
-5. one step D^(1/3) <- min(D^(1/3) + dt rate, 1) (:func:`damage_step`): explicit, with the rate
-   at the start of the step, monotone and bounded for any dt (D never exceeds 1).
+5. the active-flaw limit (Benz & Asphaug 1995): a cell with n_act of its n_tot flaws active
+   holds at most the damage
+
+       D_max = n_act / n_tot                                          (:func:`active_fraction`)
+
+   A crack relieves the stress of the volume its flaw stands for, v / n_tot of the cell, and no
+   more: a cell's damage grows to 1 only once the strain has reached its strongest flaw, and a
+   passing tensile pulse that activates a few of its flaws leaves it partly damaged instead of
+   broken (without the limit one active flaw takes any cell to D = 1 in R_s / c_g).  With
+   n_tot = N ln N flaws over N cells, as drawn in the hydro stage, a cell holds about ln N of
+   them, as a particle of Benz & Asphaug's does.  The limit is a material's
+   ``active_flaw_limit`` (on unless switched off; off, the continuum law of many flaws per cell
+   that tests/test_fracture.py verifies);
+6. one step D^(1/3) <- min(D^(1/3) + dt rate, D_max^(1/3)), D never decreasing
+   (:func:`damage_step`): explicit, with the rate at the start of the step, monotone and
+   bounded for any dt (D never exceeds D_max <= 1).
 
 Damaged material (:func:`damaged_pressure`, :func:`damaged_deviator`) carries (1 - D) of
 the deviatoric stress and of tension and the full pressure in compression.
@@ -140,21 +154,34 @@ def damage_growth_rate(n_active, crack_growth_speed, sphere_radius):
 
 
 @njit(cache=True, inline="always")
-def damage_step(damage, rate, dt):
+def active_fraction(n_active, n_total):
+    """Damage limit D_max = n_act / n_tot (-) of a cell with n_act of its n_tot flaws active
+    (Benz & Asphaug 1995; 0 without flaws, at most 1)."""
+    if n_total <= 0.0 or n_active <= 0.0:
+        return 0.0
+    return min(n_active / n_total, 1.0)
+
+
+@njit(cache=True, inline="always")
+def damage_step(damage, rate, dt, limit=1.0):
     """Damage after dt (s) at the growth ``rate`` of D^(1/3) (1/s): D^(1/3) grows linearly, capped
-    at 1; stable and monotone for any dt."""
-    root = min(max(damage, 0.0) ** (1.0 / 3.0) + rate * dt, 1.0)
-    return root * root * root
+    at ``limit``^(1/3) (D_max, 1 without the active-flaw limit); D never decreases (a cell above
+    a limit that has fallen keeps its damage).  Stable and monotone for any dt."""
+    d = max(damage, 0.0)
+    root = min(d ** (1.0 / 3.0) + rate * dt, min(limit, 1.0) ** (1.0 / 3.0))
+    return max(d, root * root * root)
 
 
 @njit(cache=True)
 def grady_kipp_damage(damage, sigma_max, young, eps_min, eps_max, count, weibull_m, crack_growth_speed,
-                      sphere_radius, dt):
+                      sphere_radius, dt, limited):
     """Damage D after one step of dt (s) for the largest principal stress ``sigma_max`` (Pa):
-    tensile strain, active flaws, growth rate and step of the module docstring."""
+    tensile strain, active flaws, growth rate and step of the module docstring, with the
+    active-flaw limit D <= n_act / n_tot when ``limited``."""
     strain = tensile_strain(sigma_max, damage, young)
     n_active = active_flaws(strain, eps_min, eps_max, count, weibull_m)
-    return damage_step(damage, damage_growth_rate(n_active, crack_growth_speed, sphere_radius), dt)
+    limit = active_fraction(n_active, float(count)) if limited else 1.0
+    return damage_step(damage, damage_growth_rate(n_active, crack_growth_speed, sphere_radius), dt, limit)
 
 
 @njit(cache=True, inline="always")

@@ -108,9 +108,9 @@ INSTANT = 0
 GRADY_KIPP = 1
 DAMAGE_CODES = {"instant": INSTANT, "grady_kipp": GRADY_KIPP}
 
-# damage parameter row slots: Weibull m, k, Young's modulus, then the FLAW_NODES node strains'
-# eps_j^m of the cumulative flaw law (impactpipe.hydro.strength.flaws)
-WEIBULL_M, WEIBULL_K, YOUNG, NODE0 = range(4)
+# damage parameter row slots: Weibull m, k, Young's modulus, the active-flaw limit (1 on, 0 off),
+# then the FLAW_NODES node strains' eps_j^m of the cumulative flaw law (impactpipe.hydro.strength.flaws)
+WEIBULL_M, WEIBULL_K, YOUNG, ACTIVE_LIMIT, NODE0 = range(5)
 FLAW_NODES = 8
 NDAMAGE = NODE0 + FLAW_NODES
 
@@ -120,7 +120,9 @@ class DamageArrays(NamedTuple):
 
     model: (M,) int64 damage model codes (INSTANT, GRADY_KIPP); params: (M, NDAMAGE) rows of
     Weibull m (-), Weibull k (m^-3), Young's modulus E (Pa; 0: E = 9 K G / (3 K + G) from
-    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`) and the
+    the cell's moduli, :func:`impactpipe.hydro.strength.fracture.young_modulus`), the active-flaw
+    limit (1: D <= n_act / n_tot, Benz & Asphaug 1995, ``active_flaw_limit``, the default; 0: none;
+    :func:`impactpipe.hydro.strength.fracture.active_fraction`) and the
     FLAW_NODES node strains eps_j^m of the flaw law (``flaw_strains`` eps_j; zeros until the
     flaws are drawn, :class:`impactpipe.hydro.strength.model.MaterialStrength`); seed: (M,)
     int64 seed of each material's flaw draw (``flaw_seed``, default 0); flaw_count: (M,) int64
@@ -169,6 +171,7 @@ def pack_damage(specs: list[dict | None]) -> DamageArrays:
         params[k, YOUNG] = float(spec.get("young_modulus", 0.0))
         if params[k, YOUNG] < 0.0:
             raise ValueError(f"material {k}: young_modulus must be >= 0 (got {params[k, YOUNG]:g})")
+        params[k, ACTIVE_LIMIT] = 1.0 if spec.get("active_flaw_limit", True) else 0.0
         seed[k] = int(spec.get("flaw_seed", 0))
         flaw_count[k] = int(spec.get("flaw_count", 0))
         for key, value in (("flaw_seed", seed[k]), ("flaw_count", flaw_count[k])):

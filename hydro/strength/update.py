@@ -34,7 +34,9 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    stress of -p_b I + S the damage grows by one step of
    :func:`impactpipe.hydro.strength.fracture.damage_step` at the rate
    c_g (4 pi rho_k n_act,m / 3)^(1/3), n_act,m the active flaws per kg at the matrix strain
-   sigma_max / ((1 - D) E) (:mod:`impactpipe.hydro.strength.fracture`); the stored deviator
+   sigma_max / ((1 - D) E) (:mod:`impactpipe.hydro.strength.fracture`), up to the active share
+   of the cell's flaws n_act,m / n_tot,m with the active-flaw limit (``grady_kipp_flaw_limited``
+   counts the steps where it held D below the unlimited step); the stored deviator
    (the one the material bears) is scaled by (1 - D_new) / (1 - D_old) and the Jaumann update
    uses the shear modulus (1 - D) G, so S stays (1 - D) times the intact matrix's
    (von Mises, GEO; ROCK carries its damage in its yield curve instead, Y = (1 - D) Y_i + D Y_d,
@@ -71,11 +73,11 @@ from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
 from impactpipe.hydro.strength.fracture import (
-    crack_speed, cumulative_flaws, damage_growth_rate_of_density, damage_step, damaged_pressure,
+    active_fraction, crack_speed, cumulative_flaws, damage_growth_rate_of_density, damage_step, damaged_pressure,
     largest_principal_stress, tensile_strain, young_modulus,
 )
 from impactpipe.hydro.strength.parameters import (
-    FLAW_NODES, GRADY_KIPP, NODE0, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG,
+    ACTIVE_LIMIT, FLAW_NODES, GRADY_KIPP, NODE0, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG,
 )
 from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
 from impactpipe.hydro.scheme.timestep import PHI_VOID
@@ -92,8 +94,10 @@ CNT_YIELD = 0
 CNT_TENSILE_FAILURE = 1
 CNT_LOW_DENSITY = 2
 CNT_FRACTURED = 3
-NCOUNT = 4
-COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density", "grady_kipp_fractured")
+CNT_FLAW_LIMITED = 4
+NCOUNT = 5
+COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density", "grady_kipp_fractured",
+               "grady_kipp_flaw_limited")
 AMT_PLASTIC_WORK = 0
 NSAMOUNT = 1
 AMOUNT_NAMES = ("stress_work",)
@@ -271,24 +275,34 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
 
 @njit(cache=True, inline="always")
 def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_bulk, shear_modulus, arhoq, b, first,
-                       ix, iy, iz, inv_mass, weibull_m, young, node_x, dt):
+                       ix, iy, iz, inv_mass, weibull_m, young, limited, node_x, dt):
     """Damage after one Grady-Kipp step of ``dt`` (s) (module docstring, step 2).
 
     ``pressure`` the borne pressure p_b and S the borne deviator (Pa), rho the material density
     (kg/m^3), c2_bulk its EOS sound speed squared (m^2/s^2), ``shear_modulus`` the intact G
     (Pa); the flaw law per kg is read from ``arhoq[b, first .. first + NFLAW - 1]`` times
     ``inv_mass`` = 1 / (alpha_k rho_k), at the nodes eps_j^m = ``node_x``.  E = ``young`` (Pa), or 9 K G / (3 K + G) when 0;
-    the crack speed is 0.4 of the intact longitudinal speed sqrt(c_K^2 + 4 G / (3 rho)).
+    the crack speed is 0.4 of the intact longitudinal speed sqrt(c_K^2 + 4 G / (3 rho)).  With
+    ``limited`` (> 0) D grows to at most n_act,m / n_tot,m, the active share of the cell's flaws
+    (its law at the strain over its law beyond the last node; Benz & Asphaug 1995).  Returns
+    (D, whether the limit held D below the unlimited step).
     """
     bulk = rho * max(c2_bulk, 0.0)
     e = young if young > 0.0 else young_modulus(shear_modulus, bulk)
     sigma_max = largest_principal_stress(pressure, sxx, syy, szz, sxy, sxz, syz)
     strain = tensile_strain(sigma_max, damage, e)
     if strain <= 0.0:
-        return damage
+        return damage, False
     n_active = cumulative_flaws(strain ** weibull_m, node_x, arhoq, first, b, ix, iy, iz, inv_mass)
     c_p = (max(c2_bulk, 0.0) + 4.0 * shear_modulus / (3.0 * rho)) ** 0.5
-    return damage_step(damage, damage_growth_rate_of_density(rho * n_active, crack_speed(c_p)), dt)
+    rate = damage_growth_rate_of_density(rho * n_active, crack_speed(c_p))
+    if limited > 0.0:
+        n_total = arhoq[b, first + node_x.shape[0] - 1, ix, iy, iz] * inv_mass
+        capped = damage_step(damage, rate, dt, active_fraction(n_active, n_total))
+        if capped < damage_step(damage, rate, dt):
+            return capped, True
+        return capped, False
+    return damage_step(damage, rate, dt), False
 
 
 @njit(cache=True, parallel=True)
@@ -375,10 +389,12 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             # Grady-Kipp: damage grows from the active flaws; S and G soften with it
                             if tensile_strength[k] > 0.0:
                                 p_matrix = max(pk, -tensile_strength[k])
-                            d_new = _grady_kipp_damage(dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy,
-                                                       sxz, syz, rk, c2b, g, arhoq, b, base + ns + 1, ix, iy, iz,
-                                                       inv, damage_params[k, WEIBULL_M], damage_params[k, YOUNG],
-                                                       damage_params[k, NODE0:], dt)
+                            d_new, flaw_limited = _grady_kipp_damage(
+                                dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy, sxz, syz, rk, c2b, g, arhoq,
+                                b, base + ns + 1, ix, iy, iz, inv, damage_params[k, WEIBULL_M],
+                                damage_params[k, YOUNG], damage_params[k, ACTIVE_LIMIT], damage_params[k, NODE0:], dt)
+                            if flaw_limited:
+                                counts[b, CNT_FLAW_LIMITED] += 1
                             if d_new > dmg:
                                 if model[k] != ROCK:
                                     keep = (1.0 - d_new) / (1.0 - dmg)
