@@ -30,9 +30,10 @@ C_L = np.sqrt(LONGITUDINAL_MODULUS / RHO0)
 
 
 #: the spall scenes' flaws: 1e5 for a bar of 1e-8 m^2 (the same draw statistics at every
-#: resolution), 250-1000 per cell, many enough for the continuum rate law; with that many the
-#: active-flaw limit of Benz & Asphaug (a device for particles of a few flaws each) would hold a
-#: cell's damage to the share of its flaws active and is off
+#: resolution), 290-570 per cell (220 for the checkpoint test's 2e4), many enough for the
+#: continuum rate law; with that many the active-flaw limit of Benz & Asphaug (a device for
+#: particles of a few flaws each) would hold a cell's damage to the share of its flaws active,
+#: so it is off
 MANY_FLAWS = {"flaw_count": 100_000, "flaw_seed": 1, "flaw_cross_section": 1.0e-8, "active_flaw_limit": False}
 
 
