@@ -1,7 +1,7 @@
 """Granular column collapse against the Courant number: run-out, height and rest time.
 
-Builds the scene of configs/column_collapse.yaml (a = 1, 16 cells per height, GEO with
-tan 25 deg friction and Y0 = 2e5 Pa) at each Courant number, bypassing the scene's cfl
+Builds the scene of configs/column_collapse.yaml (a = 1, 16 cells per height, cohesionless GEO with
+tan 25 deg friction) at each Courant number, bypassing the scene's cfl
 limit, and prints the deposit every ``--every`` tau and, per Courant number, the first time
 the kinetic energy falls below 1e-3 of its peak (docs/validation.md, "Granular column
 collapse").  With three or more Courant numbers it ends with the Richardson estimate

@@ -12,7 +12,7 @@ and rough (:meth:`impactpipe.hydro.strength.model.MaterialStrength.set_rough_wal
 floor holds the material by its own friction, as a bed glued with the same grains does),
 outflow at x_max and z_max.  Mesh (:func:`domain`): square cells dx = H0 /
 ``cells_per_height`` at the finest level; x spans L0 plus twice the run-out the scaling law
-predicts, z spans H0 plus one cell, each rounded up to whole root blocks.  With ``levels`` > 1
+predicts (``room`` = 2), z spans H0 plus one cell, each rounded up to whole root blocks.  With ``levels`` > 1
 the mesh is adaptive: root cells are 2^(levels - 1) dx, the blocks the refinement rule flags
 at t = 0 (the column's free surfaces) start at the finest level, and ``refinement`` decides
 where the mesh refines and coarsens as the column collapses
@@ -25,11 +25,15 @@ deviatoric stress; void elsewhere.
 
 The material should carry a pressure-dependent yield strength with no tensile strength (a
 Drucker-Prager / Coulomb granular material): the GEO model with Y_T = 0, mu_i = tan(phi),
-a large Y_M and a small cohesion Y0, sqrt(J2) <= Y0 + mu_i P.  The cohesion holds the
-partly filled surface cells, whose pressure the free-surface closure relaxes to zero: a
-cohesionless material has no strength there and a skin one cell thick flows down any slope
-(docs/validation.md, "Granular column collapse").  A strengthless material collapses as a
-fluid (dam break) on a free-slip floor.
+a large Y_M and no cohesion, sqrt(J2) <= mu_i P.  The scene gives the strength scheme the
+gravity for the surface-layer pressure (the yield strength of a partly filled surface cell is
+taken at the pressure at mid-depth of the layer it holds, not at the zero pressure the
+free-surface closure leaves there) and ``hourglass`` viscosity against the odd-even velocity
+modes (:mod:`impactpipe.hydro.strength.hourglass`); without them a cohesionless column does
+not come to rest (docs/validation.md, "Granular column collapse").  The mesh spans L0 plus
+``room`` run-outs of the law; :class:`ColumnCollapseSimulation` stops the run with an error
+when the deposit reaches the mesh's far edge.  A strengthless material collapses as a fluid
+(dam break) on a free-slip floor.
 """
 
 from __future__ import annotations
@@ -37,13 +41,13 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
-from impactpipe.hydro.eos import reference_density
+from impactpipe.hydro.eos import energy_from_pressure, pressure_sound_speed, reference_density
 from impactpipe.hydro.gravity import ExternalGravity
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, check_geometry, material_list, merged,
                                               root_cell_multiple, strength_specs, tensile_strengths)
 from impactpipe.hydro.problems.parameters import Parameter, setup_defaults, violations
-from impactpipe.hydro.solver import Simulation
+from impactpipe.hydro.solver import HydroFailure, Simulation
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
@@ -67,6 +71,13 @@ MAX_CFL = 0.2
 #: so the hydro stage restarts an interrupted run of this problem from t = 0.
 RESUMABLE = False
 
+#: Hourglass viscosity coefficient C of the scene (:mod:`impactpipe.hydro.strength.hourglass`).
+HOURGLASS_COEFFICIENT = 0.1
+
+#: Material filling this fraction of a cell in the last cell column before x_max stops the run
+#: (:class:`ColumnCollapseSimulation`).
+EDGE_FILL = 1.0e-3
+
 #: The deposit ends where its thickness falls below this fraction of a cell (:func:`deposit`).
 FRONT_THICKNESS_CELLS = 0.5
 
@@ -78,6 +89,9 @@ PARAMETERS = {
     "cells_per_height": Parameter(16, kind=int, ge=MIN_CELLS_PER_HEIGHT,
                                   description="cells across the initial height"),
     "end_time": Parameter(120.0, gt=0, units="s", description="end of the run"),
+    "hourglass": Parameter(HOURGLASS_COEFFICIENT, ge=0, description="hourglass viscosity coefficient C "
+                           "(impactpipe.hydro.strength.hourglass); 0 for none"),
+    "room": Parameter(2.0, gt=0, description="mesh length beyond the column, in run-outs L_f - L0 of the scaling law"),
 }
 
 #: What :func:`setup` takes for parameters a call leaves out.
@@ -105,7 +119,7 @@ def scaling_height(aspect_ratio: float) -> float:
 
 
 def domain(height: float, width: float, cells_per_height: int, block_cells: int | None = None,
-           levels: int = 1) -> dict:
+           levels: int = 1, room: float = 2.0) -> dict:
     """The mesh box (see the module docstring); lengths in m.
 
     Returns ``cell_size`` (the finest), ``lo``, ``hi``, ``cells`` (per axis at the finest level,
@@ -114,15 +128,34 @@ def domain(height: float, width: float, cells_per_height: int, block_cells: int 
     bc = int(block_cells or BLOCK_CELLS)
     multiple = root_cell_multiple(bc, levels)
     dx = height / cells_per_height
-    room = 2.0 * scaling_runout(height / width) * width
+    beyond = room * scaling_runout(height / width) * width
 
     def whole_blocks(length: float) -> int:
         return int(np.ceil(length / dx / multiple - 1e-9)) * multiple
 
-    nx = whole_blocks(width + room)
+    nx = whole_blocks(width + beyond)
     nz = whole_blocks(height + dx)
     return {"cell_size": dx, "lo": [0.0, 0.0], "hi": [nx * dx, nz * dx], "cells": [nx, nz],
             "boundaries": [("reflecting", "outflow"), ("reflecting", "outflow")], "block_cells": bc}
+
+
+class ColumnCollapseSimulation(Simulation):
+    """The scene's :class:`~impactpipe.hydro.solver.Simulation`: it stops with a
+    :class:`~impactpipe.hydro.solver.HydroFailure` as soon as material fills the last cell column
+    before the outflow face x_max to :data:`EDGE_FILL` or more, instead of losing the deposit's
+    front through that face: the message names the scene key ``room`` that widens the mesh."""
+
+    def step(self, dt_max: float = np.inf) -> float:
+        dt = super().step(dt_max)
+        mesh = self.mesh
+        edge = np.flatnonzero(mesh.neighbor[:, 0, 1] < 0)
+        fill = mesh.interior(self.state.alpha)[edge, :, -1].sum(axis=1)
+        if fill.size and fill.max() >= EDGE_FILL:
+            x_max = float(mesh.block_lo[edge, 0].max() + mesh.interior_shape[0] * mesh.block_dx[edge, 0].max())
+            raise HydroFailure(f"column_collapse: the deposit reached the far edge of the mesh, x = {x_max:g} m, and "
+                               f"would leave it; widen the mesh with scene.room (mesh length beyond the column in "
+                               f"run-outs of the scaling law)", self.time, int(edge[0]), None, {})
+        return dt
 
 
 def _overlap(lo: np.ndarray, hi: np.ndarray, a: float, b: float) -> np.ndarray:
@@ -141,21 +174,35 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     if cfl > MAX_CFL:
         raise ValueError(f"cfl: must be <= {MAX_CFL:g} for a column collapse (got {cfl:g}); see MAX_CFL")
     names, specs, eos = material_list(materials, [p["material"]])
-    box = domain(p["height"], p["width"], int(p["cells_per_height"]), block_cells, p["levels"])
+    box = domain(p["height"], p["width"], int(p["cells_per_height"]), block_cells, p["levels"], p["room"])
     mesh = adaptive_mesh(geometry, box["lo"], box["hi"], box["cells"], box["boundaries"], box["block_cells"],
                          p["levels"])
     rule = rule_from_config(p["refinement"])
 
     def build(m: BlockMesh) -> Simulation:
-        sim = Simulation(m, names, specs, initial_state(m, p, eos), cfl=cfl,
+        sim = ColumnCollapseSimulation(m, names, specs, initial_state(m, p, eos), cfl=cfl,
                          tensile_strength=tensile_strengths(materials, names),
                          strength=strength_specs(materials, names),
                          gravity=ExternalGravity([0.0, -p["gravity"], 0.0], m), refinement=rule)
         if sim.strength is not None:
             sim.strength.set_rough_wall(VERTICAL_AXIS, 0)
+            sim.strength.set_surface_layer_pressure([0.0, -p["gravity"], 0.0])
+            if p["hourglass"] > 0.0:
+                sim.strength.set_hourglass_viscosity(p["hourglass"], impedance(eos, sim.shear_modulus[0]))
         return sim
 
     return refine_initial(mesh, build)
+
+
+def impedance(eos, shear: np.ndarray) -> float:
+    """Longitudinal impedance rho0 c_L (kg/(m^2 s)) of material 0 of the packed ``eos`` at its
+    reference density and zero pressure, c_L^2 = c_K^2 + 4 G / (3 rho0), G from its ``shear``
+    row (G = shear[0] + shear[1] rho0 c_K^2, Pa)."""
+    kind, row = eos.kind[0], eos.params[0]
+    rho0 = float(reference_density(kind, row, eos.table))
+    _, c2, _ = pressure_sound_speed(kind, row, eos.table, rho0, energy_from_pressure(kind, row, eos.table, rho0, 0.0))
+    modulus = shear[0] + shear[1] * rho0 * c2
+    return rho0 * float(np.sqrt(c2 + 4.0 * modulus / (3.0 * rho0)))
 
 
 def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:

@@ -58,9 +58,10 @@ import numpy as np
 from impactpipe.hydro.eos import reference_densities
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
+from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
 from impactpipe.hydro.strength.flaws import assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes
 from impactpipe.hydro.strength.parameters import (
     DAMAGE0, GRADY_KIPP, NODE0, NONE, WEIBULL_K, WEIBULL_M, DamageArrays, StrengthArrays, pack_damage,
@@ -113,6 +114,10 @@ class MaterialStrength:
         self.face_flux = self._face_flux_arrays(mesh)
         #: (axis, side) of the reflecting domain faces that are rough (module docstring).
         self.rough_walls: list[tuple[int, int]] = []
+        #: hourglass viscosity: coefficient C (-) and impedance Z (kg/(m^2 s)); none while C = 0
+        self.hourglass = (0.0, 0.0)
+        #: gravity (m/s^2, (3,)) of the surface-layer pressure of the yield strength; None: none
+        self.surface_gravity: np.ndarray | None = None
         self._rho0: tuple[object, np.ndarray] | None = None
 
     def set_rough_wall(self, axis: int, side: int) -> None:
@@ -123,6 +128,23 @@ class MaterialStrength:
             raise ValueError(f"the domain face on side {side} of axis {axis} is not reflecting; only a wall can be rough")
         if (axis, side) not in self.rough_walls:
             self.rough_walls.append((axis, side))
+
+    def set_hourglass_viscosity(self, coefficient: float, impedance: float) -> None:
+        """Resist the odd-even velocity modes with the face traction C dx Z e of
+        :mod:`impactpipe.hydro.strength.hourglass` (planar meshes); ``coefficient`` C (-),
+        ``impedance`` Z = rho0 c_L (kg/(m^2 s))."""
+        if self.mesh.geometry_code == CYLINDRICAL:
+            raise ValueError("hourglass viscosity is implemented on planar meshes only")
+        if not (coefficient >= 0.0 and impedance >= 0.0):
+            raise ValueError(f"hourglass viscosity: coefficient and impedance must be >= 0 (got {coefficient}, "
+                             f"{impedance})")
+        self.hourglass = (float(coefficient), float(impedance))
+
+    def set_surface_layer_pressure(self, gravity) -> None:
+        """Let the yield strength of material in a cell with void see at least the pressure at
+        mid-depth of the layer it forms under ``gravity`` (m/s^2, three components)
+        (:func:`impactpipe.hydro.strength.update.update_stress`, step 4)."""
+        self.surface_gravity = np.array(gravity, dtype=float).reshape(3)
 
     def _face_flux_arrays(self, mesh: BlockMesh) -> np.ndarray:
         """Per-axis coarse/fine face amounts of the stress divergence (empty on a uniform mesh)."""
@@ -209,12 +231,13 @@ class MaterialStrength:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
-                          self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params)
+                          self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
+                          self.surface_gravity)
         else:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
-                          self.counts, self.amounts, lo, hi)
+                          self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns))
 
@@ -234,6 +257,10 @@ class MaterialStrength:
         apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                 mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
                                 self.face_flux, 3 * self.nmat, lo, hi)
+        if self.hourglass[0] > 0.0:
+            apply_hourglass_viscosity(dt, mesh.ndim, self.hourglass[0], self.hourglass[1], state.momentum,
+                                      state.energy, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work,
+                                      boundary, lo, hi)
         if mesh.adaptive:
             for axis in range(mesh.ndim):
                 plans = partition.plans(mesh, axis)

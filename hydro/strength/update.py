@@ -49,7 +49,11 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    matrix's strength, ROCK at Y(p_b, T_k, D)), T_k from the EOS, and
    Y = 0 for material expanded below STRENGTH_MIN_DENSITY_FRACTION of its reference density
    (fragmented or vapour: a deviatoric stress held by it would put S:D / rho_k of work into
-   very little mass); radial return to sqrt(3 J2) <= Y (``yield_return``), equivalent
+   very little mass); with a surface gravity g (:meth:`impactpipe.hydro.strength.model.
+   MaterialStrength.set_surface_layer_pressure`) p_held in a cell with void (fill phi < 1) is
+   at least rho_k |g| h / 2, h = phi times the cell's extent along g: the pressure at mid-depth
+   of the layer the cell holds, which the free-surface closure relaxes to zero (counted as
+   ``surface_layer_pressure``); radial return to sqrt(3 J2) <= Y (``yield_return``), equivalent
    plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_held);
 5. internal energy alpha_k rho_k e_k += dt alpha_k (S_k,old + S_k,new) / 2 : D_rate (stress
    power; elastic and plastic work).  The momentum kicks around this update use S_old for the
@@ -95,9 +99,10 @@ CNT_TENSILE_FAILURE = 1
 CNT_LOW_DENSITY = 2
 CNT_FRACTURED = 3
 CNT_FLAW_LIMITED = 4
-NCOUNT = 5
+CNT_SURFACE_LAYER = 5
+NCOUNT = 6
 COUNT_NAMES = ("yield_return", "tensile_failure", "strength_dropped_below_min_density", "grady_kipp_fractured",
-               "grady_kipp_flaw_limited")
+               "grady_kipp_flaw_limited", "surface_layer_pressure")
 AMT_PLASTIC_WORK = 0
 NSAMOUNT = 1
 AMOUNT_NAMES = ("stress_work",)
@@ -274,6 +279,14 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
 
 
 @njit(cache=True, inline="always")
+def _surface_layer_pressure(rho, fill, gravity, dxs):
+    """Pressure (Pa) at mid-depth of the layer a cell with void holds: rho |g| h / 2, h = fill times
+    the cell's extent along g, sum_d |g_d| dx_d / |g| (m); rho (kg/m^3), ``gravity`` g (m/s^2)."""
+    extent = abs(gravity[0]) * dxs[0] + abs(gravity[1]) * dxs[1] + abs(gravity[2]) * dxs[2]
+    return 0.5 * rho * fill * extent
+
+
+@njit(cache=True, inline="always")
 def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_bulk, shear_modulus, arhoq, b, first,
                        ix, iy, iz, inv_mass, weibull_m, young, limited, node_x, dt):
     """Damage after one Grady-Kipp step of ``dt`` (s) (module docstring, step 2).
@@ -308,13 +321,14 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
-                  damage_model=None, damage_params=None):
+                  damage_model=None, damage_params=None, surface_gravity=None):
     """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``;
     see the module docstring.
     ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
     reference_densities`).  ``damage_model[M]``, ``damage_params[M, NDAMAGE]``: the tensile
     damage models and their Weibull parameters (:func:`impactpipe.hydro.strength.parameters.
     pack_damage`); None where every material fails instantly (then ``arhoq`` has no flaw slots).
+    ``surface_gravity[3]``: the gravity g (m/s^2) of the surface-layer pressure (step 4); None: none.
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
@@ -427,6 +441,11 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         else:
                             p_held = damaged_pressure(p_matrix, dmg) if gradual else max(
                                 pk, -tensile_strength[k] * (1.0 - dmg))
+                            if surface_gravity is not None and work[b, WK_PHI, ix, iy, iz] < 1.0:
+                                layer = _surface_layer_pressure(rk, work[b, WK_PHI, ix, iy, iz], surface_gravity, dxs)
+                                if layer > p_held:
+                                    p_held = layer
+                                    counts[b, CNT_SURFACE_LAYER] += 1
                             y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk,
                                                                                  dmg))
                         if rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:

@@ -1,0 +1,89 @@
+"""Granular column collapse over aspect ratios, friction angles, Courant numbers and resolutions.
+
+Builds the scene of configs/column_collapse.yaml (its material and floor) with the cohesion
+``--cohesion`` (Pa), mu_i = tan(phi) for each ``--phi`` (deg), the width L0 = H0 / a for each
+aspect ratio ``--aspect``, each Courant number ``--cfl`` (past the scene's limit on purpose) and
+each ``--cells`` per H0, runs it to ``--end`` tau (tau = sqrt(H0 / g)) and prints one row per
+run: the kinetic energy at the end over its peak (sampled every tau / 4), how long the front
+has been still, the run-out (L_f - L0) / L0 and height H_f / L0 against the laws
+(docs/validation.md, "Granular column collapse"), and the deposit's centroid.
+
+    python benchmarks/column_collapse_table.py --aspect 0.5 1 3.2 6 --phi 25 --cfl 0.2 --cells 16 --end 10
+
+``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+from impactpipe.hydro.problems import column_collapse
+from impactpipe.pipeline.config import load_config
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "column_collapse.yaml"
+
+
+def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
+        surface_layer: bool) -> dict:
+    """One collapse; returns the row's numbers (lengths in units of L0, times in tau)."""
+    config = load_config(CONFIG)
+    scene = config.scene.model_dump(exclude={"problem", "geometry"})
+    scene.update(width=scene["height"] / aspect, cells_per_height=cells, hourglass=hourglass)
+    materials = config.resolved_materials()
+    strength = materials[scene["material"]]["strength"]
+    strength.update(Y0=cohesion, mu_i=math.tan(math.radians(phi)))
+    sim = column_collapse.setup(scene, materials, block_cells=config.hydro.block_cells,
+                                cfl=min(cfl, column_collapse.MAX_CFL))
+    sim.cfl = cfl
+    if not surface_layer:
+        sim.strength.surface_gravity = None
+    height, width = scene["height"], scene["width"]
+    tau = math.sqrt(height / scene["gravity"])
+    peak, front, still_since, started = 0.0, None, 0.0, time.perf_counter()
+    for k in range(1, int(round(4 * end)) + 1):
+        sim.run(k * tau / 4)
+        snap = sim.snapshot()
+        energy = column_collapse.kinetic_energy(snap)
+        peak = max(peak, energy)
+        deposit = column_collapse.deposit(snap)
+        if deposit["runout"] != front:
+            front, still_since = deposit["runout"], sim.time / tau
+    return {"a": aspect, "phi": phi, "cfl": cfl, "cells": cells, "ke": energy / peak,
+            "still": sim.time / tau - still_since, "runout": (deposit["runout"] - width) / width,
+            "height": deposit["height"] / width, "centroid": deposit["centroid"] / width,
+            "law_runout": column_collapse.scaling_runout(aspect), "law_height": column_collapse.scaling_height(aspect),
+            "wall": time.perf_counter() - started}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--aspect", type=float, nargs="+", default=[1.0])
+    parser.add_argument("--phi", type=float, nargs="+", default=[25.0], help="friction angle, mu_i = tan(phi) (deg)")
+    parser.add_argument("--cfl", type=float, nargs="+", default=[0.2])
+    parser.add_argument("--cells", type=int, nargs="+", default=[16], help="cells per H0")
+    parser.add_argument("--end", type=float, default=10.0, help="end time in tau = sqrt(H0 / g)")
+    parser.add_argument("--cohesion", type=float, default=0.0, help="Y0 (Pa)")
+    parser.add_argument("--hourglass", type=float, default=column_collapse.HOURGLASS_COEFFICIENT,
+                        help="scene.hourglass, the hourglass viscosity coefficient")
+    parser.add_argument("--no-surface-layer", action="store_true",
+                        help="without the surface-layer pressure of the yield strength (as before it existed)")
+    args = parser.parse_args()
+    print("| a | phi | cfl | cells/H0 | KE/peak at end | front still for | run-out (law) | height (law) | centroid |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for aspect in args.aspect:
+        for phi in args.phi:
+            for cfl in args.cfl:
+                for cells in args.cells:
+                    r = run(aspect, phi, cfl, cells, args.end, args.cohesion, args.hourglass,
+                            not args.no_surface_layer)
+                    print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
+                          f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
+                          f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "
+                          f"{r['height'] / r['law_height'] - 1:+.0%}) | {r['centroid']:.4f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
