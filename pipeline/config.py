@@ -651,7 +651,7 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
         if isinstance(cfl, (int, float)) and cfl > column_collapse.MAX_CFL:
             errors.append((("hydro", "cfl"), f"must be <= {column_collapse.MAX_CFL:g} for the column_collapse scene "
                                              f"(got {cfl:g}{'' if 'cfl' in hydro else ', the default'}): at larger "
-                                             f"steps a deposit at rest under gravity does not stay at rest "
+                                             f"steps the deposit depends on the time step "
                                              f"(docs/validation.md, granular column collapse)"))
     if scene.get("problem", "impact") != "impact":
         errors.extend(_impact_only_errors(str(scene.get("problem")), hydro))
