@@ -11,6 +11,9 @@ has been still, the run-out (L_f - L0) / L0 and height H_f / L0 against the laws
     python benchmarks/column_collapse_table.py --aspect 0.5 1 3.2 6 --phi 25 --cfl 0.2 --cells 16 --end 10
 
 ``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them.
+``--plot DIR`` writes, per run, DIR/profile_a<a>_phi<phi>_cfl<cfl>_n<cells>.png: the deposit's
+thickness h(x) / L0 at t = tau and at the end against x / L0, with the laws' run-out L_f and
+height H_f marked.
 """
 
 from __future__ import annotations
@@ -20,14 +23,19 @@ import math
 import time
 from pathlib import Path
 
-from impactpipe.hydro.problems import column_collapse
-from impactpipe.pipeline.config import load_config
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from impactpipe.hydro.problems import column_collapse  # noqa: E402
+from impactpipe.pipeline.config import load_config  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "column_collapse.yaml"
 
 
 def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
-        surface_layer: bool) -> dict:
+        surface_layer: bool, plot: Path | None = None) -> dict:
     """One collapse; returns the row's numbers (lengths in units of L0, times in tau)."""
     config = load_config(CONFIG)
     scene = config.scene.model_dump(exclude={"problem", "geometry"})
@@ -42,20 +50,41 @@ def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion:
         sim.strength.surface_gravity = None
     height, width = scene["height"], scene["width"]
     tau = math.sqrt(height / scene["gravity"])
-    peak, front, still_since, started = 0.0, None, 0.0, time.perf_counter()
+    peak, front, still_since, started, profiles = 0.0, None, 0.0, time.perf_counter(), {}
     for k in range(1, int(round(4 * end)) + 1):
         sim.run(k * tau / 4)
         snap = sim.snapshot()
         energy = column_collapse.kinetic_energy(snap)
         peak = max(peak, energy)
         deposit = column_collapse.deposit(snap)
+        if k == 4:
+            profiles["t = tau"] = deposit
         if deposit["runout"] != front:
             front, still_since = deposit["runout"], sim.time / tau
+    if plot is not None:
+        profiles[f"t = {sim.time / tau:g} tau"] = deposit
+        _plot_profiles(plot / f"profile_a{aspect:g}_phi{phi:g}_cfl{cfl:g}_n{cells}.png", profiles, width, aspect)
     return {"a": aspect, "phi": phi, "cfl": cfl, "cells": cells, "ke": energy / peak,
             "still": sim.time / tau - still_since, "runout": (deposit["runout"] - width) / width,
             "height": deposit["height"] / width, "centroid": deposit["centroid"] / width,
             "law_runout": column_collapse.scaling_runout(aspect), "law_height": column_collapse.scaling_height(aspect),
             "wall": time.perf_counter() - started}
+
+
+def _plot_profiles(path: Path, profiles: dict, width: float, aspect: float) -> None:
+    """The thickness profiles h(x) / L0 against x / L0, the laws' L_f and H_f marked, into ``path``."""
+    fig, ax = plt.subplots(figsize=(7, 3))
+    for label, deposit in profiles.items():
+        ax.step(deposit["x"] / width, deposit["thickness"] / width, where="mid", label=label)
+    ax.axvline(1.0 + column_collapse.scaling_runout(aspect), color="k", ls="--", label="law: L_f")
+    ax.axhline(column_collapse.scaling_height(aspect), color="k", ls=":", label="law: H_f")
+    ax.set_xlabel("x / L0")
+    ax.set_ylabel("h / L0")
+    ax.set_title(f"column collapse, a = {aspect:g}")
+    ax.legend(fontsize="small")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
 
 
 def main() -> None:
@@ -70,6 +99,7 @@ def main() -> None:
                         help="scene.hourglass, the hourglass viscosity coefficient")
     parser.add_argument("--no-surface-layer", action="store_true",
                         help="without the surface-layer pressure of the yield strength (as before it existed)")
+    parser.add_argument("--plot", type=Path, default=None, help="folder for the thickness profile plots")
     args = parser.parse_args()
     print("| a | phi | cfl | cells/H0 | KE/peak at end | front still for | run-out (law) | height (law) | centroid |")
     print("|---|---|---|---|---|---|---|---|---|")
@@ -78,7 +108,7 @@ def main() -> None:
             for cfl in args.cfl:
                 for cells in args.cells:
                     r = run(aspect, phi, cfl, cells, args.end, args.cohesion, args.hourglass,
-                            not args.no_surface_layer)
+                            not args.no_surface_layer, args.plot)
                     print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
                           f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
                           f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "
