@@ -49,6 +49,13 @@ wall holds the material by Coulomb friction with the material's own friction coe
 a bed roughened with the same grains does.  The face velocity is zero, so the traction does
 no work: the kinetic energy it removes becomes internal energy through the stress power.
 The sweeps still see a free-slip wall (they carry the pressure only).
+
+Two options a scene may switch on (the granular column collapse does):
+:meth:`MaterialStrength.set_surface_layer_pressure` (the yield strength of material in a cell
+with void at no less than the pressure at mid-depth of the layer it forms under gravity,
+:func:`impactpipe.hydro.strength.update.update_stress` step 4) and
+:meth:`MaterialStrength.set_hourglass_viscosity` (the traction of
+:mod:`impactpipe.hydro.strength.hourglass` against odd-even velocity modes, added in each kick).
 """
 
 from __future__ import annotations
