@@ -118,6 +118,21 @@ def test_setup_starts_in_hydrostatic_equilibrium_with_the_column_in_place():
         column_collapse.setup({"material": "sand"}, {"sand": granular()}, cfl=0.4)
 
 
+def cohesionless_collapse(width: float, samples: int, interval: float):
+    """Run a cohesionless column of ``width`` (m) at 16 cells per height and Courant number 0.2,
+    sampling every ``interval`` (s) ``samples`` times: (samples of (time in units of TAU, kinetic
+    energy, deposit), the initial totals, the simulation)."""
+    sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": width, "cells_per_height": 16},
+                                {"sand": granular(cohesion=0.0)}, cfl=0.2)
+    initial = sim.totals()
+    out = []
+    for k in range(1, samples + 1):
+        sim.run(k * interval)
+        snap = sim.snapshot()
+        out.append((sim.time / TAU, column_collapse.kinetic_energy(snap), column_collapse.deposit(snap)))
+    return out, initial, sim
+
+
 @pytest.fixture(scope="module")
 def collapse():
     """Cohesionless column (Y0 = 0) of aspect ratio 1 at 16 cells per height, Courant number 0.2, run to 8 TAU.
@@ -126,14 +141,7 @@ def collapse():
     initial totals, the simulation and L0.
     """
     width = HEIGHT
-    sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": width, "cells_per_height": 16},
-                                {"sand": granular(cohesion=0.0)}, cfl=0.2)
-    initial = sim.totals()
-    samples = []
-    for k in range(1, 33):
-        sim.run(k * TAU / 4)
-        snap = sim.snapshot()
-        samples.append((sim.time / TAU, column_collapse.kinetic_energy(snap), column_collapse.deposit(snap)))
+    samples, initial, sim = cohesionless_collapse(width, samples=32, interval=TAU / 4)
     return samples, initial, sim, width
 
 
@@ -205,14 +213,7 @@ def test_tall_cohesionless_column_stops_inside_the_mesh():
     height 21 % above it at this resolution)."""
     aspect = 6.0
     width = HEIGHT / aspect
-    sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": width, "cells_per_height": 16},
-                                {"sand": granular(cohesion=0.0)}, cfl=0.2)
-    initial = sim.totals()
-    samples = []
-    for k in range(1, 21):
-        sim.run(k * TAU / 2)
-        snap = sim.snapshot()
-        samples.append((sim.time / TAU, column_collapse.kinetic_energy(snap), column_collapse.deposit(snap)))
+    samples, initial, sim = cohesionless_collapse(width, samples=20, interval=TAU / 2)
     kinetic = np.array([e for _, e, _ in samples])
     late = np.array([t for t, _, _ in samples]) >= 8.0 - 1e-9
     assert kinetic[late].max() < 2.0e-3 * kinetic.max()
