@@ -2,7 +2,9 @@
 
 One step: on an adaptive mesh, every ``refinement.interval`` steps, a regrid
 (:mod:`impactpipe.hydro.amr.regrid`); dt from the CFL condition over all blocks
-(:mod:`impactpipe.hydro.scheme.timestep`; one global step for every level); then one sweep per used
+(:mod:`impactpipe.hydro.scheme.timestep`; one global step for every level, or with
+``time_stepping = "per_level"`` a root step whose levels subcycle, :mod:`impactpipe.hydro.amr.subcycle`,
+which replaces what follows); then one sweep per used
 axis (:mod:`impactpipe.hydro.scheme.directional`), each after filling the ghosts along its axis and, on an
 adaptive mesh, followed by refluxing the coarse cells beside finer blocks
 (:func:`impactpipe.hydro.amr.transfer.reflux`); the sweep order alternates every step
@@ -26,6 +28,7 @@ import numba
 import numpy as np
 
 from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
+from impactpipe.hydro.amr.subcycle import GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, level_time_step
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
@@ -107,6 +110,9 @@ class Simulation:
             ``save(h5group)`` and ``mesh_changed(mesh)`` (see :mod:`impactpipe.hydro.tracers.motion`).
         refinement: when and where an adaptive mesh (``mesh.max_level`` > 0) refines; the
             default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
+        time_stepping: ``"global"`` (one step, the finest cells' CFL step, for every level) or
+            ``"per_level"`` (level l steps dt_0 / 2^l, :mod:`impactpipe.hydro.amr.subcycle`; one
+            process, without strength, gravity, porosity or tracers).
         gravity: gravity, applied in two half kicks around the stress update, or None: an object
             with ``prepare(state, mesh, partition)`` (once per step, before the kicks),
             ``advance(state, dt, block_lo, block_dx, partition)``, ``spec()`` (what a checkpoint
@@ -119,8 +125,12 @@ class Simulation:
                  cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0,
                  tracers=None, tensile_strength: Iterable[float] | None = None,
                  strength: list[dict | None] | None = None, gravity=None,
-                 refinement: RefinementRule | None = None):
+                 refinement: RefinementRule | None = None, time_stepping: str = GLOBAL):
         self.gravity = gravity
+        #: ``"global"`` or ``"per_level"`` (:mod:`impactpipe.hydro.amr.subcycle`); may be changed
+        #: between steps, checked by :meth:`check_time_stepping`.
+        self.time_stepping = time_stepping
+        self._level_stepper = LevelStepper()
         self.refinement = refinement or RefinementRule()
         #: Regrids that changed the mesh, blocks split into children and sibling groups merged.
         self.regrids = 0
@@ -221,6 +231,7 @@ class Simulation:
             for axis in range(mesh.ndim):
                 fill_state_ghosts(state, mesh, axis)
         self._keep_good()
+        self.check_time_stepping()
 
     def _keep_good(self) -> None:
         """Start the last-good copies (interior cells of the state, counters, clock) from the current ones."""
@@ -248,12 +259,43 @@ class Simulation:
             raise HydroFailure("no signal speed anywhere (empty or cold mesh)", self.time, -1, None, {})
         return self.cfl / rate
 
+    def check_time_stepping(self) -> None:
+        """Raise ValueError for an unknown ``time_stepping``, or naming what ``"per_level"`` does not
+        support yet in this Simulation (strength, gravity, porosity, tracers, several MPI ranks)."""
+        if self.time_stepping not in TIME_STEPPING:
+            raise ValueError(f"time_stepping must be one of {', '.join(TIME_STEPPING)} (got {self.time_stepping!r})")
+        if self.time_stepping != PER_LEVEL:
+            return
+        missing = [what for what, present in (("material strength", self.strength is not None),
+                                              ("gravity", self.gravity is not None),
+                                              ("porosity", self.porosity is not None),
+                                              ("tracers", self.tracers is not None),
+                                              ("more than one MPI rank", not isinstance(self.partition, WholeMesh)))
+                   if present]
+        if missing:
+            raise ValueError(f"time_stepping per_level does not support {', '.join(missing)} yet; use global")
+
+    def regrid_interval(self) -> int:
+        """Steps between regrids: ``refinement.interval``; per level, the root steps that hold as
+        many finest substeps, max(1, interval // 2^max_level), so a shock crosses as many finest
+        cells between regrids as with the global step."""
+        if self.time_stepping == PER_LEVEL:
+            return max(1, self.refinement.interval // 2 ** self.mesh.max_level)
+        return self.refinement.interval
+
     def step(self, dt_max: float = np.inf) -> float:
-        """Advance one step of at most ``dt_max`` (s); returns the step taken (s)."""
-        if self.mesh.adaptive and self.step_count % self.refinement.interval == 0:
+        """Advance one step of at most ``dt_max`` (s); returns the step taken (s).
+
+        Per level (``time_stepping``), one root-level step: level l in 2^l substeps of dt / 2^l.
+        """
+        self.check_time_stepping()
+        per_level = self.time_stepping == PER_LEVEL
+        if self.mesh.adaptive and self.step_count % self.regrid_interval() == 0:
             self.regrid()
         self._observe("regrid", -1)
         dt = self.stable_dt()
+        if per_level:
+            dt = level_time_step(self.mesh, self._rate, self.cfl)
         if self.dt_first is None:
             self.dt_first = dt
         elif dt < DT_COLLAPSE_FRACTION * self.dt_first:
@@ -261,6 +303,12 @@ class Simulation:
                                self.time, -1, None, {})
         dt = min(dt, dt_max)
         self._save_good()
+        if per_level:
+            self.cell_updates += self._level_stepper.advance(self, dt)
+            self.time += dt
+            self.step_count += 1
+            self.last_dt = dt
+            return dt
         if self.tracers is not None:
             self.tracers.before_step(self)
         axes = list(range(self.mesh.ndim))
@@ -268,6 +316,7 @@ class Simulation:
             axes.reverse()
         st = self.state
         own = self.partition.blocks
+        blocks = np.arange(len(range(*own.indices(self.mesh.nblocks))), dtype=np.int64)
         for axis in axes:
             self.partition.fill_ghosts(st, self.mesh, axis)
             self._observe("ghosts", axis)
@@ -276,7 +325,7 @@ class Simulation:
                   self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
                   self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
                   self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-                  self.grady_kipp, self.porosity)
+                  blocks, self.grady_kipp, self.porosity)
             failed = self.partition.first_failure(self._failure)
             if failed >= 0:
                 self._raise_sweep_failure(failed)
@@ -605,6 +654,7 @@ class Simulation:
                 fh.attrs["step_count"] = self.step_count
                 fh.attrs["cell_updates"] = self.cell_updates
                 fh.attrs["cfl"] = self.cfl
+                fh.attrs["time_stepping"] = self.time_stepping
                 fh.attrs["dt_first"] = -1.0 if self.dt_first is None else self.dt_first
                 fh.attrs["material_names"] = json.dumps(self.material_names)
                 fh.attrs["eos_specs"] = json.dumps(self.eos_specs)
@@ -656,7 +706,8 @@ class Simulation:
                       cfl=float(fh.attrs["cfl"]), shear_modulus=None if strength else shear.reshape(nmat, -1)[:, 0],
                       tensile_strength=fh["counters/tensile_strength"][()],
                       time=float(fh.attrs["time"]), strength=strength,
-                      refinement=_rule_from_json(fh.attrs.get("refinement")))
+                      refinement=_rule_from_json(fh.attrs.get("refinement")),
+                      time_stepping=str(fh.attrs.get("time_stepping", GLOBAL)))
             if mesh.adaptive:  # the ghosts as saved (the constructor refilled them), so the run continues exactly
                 for name in FIELDS:
                     if name in fh["state"]:

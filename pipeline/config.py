@@ -319,6 +319,10 @@ class Hydro(Strict):
     block_cells: int | None = Field(None, ge=4, le=64, description="cells per block edge; default: impacts and adaptive meshes 16 in 2D, 8 in 3D, uniform meshes up to 64 in 2D and 16 in 3D")
     max_levels: int | Literal["auto"] = "auto"
     refinement: Refinement = Field(default_factory=Refinement)
+    time_stepping: Literal["global", "per_level"] = Field(
+        "global", description="global: one time step (the finest cells' CFL step) for every level; per_level: "
+                              "level l steps dt_0 / 2^l with flux registers at level faces (one rank, no strength, "
+                              "gravity, porosity or tracers yet)")
     cfl: float = Field(0.4, gt=0, le=1)
     end_time: float | Literal["auto"] = "auto"
     output_times: list[float] | None = None

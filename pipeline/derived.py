@@ -95,10 +95,15 @@ def derive(config: Config) -> dict[str, Any]:
     out["porosity"], out["porosity_rule"] = porosity_choice(materials)
     out["tracers"], out["tracers_rule"] = tracers_enabled(config)
     out["levels"], out["levels_rule"] = mesh_levels(config, geom)
+    interval = config.hydro.refinement.interval
+    if config.hydro.time_stepping == "per_level":
+        regrids = (f"every {max(1, interval // 2 ** (out['levels'] - 1))} root steps; a time step per level "
+                   f"(level l steps dt_0 / 2^l)")
+    else:
+        regrids = f"every {interval} steps"
     out["mesh"] = ("uniform, one level at the finest cell size" if out["levels"] == 1 else
                    f"adaptive, {out['levels']} levels (root cells 2^{out['levels'] - 1} finest cells), "
-                   f"refining at {refinement_summary(config.hydro.refinement)} every "
-                   f"{config.hydro.refinement.interval} steps")
+                   f"refining at {refinement_summary(config.hydro.refinement)} {regrids}")
     if config.scene.problem != "impact":
         out["end_time"] = config.scene.end_time
         return out
@@ -382,6 +387,7 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
         if block % 4:
             errors.append(f"hydro.block_cells: {block} cells per block edge on an adaptive mesh ({levels} levels); "
                           f"refinement splits blocks in halves and tracers need quarters: use a multiple of 4")
+    errors.extend(_time_stepping_errors(config, values))
     ndim = GEOMETRY_DIMENSIONS.get(values["geometry"], 0)
     for i, box in enumerate(config.hydro.refinement.boxes):
         if ndim and len(box.lo) != ndim:
@@ -391,6 +397,31 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
             errors.append(f"hydro.refinement.boxes[{i}].level: {box.level} is finer than the finest level "
                           f"{levels - 1} (hydro.max_levels resolves to {levels}); use 0 to {levels - 1}")
     return errors
+
+
+#: The scenes whose hydro stage always has gravity, and which.
+SCENE_GRAVITY = {"column_collapse": "external gravity (the column_collapse scene)",
+                 "hydrostatic_body": "self-gravity (the hydrostatic_body scene)"}
+
+
+def _time_stepping_errors(config: Config, values: dict[str, Any]) -> list[str]:
+    """``hydro.time_stepping: per_level`` with physics its level recursion does not carry yet
+    (impactpipe.hydro.amr.subcycle): material strength, gravity, porosity, tracers."""
+    if config.hydro.time_stepping != "per_level":
+        return []
+    missing = [f"material strength ({name})" for name, choice in values.get("strength", {}).items()
+               if choice["enabled"]]
+    if config.scene.problem in SCENE_GRAVITY:
+        missing.append(SCENE_GRAVITY[config.scene.problem])
+    if values.get("self_gravity"):
+        missing.append("self-gravity (hydro.self_gravity)")
+    if values.get("porosity"):
+        missing.append("porosity")
+    if values.get("tracers"):
+        missing.append("tracers (hydro.tracers.enabled)")
+    if not missing:
+        return []
+    return [f"hydro.time_stepping: per_level does not support {', '.join(missing)} yet; use global"]
 
 
 def _cells_errors(cells: int, block: int, levels: int) -> list[str]:

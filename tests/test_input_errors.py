@@ -58,6 +58,29 @@ def test_hydro_end_time_of_a_verification_scene_is_an_error(tmp_path):
              "so this value would be ignored: remove it and set scene.end_time")
 
 
+def test_time_stepping_is_global_or_per_level_and_per_level_refuses_what_it_does_not_carry(tmp_path):
+    """``hydro.time_stepping``: an unknown mode, and per_level with tracers or on several MPI ranks, are
+    refused before any work; per_level alone validates."""
+    from impactpipe.pipeline.adapters.hydro import too_many_ranks
+    from impactpipe.pipeline.checks import check
+
+    sedov = SEDOV.replace("cells: 96", "cells: 128")
+    rejected(tmp_path, sedov + "  time_stepping: sometimes\n",
+             "11: hydro.time_stepping: must be one of 'global' or 'per_level' (got 'sometimes')")
+    case8c = (HERE.parent / "configs" / "reference" / "case8c.yaml").read_text()
+    rejected(tmp_path, case8c.replace("  self_gravity: false\n", "  self_gravity: true\n  time_stepping: per_level\n"),
+             "19: hydro.time_stepping: per_level does not support material strength (basalt), self-gravity "
+             "(hydro.self_gravity), tracers (hydro.tracers.enabled) yet; use global")
+    path = tmp_path / "per_level.yaml"
+    path.write_text(sedov + "  time_stepping: per_level\n")
+    result = CliRunner().invoke(main, ["validate", str(path)])
+    assert result.exit_code == 0, result.output
+    config = load_config(path)
+    assert too_many_ranks(config, check(config), 2) == (
+        "--ranks 2: hydro.time_stepping per_level runs the hydro stage on one process in this version; use "
+        "--ranks 1 or hydro.time_stepping global")
+
+
 def test_python_run_applies_the_checks_of_validate(tmp_path):
     """A Sedov config with three levels whose root level would not hold whole blocks, and mesh cells
     the block size does not divide, raise the located ConfigError from ``run()`` (as validate does),

@@ -44,6 +44,11 @@ coarse/fine face; the fine blocks' fluxes through the same face (area-weighted s
 
 which makes what left the fine blocks exactly what entered the coarse one.  The amounts
 dt A F per face come from :func:`impactpipe.hydro.scheme.directional.sweep` (``face_flux``).
+With one global step the correction follows each sweep (:func:`reflux`); with a step per level
+(:mod:`impactpipe.hydro.amr.subcycle`) the fine level takes two substeps of dt_c / 2 per coarse
+step, and a flux register per sweep axis sums, per coarse face cell, the fine amounts of both
+substeps less the coarse one (:func:`register_fluxes`) until the fine level has caught up
+(:func:`reflux_register`): Delta U_c = +-(sum_substeps sum_f dt_f A_f F_f - dt_c A_c F_c) / V_c.
 """
 
 from __future__ import annotations
@@ -425,11 +430,27 @@ def restrict_blocks(src, dst, pairs, weight0):
 @njit(cache=True)
 def _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, q, a1, a2):
     """sum_f dt A_f F_f - dt A_c F_c of face-flux column q (fine sum over the fine face cells)."""
+    return _fine_face_sum(face_flux, side, fb, f1, f2, q, a1, a2) - face_flux[cb, side, q, j1, j2]
+
+
+@njit(cache=True)
+def _fine_face_sum(face_flux, side, fb, f1, f2, q, a1, a2):
+    """sum_f dt A_f F_f of face-flux column q over the fine face cells across from a coarse cell's ``side``."""
     fine = 0.0
     for a in range(a1):
         for c in range(a2):
             fine += face_flux[fb, 1 - side, q, f1 + a, f2 + c]
-    return fine - face_flux[cb, side, q, j1, j2]
+    return fine
+
+
+@njit(cache=True)
+def _coarse_face_cell(axis, ix, iy, iz):
+    """The transverse indices (j1, j2) of padded cell (ix, iy, iz) in a face-flux slab along ``axis``."""
+    if axis == 0:
+        return iy, iz
+    if axis == 1:
+        return ix, iz
+    return ix, iy
 
 
 @njit(cache=True)
@@ -439,11 +460,35 @@ def reflux(axis, plan, volume, face_flux, alpha, arho, arhoe, arhoq, mom, energy
     ``face_flux[NB, 2, NQ, N1, N2]`` holds dt A F through each block's low and high faces
     along ``axis`` (columns: volume, mass, internal energy of each material, momentum x y z,
     total energy, transported scalars).  ``plan`` rows are (coarse block, side, coarse cell,
-    fine block, first fine face cell); ``volume`` the coarse cells' volumes V (m^3).
+    fine block, first fine face cell); ``volume`` the coarse cells' volumes V (m^3).  Each
+    coarse cell takes the differences Delta = sum_f dt A_f F_f - dt A_c F_c of every column
+    (:func:`_reflux_cell`).  Serial: a plan touches a few hundred cells.
+    """
+    n1 = face_flux.shape[3]
+    n2 = face_flux.shape[4]
+    a1 = 2 if n1 > 1 else 1
+    a2 = 2 if n2 > 1 else 1
+    delta = np.empty(face_flux.shape[2])
+    for e in range(plan.shape[0]):
+        cb = plan[e, R_COARSE]
+        side = plan[e, R_SIDE]
+        ix, iy, iz = plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ]
+        fb, f1, f2 = plan[e, R_FINE], plan[e, R_F1], plan[e, R_F2]
+        j1, j2 = _coarse_face_cell(axis, ix, iy, iz)
+        for q in range(delta.shape[0]):
+            delta[q] = _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, q, a1, a2)
+        _reflux_cell(cb, side, ix, iy, iz, volume[e], delta, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts)
+
+
+@njit(cache=True)
+def _reflux_cell(cb, side, ix, iy, iz, volume, delta, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts):
+    """Correct coarse cell (ix, iy, iz) of block ``cb`` on its ``side`` face by the flux differences
+    ``delta[NQ]`` = sum_f dt A_f F_f - dt A_c F_c (columns of :func:`reflux`), ``volume`` V (m^3).
 
     Every column gets the exact flux difference Delta, as if the sweep had used the fine
     fluxes: alpha_k += Delta(alpha_k,face s dt A) / V, alpha_k rho_k += Delta(mass_k) / V,
-    alpha_k rho_k e_k += Delta(internal energy_k) / V, and so on, with the sweep's volume
+    alpha_k rho_k e_k += Delta(internal energy_k) / V, and so on (+ on the low face, - on the
+    high face), with the sweep's volume
     closure: a cell without void (sum_k alpha_k >= 1 - FULL_TOLERANCE) stays exactly as full,
     each material taking its share alpha_k of the summed volume difference (equal strain,
     as the closure of an overfull cell), alpha_k += Delta_k - alpha_k sum_j Delta_j.  So a
@@ -458,59 +503,81 @@ def reflux(axis, plan, volume, face_flux, alpha, arho, arhoe, arhoq, mom, energy
     material driven below zero leaves the cell: the mass that brings it to zero is counted as
     added by the floors, or what remains of it as removed by the void cleanup (``floors``,
     ``amounts``).
-    Serial: a plan touches a few hundred cells.
     """
     nmat = alpha.shape[1]
+    sign = 1.0 / volume if side == 0 else -1.0 / volume
+    filled = 0.0
+    for k in range(nmat):
+        filled += alpha[cb, k, ix, iy, iz]
+    strain = 0.0
+    if filled >= 1.0 - FULL_TOLERANCE:
+        for k in range(nmat):
+            strain += sign * delta[k]
+    for k in range(nmat):
+        a = alpha[cb, k, ix, iy, iz]
+        a_new = a + sign * delta[k] - a * strain
+        ar = arho[cb, k, ix, iy, iz] + sign * delta[nmat + k]
+        if ar < 0.0 or a_new < 0.0:
+            if ar < 0.0:
+                amounts[cb, AMOUNT_MASS_FLOOR] -= ar * volume
+            else:
+                amounts[cb, AMOUNT_MASS_VOID] += ar * volume
+            floors[cb, FLOOR_PARTIAL_DENSITY] += 1
+            alpha[cb, k, ix, iy, iz] = 0.0
+            arho[cb, k, ix, iy, iz] = 0.0
+            arhoe[cb, k, ix, iy, iz] = 0.0
+        else:
+            alpha[cb, k, ix, iy, iz] = a_new
+            arho[cb, k, ix, iy, iz] = ar
+            arhoe[cb, k, ix, iy, iz] += sign * delta[2 * nmat + k]
+    for c in range(3):
+        mom[cb, c, ix, iy, iz] += sign * delta[3 * nmat + c]
+    energy[cb, 0, ix, iy, iz] += sign * delta[3 * nmat + 3]
+    for c in range(arhoq.shape[1]):
+        arhoq[cb, c, ix, iy, iz] += sign * delta[3 * nmat + 4 + c]
+
+
+@njit(cache=True)
+def register_fluxes(axis, plan, face_flux, register, block_level, level):
+    """Add one sweep's face amounts of the blocks at ``level`` to the flux register of ``axis``.
+
+    ``register[E, NQ]`` holds, per row e of the reflux ``plan`` (coarse cell, fine face cells),
+    Delta_e = sum over the fine substeps of sum_f dt_f A_f F_f - dt_c A_c F_c since the
+    last :func:`reflux_register`: a sweep of the coarse level (``block_level`` of the coarse
+    block == ``level``) subtracts its amount dt A F, a sweep of the fine level adds the fine
+    face cells' (``face_flux`` as :func:`reflux`).  Serial: a plan touches a few hundred cells.
+    """
     n1 = face_flux.shape[3]
     n2 = face_flux.shape[4]
     a1 = 2 if n1 > 1 else 1
     a2 = 2 if n2 > 1 else 1
     for e in range(plan.shape[0]):
         cb = plan[e, R_COARSE]
+        fb = plan[e, R_FINE]
         side = plan[e, R_SIDE]
-        ix, iy, iz = plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ]
-        fb, f1, f2 = plan[e, R_FINE], plan[e, R_F1], plan[e, R_F2]
-        if axis == 0:
-            j1, j2 = iy, iz
-        elif axis == 1:
-            j1, j2 = ix, iz
-        else:
-            j1, j2 = ix, iy
-        sign = 1.0 / volume[e] if side == 0 else -1.0 / volume[e]
-        filled = 0.0
-        for k in range(nmat):
-            filled += alpha[cb, k, ix, iy, iz]
-        strain = 0.0
-        if filled >= 1.0 - FULL_TOLERANCE:
-            for k in range(nmat):
-                strain += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, k, a1, a2)
-        for k in range(nmat):
-            a = alpha[cb, k, ix, iy, iz]
-            a_new = a + sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, k, a1, a2) - a * strain
-            ar = arho[cb, k, ix, iy, iz] + sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2, nmat + k,
-                                                                  a1, a2)
-            if ar < 0.0 or a_new < 0.0:
-                if ar < 0.0:
-                    amounts[cb, AMOUNT_MASS_FLOOR] -= ar * volume[e]
-                else:
-                    amounts[cb, AMOUNT_MASS_VOID] += ar * volume[e]
-                floors[cb, FLOOR_PARTIAL_DENSITY] += 1
-                alpha[cb, k, ix, iy, iz] = 0.0
-                arho[cb, k, ix, iy, iz] = 0.0
-                arhoe[cb, k, ix, iy, iz] = 0.0
-            else:
-                alpha[cb, k, ix, iy, iz] = a_new
-                arho[cb, k, ix, iy, iz] = ar
-                arhoe[cb, k, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
-                                                                    2 * nmat + k, a1, a2)
-        for c in range(3):
-            mom[cb, c, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
-                                                              3 * nmat + c, a1, a2)
-        energy[cb, 0, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
-                                                             3 * nmat + 3, a1, a2)
-        for c in range(arhoq.shape[1]):
-            arhoq[cb, c, ix, iy, iz] += sign * _face_difference(face_flux, cb, side, fb, f1, f2, j1, j2,
-                                                                3 * nmat + 4 + c, a1, a2)
+        if block_level[cb] == level:
+            j1, j2 = _coarse_face_cell(axis, plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ])
+            for q in range(register.shape[1]):
+                register[e, q] -= face_flux[cb, side, q, j1, j2]
+        elif block_level[fb] == level:
+            for q in range(register.shape[1]):
+                register[e, q] += _fine_face_sum(face_flux, side, fb, plan[e, R_F1], plan[e, R_F2], q, a1, a2)
+
+
+@njit(cache=True)
+def reflux_register(plan, volume, register, block_level, level, alpha, arho, arhoe, arhoq, mom, energy, floors,
+                    amounts):
+    """Correct the coarse cells at ``level`` by their flux register rows (:func:`register_fluxes`), then
+    clear those rows: after the finer level's substeps have caught up with the coarse step, what
+    crossed each coarse/fine face is the fine amount on both sides (:func:`_reflux_cell`).
+    """
+    for e in range(plan.shape[0]):
+        cb = plan[e, R_COARSE]
+        if block_level[cb] != level:
+            continue
+        _reflux_cell(cb, plan[e, R_SIDE], plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ], volume[e], register[e], alpha,
+                     arho, arhoe, arhoq, mom, energy, floors, amounts)
+        register[e, :] = 0.0
 
 
 def face_flux_columns(nmat: int, nq_total: int) -> int:

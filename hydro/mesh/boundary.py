@@ -65,6 +65,20 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
         _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
 
 
+@njit(cache=True, parallel=True)
+def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, blocks):
+    """:func:`fill_state_ghost_slabs` for the blocks listed in ``blocks`` (int64) only: one
+    refinement level's blocks before its substep's sweep (:mod:`impactpipe.hydro.amr.subcycle`)."""
+    for e in prange(blocks.shape[0]):
+        b = blocks[e]
+        _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arho, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arhoe, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(mom, b, neighbor, neighbor_level, axis, ghost, axis)
+        _fill_block_ghosts(energy, b, neighbor, neighbor_level, axis, ghost, -1)
+        _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
+
+
 @njit(cache=True)
 def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component):
     """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring)."""

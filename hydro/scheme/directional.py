@@ -161,14 +161,17 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux, plain_pencils, grady_kipp=None, porosity=None):
-    """Advance all blocks by ``dt`` (s) along ``axis``; see the module docstring.
+          floors, amounts, failure, face_flux, plain_pencils, blocks, grady_kipp=None, porosity=None):
+    """Advance the blocks listed in ``blocks`` by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
     ``boundary``, ``floors``, ``amounts`` accumulate per block; ``failure`` records the first
     failing cell of each block.  Through each block face along ``axis`` whose neighbour is at
     another refinement level (``neighbor_level`` != 0) the amounts dt A F are stored in
     ``face_flux[b, side, :, j1, j2]`` for refluxing (:mod:`impactpipe.hydro.amr.transfer`).
+    ``blocks`` (int64) lists the blocks to advance, in parallel over the list: every block of
+    the arrays for one global step, one refinement level's for a level's substep
+    (:mod:`impactpipe.hydro.amr.subcycle`); the others are left as they are.
     With ``plain_pencils`` a pencil that one material fills alone takes the plain path
     (:mod:`impactpipe.hydro.scheme.plain_pencils`); without, every pencil takes the general path.
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
@@ -176,7 +179,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`),
     None in scenes without porous materials.
     """
-    nb, nmat, nx, ny, nz = alpha.shape
+    _, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
     ncell = npad[axis]
     g = GHOST
@@ -207,7 +210,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     energy_f = energy.reshape(energy.size)
     cs = nx * ny * nz
     ncomp = mom.shape[1]
-    for b in prange(nb):
+    for e in prange(blocks.shape[0]):
+        b = blocks[e]
         sc = scratch[get_thread_id()]
         dx = block_dx[b, axis]
         dtdx = dt / dx

@@ -85,15 +85,22 @@ def build_simulation(config, values: dict[str, Any]) -> Simulation:
     options: dict[str, Any] = {"cfl": config.hydro.cfl, "geometry": values["geometry"]}
     if config.hydro.block_cells is not None:
         options["block_cells"] = config.hydro.block_cells
-    return PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
+    sim = PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
+    sim.time_stepping = config.hydro.time_stepping
+    sim.check_time_stepping()
+    return sim
 
 
 def too_many_ranks(config, values: dict[str, Any], nranks: int) -> str | None:
     """Why ``nranks`` ranks cannot share the hydro stage's mesh at t = 0 (more ranks than
-    blocks), or None.  The root blocks are counted from the derived domain; the initial mesh
-    (whose refinement adds blocks) is built only when they are fewer than the ranks."""
+    blocks, or ``hydro.time_stepping: per_level``, which runs on one process), or None.  The
+    root blocks are counted from the derived domain; the initial mesh (whose refinement adds
+    blocks) is built only when they are fewer than the ranks."""
     if nranks <= 1:
         return None
+    if config.hydro.time_stepping == "per_level":
+        return (f"--ranks {nranks}: hydro.time_stepping per_level runs the hydro stage on one process in this "
+                f"version; use --ranks 1 or hydro.time_stepping global")
     domain = values.get("domain")
     if domain:
         per_root = domain["block_cells"] * 2 ** (int(values["levels"]) - 1)

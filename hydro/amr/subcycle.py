@@ -1,0 +1,232 @@
+"""Local time stepping per refinement level (subcycling, Berger & Colella 1989) on the leaf-block mesh.
+
+With ``time_stepping = "per_level"`` a :class:`~impactpipe.hydro.solver.Simulation` step is one
+step dt_0 of the root level, and level l advances in 2^l substeps of
+
+    dt_l = dt_0 / 2^l,   dt_0 = min over the levels holding blocks of 2^l cfl / rate_l
+
+(rate_l the largest (|u_d| + c) / dx_d of level l's cells, 1/s), so every level meets its own
+CFL condition and a coarse cell is updated once where the global step updates it 2^l times.
+The levels advance recursively, coarse first (refinement ratio 2):
+
+    advance(l, dt, theta):  sweep level l's blocks by dt (ghosts filled for level l, the coarser
+                            level l - 1 at the fraction theta of its own step);
+                            advance(l + 1, dt / 2, 0); advance(l + 1, dt / 2, 1/2);
+                            reflux the level-l cells beside level l + 1 (flux registers).
+
+The mesh holds leaves only (no covered coarse cells), so nothing is restricted onto level l
+after its finer level's substeps; the finer level's amounts enter the coarse cells beside it
+through the flux registers (:func:`~impactpipe.hydro.amr.transfer.register_fluxes`,
+:func:`~impactpipe.hydro.amr.transfer.reflux_register`): per coarse face cell and sweep axis the
+fine amounts dt_f A_f F_f of both substeps less the coarse dt_c A_c F_c, so what crossed every
+coarse/fine face is the fine amount on both sides and the totals are kept to round-off.
+
+Ghosts of level l along the sweep axis (:meth:`LevelStepper.fill_level_ghosts`): copies from the
+same level's blocks, restriction from level l + 1 (which is at level l's time when level l
+sweeps), and prolongation from level l - 1 at the time t_l of the substep, the coarse cells the
+prolongation reads taken linearly in time between their values before (U_old) and after
+(U_new) level l - 1's step:
+
+    U(t_l) = U_old + theta (U_new - U_old),   theta = (t_l - t_(l-1)) / dt_(l-1) in {0, 1/2}
+
+(one theta per substep, for all its sweeps).  Only those coarse cells are kept and
+interpolated (:func:`level_plans`, ``interpolated``): the coarse cells holding a ghost of level l
+and their face neighbours inside the same block.  A convex combination of two states keeps the
+densities, volume fractions and internal energy (concave in the conserved amounts) positive.
+
+The split sweeps alternate their order per substep: the n-th substep of level l (n counted from
+the start of the run, 2^l per root step) sweeps x y z for even n and z y x for odd n, so a
+level's pair of substeps is Strang-symmetric and the order follows from the step count alone
+(a restart continues bit for bit).  On one level this is the global step, bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impactpipe.hydro.amr.plans import axis_plans
+from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, prolong_state_ghosts, register_fluxes,
+                                           reflux_register, restrict_ghosts)
+from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
+from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs_of
+from impactpipe.hydro.scheme.directional import sweep
+
+#: The ``time_stepping`` modes: one step for all levels, or a step per level.
+GLOBAL = "global"
+PER_LEVEL = "per_level"
+TIME_STEPPING = (GLOBAL, PER_LEVEL)
+
+
+def level_plans(mesh: BlockMesh) -> dict:
+    """Each level's blocks and ghost plans, cached on the mesh.
+
+    ``blocks[l]``: the blocks of level l (int64); for each sweep axis a and level l,
+    ``restrict[a, l]`` / ``restrict_weight[a, l]``: the rows of the axis's restrict plan
+    (:func:`~impactpipe.hydro.amr.plans.axis_plans`) that fill level l's ghosts from level l + 1
+    or level (l - 1)'s ghosts from level l (the prolongation into level l reads them);
+    ``prolong[a, l]``: its prolong rows into level l's ghosts; ``interpolated[l]``: (N, 4) rows
+    (block, padded cell) of the level-(l - 1) interior cells that any axis's prolongation into
+    level l reads (a source cell and its face neighbours), the cells taken at the substep's time.
+    """
+    key = "level_plans"
+    if key in mesh.cache:
+        return mesh.cache[key]
+    levels = mesh.max_level + 1
+    level = mesh.block_level
+    out = {"blocks": [np.flatnonzero(level == lv).astype(np.int64) for lv in range(levels)],
+           "restrict": {}, "restrict_weight": {}, "prolong": {}}
+    sources = [[] for _ in range(levels)]
+    for axis in range(mesh.ndim if mesh.adaptive else 0):
+        plans = axis_plans(mesh, axis)
+        restrict, prolong = plans["restrict"], plans["prolong"]
+        into, onto = level[restrict[:, P_DST]], level[restrict[:, P_SRC]]
+        for lv in range(levels):
+            rows = (into == lv) | (onto == lv)
+            out["restrict"][axis, lv] = np.ascontiguousarray(restrict[rows])
+            out["restrict_weight"][axis, lv] = np.ascontiguousarray(plans["restrict_weight"][rows])
+            rows = level[prolong[:, P_DST]] == lv
+            out["prolong"][axis, lv] = np.ascontiguousarray(prolong[rows])
+            sources[lv].append(prolong[rows][:, [P_SRC, P_SX, P_SY, P_SZ]])
+    out["interpolated"] = [_stencil_cells(mesh, np.concatenate(rows) if rows else np.zeros((0, 4), np.int64))
+                           for rows in sources]
+    mesh.cache[key] = out
+    return out
+
+
+def _stencil_cells(mesh: BlockMesh, cells: np.ndarray) -> np.ndarray:
+    """(N, 4) unique (block, padded cell) of ``cells`` and their face neighbours along the used
+    axes that are interior cells of the same block: what a prolongation from ``cells`` reads."""
+    stencil = [cells]
+    for axis in range(mesh.ndim):
+        for step in (-1, 1):
+            moved = cells.copy()
+            moved[:, 1 + axis] += step
+            stencil.append(moved)
+    every = np.concatenate(stencil)
+    inside = np.ones(len(every), dtype=bool)
+    for axis in range(mesh.ndim):
+        inside &= (every[:, 1 + axis] >= GHOST) & (every[:, 1 + axis] < GHOST + mesh.block_cells)
+    return np.unique(every[inside], axis=0).astype(np.int64)
+
+
+def level_time_step(mesh: BlockMesh, rates: np.ndarray, cfl: float) -> float:
+    """dt_0 (s): the root step whose level-l substeps dt_0 / 2^l keep every level's own CFL
+    condition, min over the levels with a signal of 2^l cfl / rate_l (``rates`` per block, 1/s)."""
+    dt = np.inf
+    for lv, blocks in enumerate(level_plans(mesh)["blocks"]):
+        if blocks.size:
+            rate = float(rates[blocks].max())
+            if rate > 0.0:
+                dt = min(dt, 2.0 ** lv * cfl / rate)
+    return dt
+
+
+def _fields(state) -> tuple:
+    return state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq
+
+
+def _gather(state, cells: np.ndarray) -> list[np.ndarray]:
+    """Copies (N, C) of every conserved field at ``cells`` (rows block, padded cell)."""
+    b, x, y, z = cells.T
+    return [field[b, :, x, y, z] for field in _fields(state)]
+
+
+def _scatter(state, cells: np.ndarray, values: list[np.ndarray]) -> None:
+    b, x, y, z = cells.T
+    for field, value in zip(_fields(state), values):
+        field[b, :, x, y, z] = value
+
+
+class LevelStepper:
+    """The root step of ``time_stepping = "per_level"`` (module docstring): per mesh, the flux
+    registers (one (E, NQ) array per sweep axis, E the reflux plan's rows) and, while a level
+    steps, the copies of the coarser cells its finer level's ghosts interpolate from."""
+
+    def __init__(self):
+        self._mesh: BlockMesh | None = None
+        self._registers: list[np.ndarray] = []
+        self._before: dict[int, list[np.ndarray]] = {}
+
+    def _prepare(self, sim) -> None:
+        """Registers sized for the current mesh, all zero (a failed step may have left some)."""
+        mesh = sim.mesh
+        if mesh is not self._mesh:
+            columns = sim._face_flux.shape[2]
+            self._registers = [np.zeros((axis_plans(mesh, a)["reflux"].shape[0], columns)) if mesh.adaptive
+                               else np.zeros((0, columns)) for a in range(mesh.ndim)]
+            self._mesh = mesh
+        for register in self._registers:
+            register[:] = 0.0
+        self._before.clear()
+
+    def advance(self, sim, dt: float) -> int:
+        """Advance every level of ``sim`` by the root step ``dt`` (s); returns the cell-updates
+        (each level's cells once per substep of its own)."""
+        self._prepare(sim)
+        plans = level_plans(sim.mesh)
+        finest = int(sim.mesh.block_level.max())
+        return self._advance_level(sim, plans, 0, dt, sim.step_count, 0.0, finest)
+
+    def _advance_level(self, sim, plans: dict, level: int, dt: float, substep: int, theta: float,
+                       finest: int) -> int:
+        """Level ``level`` by ``dt`` (s), then its finer levels twice by dt / 2 and the reflux;
+        ``substep`` counts this level's substeps from the start of the run, ``theta`` is the
+        fraction of the coarser level's step at which this substep starts."""
+        mesh, st = sim.mesh, sim.state
+        blocks = plans["blocks"][level]
+        if level < finest:
+            self._before[level + 1] = _gather(st, plans["interpolated"][level + 1])
+        updates = 0
+        if blocks.size:
+            axes = list(range(mesh.ndim))
+            if substep % 2:
+                axes.reverse()
+            for axis in axes:
+                self.fill_level_ghosts(sim, plans, axis, level, theta)
+                sim._observe("ghosts", axis)
+                sweep(axis, dt, mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
+                      mesh.block_lo, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, sim.eos.kind, sim.eos.params,
+                      sim.eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch, sim.boundary, sim.floors,
+                      sim.amounts, sim._failure, sim._face_flux, sim.plain_pencils, blocks, sim.grady_kipp,
+                      sim.porosity)
+                failed = sim.partition.first_failure(sim._failure)
+                if failed >= 0:
+                    sim._raise_sweep_failure(failed)
+                sim._observe("sweep", axis)
+                if mesh.adaptive:
+                    register_fluxes(axis, axis_plans(mesh, axis)["reflux"], sim._face_flux, self._registers[axis],
+                                    mesh.block_level, level)
+            updates += blocks.size * int(np.prod(mesh.interior_shape))
+        if level < finest:
+            for k in range(2):
+                updates += self._advance_level(sim, plans, level + 1, 0.5 * dt, 2 * substep + k, 0.5 * k, finest)
+            for axis in range(mesh.ndim):
+                plan = axis_plans(mesh, axis)
+                reflux_register(plan["reflux"], plan["reflux_volume"], self._registers[axis], mesh.block_level, level,
+                                st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy, sim.floors,
+                                sim.amounts)
+                sim._observe("reflux", axis)
+        return updates
+
+    def fill_level_ghosts(self, sim, plans: dict, axis: int, level: int, theta: float) -> None:
+        """Fill the ghosts of level ``level``'s blocks along ``axis`` (module docstring): same-level
+        copies and domain faces, restriction from level + 1 (and of level - 1's ghosts from this
+        level), prolongation from level - 1 at the fraction ``theta`` of its step."""
+        mesh, st = sim.mesh, sim.state
+        fields = _fields(st)
+        fill_state_ghost_slabs_of(*fields, mesh.neighbor, mesh.neighbor_level, axis, int(mesh.ghost[axis]),
+                                  plans["blocks"][level])
+        if not mesh.adaptive:
+            return
+        restrict, weight = plans["restrict"][axis, level], plans["restrict_weight"][axis, level]
+        for field in fields:
+            restrict_ghosts(field, restrict, weight)
+        prolong = plans["prolong"][axis, level]
+        if prolong.shape[0] == 0:
+            return
+        cells = plans["interpolated"][level]
+        before = self._before[level]
+        after = _gather(st, cells)
+        _scatter(st, cells, before if theta == 0.0 else [old + theta * (new - old) for old, new in zip(before, after)])
+        prolong_state_ghosts(fields, prolong, mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
+        _scatter(st, cells, after)
