@@ -43,6 +43,7 @@ level's pair of substeps is Strang-symmetric and the order follows from the step
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, prolong_state_ghosts, register_fluxes,
@@ -125,16 +126,48 @@ def _fields(state) -> tuple:
     return state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq
 
 
-def _gather(state, cells: np.ndarray) -> list[np.ndarray]:
+@njit(cache=True)
+def gather_cells(fields, cells, out):
+    """``out[f][i, c] = fields[f][b, c, x, y, z]`` for every field f and row i = (b, x, y, z) of ``cells``."""
+    for f in range(len(fields)):
+        field = fields[f]
+        values = out[f]
+        for i in range(cells.shape[0]):
+            for c in range(field.shape[1]):
+                values[i, c] = field[cells[i, 0], c, cells[i, 1], cells[i, 2], cells[i, 3]]
+
+
+@njit(cache=True)
+def blend_cells(fields, cells, before, after, theta):
+    """Set the ``cells`` of every field to U_old + theta (U_new - U_old), ``before`` = U_old and
+    ``after`` = U_new as gathered by :func:`gather_cells` (theta = 0 gives U_old exactly)."""
+    for f in range(len(fields)):
+        field = fields[f]
+        old = before[f]
+        new = after[f]
+        for i in range(cells.shape[0]):
+            b, x, y, z = cells[i, 0], cells[i, 1], cells[i, 2], cells[i, 3]
+            for c in range(field.shape[1]):
+                field[b, c, x, y, z] = old[i, c] + theta * (new[i, c] - old[i, c])
+
+
+@njit(cache=True)
+def put_cells(fields, cells, values):
+    """``fields[f][b, c, x, y, z] = values[f][i, c]``: the inverse of :func:`gather_cells`."""
+    for f in range(len(fields)):
+        field = fields[f]
+        value = values[f]
+        for i in range(cells.shape[0]):
+            for c in range(field.shape[1]):
+                field[cells[i, 0], c, cells[i, 1], cells[i, 2], cells[i, 3]] = value[i, c]
+
+
+def _gathered(state, cells: np.ndarray) -> tuple:
     """Copies (N, C) of every conserved field at ``cells`` (rows block, padded cell)."""
-    b, x, y, z = cells.T
-    return [field[b, :, x, y, z] for field in _fields(state)]
-
-
-def _scatter(state, cells: np.ndarray, values: list[np.ndarray]) -> None:
-    b, x, y, z = cells.T
-    for field, value in zip(_fields(state), values):
-        field[b, :, x, y, z] = value
+    fields = _fields(state)
+    out = tuple(np.empty((cells.shape[0], field.shape[1])) for field in fields)
+    gather_cells(fields, cells, out)
+    return out
 
 
 class LevelStepper:
@@ -145,7 +178,7 @@ class LevelStepper:
     def __init__(self):
         self._mesh: BlockMesh | None = None
         self._registers: list[np.ndarray] = []
-        self._before: dict[int, list[np.ndarray]] = {}
+        self._before: dict[int, tuple] = {}
 
     def _prepare(self, sim) -> None:
         """Registers sized for the current mesh, all zero (a failed step may have left some)."""
@@ -175,7 +208,7 @@ class LevelStepper:
         mesh, st = sim.mesh, sim.state
         blocks = plans["blocks"][level]
         if level < finest:
-            self._before[level + 1] = _gather(st, plans["interpolated"][level + 1])
+            self._before[level + 1] = _gathered(st, plans["interpolated"][level + 1])
         updates = 0
         if blocks.size:
             axes = list(range(mesh.ndim))
@@ -225,8 +258,7 @@ class LevelStepper:
         if prolong.shape[0] == 0:
             return
         cells = plans["interpolated"][level]
-        before = self._before[level]
-        after = _gather(st, cells)
-        _scatter(st, cells, before if theta == 0.0 else [old + theta * (new - old) for old, new in zip(before, after)])
+        after = _gathered(st, cells)
+        blend_cells(fields, cells, self._before[level], after, theta)
         prolong_state_ghosts(fields, prolong, mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
-        _scatter(st, cells, after)
+        put_cells(fields, cells, after)
