@@ -179,7 +179,9 @@ class Simulation:
         #: Called as ``observer(event, axis)`` between the operations of a step, for diagnostics
         #: (benchmarks/energy_budget.py): "regrid" after the regrid (or its check), "ghosts" after
         #: a sweep's ghosts are filled, "sweep" and "reflux" after them, "sources" after the
-        #: strength and gravity sources (axis -1 where none applies).  None: no calls.
+        #: strength and gravity sources (axis -1 where none applies); per level, "ghosts" and
+        #: "sweep" for each level substep's sweeps and "reflux" after each level's register
+        #: correction.  None: no calls.
         self.observer: Callable[[str, int], None] | None = None
         #: Which blocks this process advances and how it combines with the others
         #: (:mod:`impactpipe.hydro.parallel.distributed`); every block by default.
