@@ -46,8 +46,8 @@ import numpy as np
 from numba import njit
 
 from impactpipe.hydro.amr.plans import axis_plans
-from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, prolong_state_ghosts, register_fluxes,
-                                           reflux_register, restrict_ghosts)
+from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_FINE, R_F1, R_F2, R_SIDE,
+                                           prolong_state_ghosts, register_fluxes, reflux_register, restrict_ghosts)
 from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
 from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
@@ -90,8 +90,36 @@ def level_plans(mesh: BlockMesh) -> dict:
             sources[lv].append(prolong[rows][:, [P_SRC, P_SX, P_SY, P_SZ]])
     out["interpolated"] = [_stencil_cells(mesh, np.concatenate(rows) if rows else np.zeros((0, 4), np.int64))
                            for rows in sources]
+    out["fine_faces"] = [_fine_face_cells(mesh, axis) for axis in range(mesh.ndim if mesh.adaptive else 0)]
     mesh.cache[key] = out
     return out
+
+
+def _fine_face_cells(mesh: BlockMesh, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each row e of the reflux plan of ``axis``, the 2^(ndim-1) fine cells beside the coarse
+    face cell: (cells (E, J, 4) block and padded cell, volumes (E, J) m^3, weights (E, J) the shares
+    of the coarse face's area, 1/2^(ndim-1), or the annuli's in 2d-cylindrical along z)."""
+    plan = axis_plans(mesh, axis)["reflux"]
+    t1 = 1 if axis == 0 else 0
+    t2 = 1 if axis == 2 else 2
+    offsets = [(a, c) for a in range(2 if mesh.ndim > 1 else 1) for c in range(2 if mesh.ndim > 2 else 1)]
+    cells = np.zeros((len(plan), len(offsets), 4), dtype=np.int64)
+    cells[:, :, 0] = plan[:, R_FINE, None]
+    low_side = plan[:, R_SIDE] == 0  # the fine block lies below the coarse cell: its last layer
+    cells[:, :, 1 + axis] = np.where(low_side, GHOST + mesh.block_cells - 1, GHOST)[:, None]
+    for j, (a, c) in enumerate(offsets):
+        if mesh.ndim > 1:
+            cells[:, j, 1 + t1] = plan[:, R_F1] + a
+        if mesh.ndim > 2:
+            cells[:, j, 1 + t2] = plan[:, R_F2] + c
+    interior = np.where(np.arange(3) < mesh.ndim, cells[:, :, 1:] - GHOST, 0)
+    volume = mesh.cell_volumes()[cells[:, :, 0], interior[:, :, 0], interior[:, :, 1], interior[:, :, 2]]
+    weight = np.full(volume.shape, 1.0 / len(offsets))
+    if mesh.geometry == "2d-cylindrical" and axis == 1 and len(plan):
+        r_lo = mesh.block_lo[cells[:, :, 0], 0] + interior[:, :, 0] * mesh.block_dx[cells[:, :, 0], 0]
+        ring = (r_lo + mesh.block_dx[cells[:, :, 0], 0]) ** 2 - r_lo ** 2
+        weight = ring / ring.sum(axis=1, keepdims=True)
+    return cells, volume, weight
 
 
 def _stencil_cells(mesh: BlockMesh, cells: np.ndarray) -> np.ndarray:
@@ -236,8 +264,8 @@ class LevelStepper:
             for axis in range(mesh.ndim):
                 plan = axis_plans(mesh, axis)
                 reflux_register(plan["reflux"], plan["reflux_volume"], self._registers[axis], mesh.block_level, level,
-                                st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy, sim.floors,
-                                sim.amounts)
+                                *plans["fine_faces"][axis], st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum,
+                                st.energy, sim.floors, sim.amounts)
                 sim._observe("reflux", axis)
         return updates
 

@@ -565,19 +565,70 @@ def register_fluxes(axis, plan, face_flux, register, block_level, level):
 
 
 @njit(cache=True)
-def reflux_register(plan, volume, register, block_level, level, alpha, arho, arhoe, arhoq, mom, energy, floors,
-                    amounts):
+def reflux_register(plan, volume, register, block_level, level, fine_cells, fine_volume, fine_weight, alpha, arho,
+                    arhoe, arhoq, mom, energy, floors, amounts):
     """Correct the coarse cells at ``level`` by their flux register rows (:func:`register_fluxes`), then
     clear those rows: after the finer level's substeps have caught up with the coarse step, what
-    crossed each coarse/fine face is the fine amount on both sides (:func:`_reflux_cell`).
+    crossed each coarse/fine face is the same amount on both sides.
+
+    That amount is F* = F_c + s R (F_c the coarse amount, R = sum_f F_f - F_c the register row):
+    the fine one (s = 1) unless it would drive a material of the coarse cell below zero (the
+    fine faces carried more of a trace out over a coarse step than the cell held); then s < 1
+    is the largest share that keeps every partial density and volume fraction of the coarse
+    cell >= 0 (:func:`_largest_fraction`).  The coarse cell takes s R (:func:`_reflux_cell`);
+    the fine face cells across from it, ``fine_cells[e, j]`` (block, padded cell) of volume
+    ``fine_volume[e, j]`` (m^3) and face-area share ``fine_weight[e, j]``, take -(1 - s) R w_j
+    through their face, so both sides agree on F* and every amount is kept.  A fine cell's
+    material driven below zero by that is removed and counted, as in :func:`_reflux_cell`
+    (keeping the fine cells >= 0 instead, where both cannot be, removed twice the mass in the
+    moving-interface scene of tests/test_hydro_amr.py; docs/hydro.md, "Time step").
     """
+    part = np.empty(register.shape[1])
     for e in range(plan.shape[0]):
         cb = plan[e, R_COARSE]
         if block_level[cb] != level:
             continue
-        _reflux_cell(cb, plan[e, R_SIDE], plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ], volume[e], register[e], alpha,
-                     arho, arhoe, arhoq, mom, energy, floors, amounts)
+        side = plan[e, R_SIDE]
+        ix, iy, iz = plan[e, R_CX], plan[e, R_CY], plan[e, R_CZ]
+        share = _largest_fraction(cb, side, ix, iy, iz, volume[e], register[e], alpha, arho)
+        for q in range(part.shape[0]):
+            part[q] = share * register[e, q]
+        _reflux_cell(cb, side, ix, iy, iz, volume[e], part, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts)
+        if share < 1.0:
+            for j in range(fine_cells.shape[1]):
+                for q in range(part.shape[0]):
+                    part[q] = -(1.0 - share) * fine_weight[e, j] * register[e, q]
+                _reflux_cell(fine_cells[e, j, 0], 1 - side, fine_cells[e, j, 1], fine_cells[e, j, 2],
+                             fine_cells[e, j, 3], fine_volume[e, j], part, alpha, arho, arhoe, arhoq, mom, energy,
+                             floors, amounts)
         register[e, :] = 0.0
+
+
+@njit(cache=True)
+def _largest_fraction(b, side, ix, iy, iz, volume, delta, alpha, arho):
+    """The largest t in [0, 1] for which the correction t ``delta`` of cell (ix, iy, iz) of block
+    ``b`` through its ``side`` face (:func:`_reflux_cell`) leaves every partial density and volume
+    fraction >= 0 (both are linear in t)."""
+    nmat = alpha.shape[1]
+    sign = 1.0 / volume if side == 0 else -1.0 / volume
+    filled = 0.0
+    for k in range(nmat):
+        filled += alpha[b, k, ix, iy, iz]
+    strain = 0.0
+    if filled >= 1.0 - FULL_TOLERANCE:
+        for k in range(nmat):
+            strain += sign * delta[k]
+    largest = 1.0
+    for k in range(nmat):
+        a = alpha[b, k, ix, iy, iz]
+        ar = arho[b, k, ix, iy, iz]
+        da = sign * delta[k] - a * strain
+        dm = sign * delta[nmat + k]
+        if a + da < 0.0:
+            largest = min(largest, a / -da)
+        if ar + dm < 0.0:
+            largest = min(largest, ar / -dm)
+    return largest
 
 
 def face_flux_columns(nmat: int, nq_total: int) -> int:
