@@ -19,7 +19,9 @@ after its finer level's substeps; the finer level's amounts enter the coarse cel
 through the flux registers (:func:`~impactpipe.hydro.amr.transfer.register_fluxes`,
 :func:`~impactpipe.hydro.amr.transfer.reflux_register`): per coarse face cell and sweep axis the
 fine amounts dt_f A_f F_f of both substeps less the coarse dt_c A_c F_c, so what crossed every
-coarse/fine face is the fine amount on both sides and the totals are kept to round-off.
+coarse/fine face is the same amount on both sides and the totals are kept to round-off: the
+fine amount, or, where that would drive a material of the coarse cell below zero, the share of
+it that does not (the fine cells beside the face taking the rest).
 
 Ghosts of level l along the sweep axis (:meth:`LevelStepper.fill_level_ghosts`): copies from the
 same level's blocks, restriction from level l + 1 (which is at level l's time when level l
@@ -67,7 +69,9 @@ def level_plans(mesh: BlockMesh) -> dict:
     or level (l - 1)'s ghosts from level l (the prolongation into level l reads them);
     ``prolong[a, l]``: its prolong rows into level l's ghosts; ``interpolated[l]``: (N, 4) rows
     (block, padded cell) of the level-(l - 1) interior cells that any axis's prolongation into
-    level l reads (a source cell and its face neighbours), the cells taken at the substep's time.
+    level l reads (a source cell and its face neighbours), the cells taken at the substep's time;
+    ``fine_faces[a]``: the fine cells beside each coarse face cell of the reflux plan
+    (:func:`_fine_face_cells`), which take what the coarse cell cannot of a register correction.
     """
     key = "level_plans"
     if key in mesh.cache:
