@@ -1,6 +1,8 @@
 """Local time stepping per refinement level (``time_stepping = "per_level"``, hydro/amr/subcycle.py):
-exact conservation through refinement and coarsening, Sod and Sedov on 3 levels as accurate as the
-global step at fewer cell-updates, one level identical to the global step, restarts bit for bit."""
+exact conservation through refinement and coarsening (2d and 3d), a dense disc crossing level faces
+at uniform pressure and velocity, Sod and Sedov on 3 levels as accurate as the global step at fewer
+cell-updates (Sod also through the pipeline), one level identical to the global step, restarts bit
+for bit, and what it refuses."""
 
 from pathlib import Path
 
@@ -15,9 +17,9 @@ from impactpipe.hydro.exact.riemann import exact_riemann
 from test_hydro_amr import ERROR_FACTOR, GAS, GAS_14, HEAVY, _density_l1, _disc_and_pulse, _sedov_density
 
 
-def _box(levels, boundary="periodic", cells=16, mode="per_level", interval=2):
-    """The two-material disc-and-pulse box of tests/test_hydro_amr.py on ``levels`` levels."""
-    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [cells, cells], [(boundary, boundary)] * 2, 8,
+def _box(levels, cells=16, mode="per_level", interval=2):
+    """The periodic two-material disc-and-pulse box of tests/test_hydro_amr.py on ``levels`` levels."""
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [cells, cells], [("periodic", "periodic")] * 2, 8,
                              max_level=levels - 1)
     return Simulation(mesh, ["a", "b"], [GAS, HEAVY], _disc_and_pulse(mesh, pack_eos([GAS, HEAVY]), 2),
                       refinement=RefinementRule(interval=interval), time_stepping=mode)
