@@ -5,9 +5,13 @@ cells per axis, 3 levels) runs from t = 0 to ``--end`` (s) with ``hydro.time_ste
 and per_level, after a short run of both (``--warm-up`` s) so that every kernel is compiled;
 prints, per mode, the wall seconds of the run, root steps, cell-updates (each level's cells
 once per substep of its own), the regrids' share of the wall time and the density L1 error
-against the exact solution (docs/hydro.md, "Time step"):
+against the exact solution (docs/hydro.md, "Time step").  ``--scene impact`` runs instead the
+hydro-only impact of docs/hydro.md (basalt Tillotson without strength, R_T = 1 km, R_P =
+100 m, 8 cells per projectile radius, 4 levels, 2d-cylindrical) to ``--end`` 1 s and prints
+no L1 error:
 
     NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py
+    NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py --scene impact --end 1.0
 """
 
 import argparse
@@ -17,6 +21,7 @@ import numpy as np
 
 from impactpipe.hydro.exact.sedov import sedov_solution
 from impactpipe.hydro.problems import PROBLEMS
+from impactpipe.hydro.problems.common import preset_material
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 717.5}
 
@@ -25,6 +30,14 @@ def sedov(cells: int, mode: str):
     """The Sedov Simulation on 3 levels at ``cells`` finest cells per axis, stepped by ``mode``."""
     sim = PROBLEMS["sedov"].setup({"cells": cells, "end_time": 1.0, "deposit_cells": 3.5, "levels": 3},
                                   {"gas": {"eos": GAS}}, geometry="2d-cylindrical")
+    sim.time_stepping = mode
+    return sim
+
+
+def impact(mode: str):
+    """The hydro-only impact (module docstring) on 4 levels, stepped by ``mode``."""
+    sim = PROBLEMS["impact"].setup({"cells_per_projectile_radius": 8, "levels": 4, "end_time": 1.0},
+                                   {"basalt": preset_material("basalt")}, geometry="2d-cylindrical")
     sim.time_stepping = mode
     return sim
 
@@ -39,21 +52,24 @@ def density_l1(sim) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cells", type=int, default=256)
+    parser.add_argument("--scene", choices=("sedov", "impact"), default="sedov")
+    parser.add_argument("--cells", type=int, default=256, help="Sedov's finest cells per axis")
     parser.add_argument("--end", type=float, default=0.05)
     parser.add_argument("--warm-up", type=float, default=0.002)
     args = parser.parse_args()
+    build = (lambda mode: sedov(args.cells, mode)) if args.scene == "sedov" else impact
     for mode in ("global", "per_level"):
-        sedov(args.cells, mode).run(args.warm_up)
+        build(mode).run(args.warm_up)
     for mode in ("global", "per_level"):
-        sim = sedov(args.cells, mode)
+        sim = build(mode)
         started = time.perf_counter()
         sim.run(args.end)
         wall = time.perf_counter() - started
         print(f"{mode:9s} wall {wall:7.2f} s  root steps {sim.step_count:5d}  cell-updates {sim.cell_updates:.4e}  "
               f"({sim.cell_updates / wall:.3e} /s)  regrids {sim.regrid_seconds:5.2f} s  "
               f"blocks per level {np.bincount(sim.mesh.block_level, minlength=3).tolist()}  "
-              f"density L1 {density_l1(sim):.4e}  floor mass {sim.floor_amounts['mass_added_by_floors']:.2e} kg",
+              + (f"density L1 {density_l1(sim):.4e}  " if args.scene == "sedov" else "")
+              + f"floor mass {sim.floor_amounts['mass_added_by_floors']:.2e} kg",
               flush=True)
 
 
