@@ -318,16 +318,12 @@ class Simulation:
             axes.reverse()
         st = self.state
         own = self.partition.blocks
-        blocks = np.arange(len(range(*own.indices(self.mesh.nblocks))), dtype=np.int64)
         for axis in axes:
-            self.partition.fill_ghosts(st, self.mesh, axis)
+            fill = self.partition.start_ghosts(st, self.mesh, axis)
+            self._sweep(axis, dt, fill.early)
+            self.partition.finish_ghosts(fill, st, self.mesh, axis)
             self._observe("ghosts", axis)
-            sweep(axis, dt, self.mesh.geometry_code, st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own],
-                  st.momentum[own], st.energy[own], self.mesh.block_lo[own], self.mesh.block_dx[own],
-                  self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
-                  self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
-                  self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-                  blocks, self.grady_kipp, self.porosity)
+            self._sweep(axis, dt, fill.late)
             failed = self.partition.first_failure(self._failure)
             if failed >= 0:
                 self._raise_sweep_failure(failed)
@@ -352,6 +348,20 @@ class Simulation:
             self.partition.share_neighbourhood(st)
             self.tracers.after_step(self, dt)
         return dt
+
+    def _sweep(self, axis: int, dt: float, blocks: np.ndarray) -> None:
+        """Advance the partition's blocks listed in ``blocks`` (indices within ``partition.blocks``)
+        by ``dt`` (s) along ``axis`` (:func:`~impactpipe.hydro.scheme.directional.sweep`)."""
+        if blocks.size == 0:
+            return
+        st = self.state
+        own = self.partition.blocks
+        sweep(axis, dt, self.mesh.geometry_code, st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own],
+              st.momentum[own], st.energy[own], self.mesh.block_lo[own], self.mesh.block_dx[own],
+              self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
+              self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
+              self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
+              blocks, self.grady_kipp, self.porosity)
 
     def _observe(self, event: str, axis: int) -> None:
         if self.observer is not None:

@@ -79,49 +79,78 @@ def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, 
         _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
 
 
+@njit(cache=True, parallel=True)
+def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost,
+                                 blocks, lo, hi):
+    """For the blocks listed in ``blocks`` (int64), the ghost slabs along ``axis`` whose same-level
+    neighbour lies outside ``lo .. hi - 1`` (another MPI rank's block, its strips just received),
+    every conserved field; the other slabs are left as they are (filled before, from blocks
+    that may have been advanced since: :meth:`impactpipe.hydro.parallel.distributed.BlockRanges.
+    start_ghosts`)."""
+    for e in prange(blocks.shape[0]):
+        b = blocks[e]
+        for side in range(2):
+            nbr = neighbor[b, axis, side]
+            if nbr < 0 or neighbor_level[b, axis, side] != 0 or (lo <= nbr < hi):
+                continue
+            _fill_block_side(alpha, b, side, nbr, axis, ghost, -1)
+            _fill_block_side(arho, b, side, nbr, axis, ghost, -1)
+            _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1)
+            _fill_block_side(mom, b, side, nbr, axis, ghost, axis)
+            _fill_block_side(energy, b, side, nbr, axis, ghost, -1)
+            _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1)
+
+
 @njit(cache=True)
 def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component):
     """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring)."""
-    nb, nc, nx, ny, nz = field.shape
-    npad = (nx, ny, nz)[axis]
-    n = npad - 2 * ghost
     for side in range(2):
         nbr = neighbor[b, axis, side]
         if nbr >= 0 and neighbor_level[b, axis, side] != 0:
             continue
-        for j in range(ghost):
-            if side == 0:
-                dst = ghost - 1 - j
-                if nbr >= 0:
-                    src = ghost + n - 1 - j
-                elif nbr == REFLECTING:
-                    src = ghost + j
-                else:
-                    src = ghost
+        _fill_block_side(field, b, side, nbr, axis, ghost, flip_component)
+
+
+@njit(cache=True)
+def _fill_block_side(field, b, side, nbr, axis, ghost, flip_component):
+    """The ghost slab of block ``b`` on ``side`` (0 low, 1 high) along ``axis`` from its same-level
+    neighbour ``nbr``, or by the domain-face rule ``nbr`` < 0 names (module docstring)."""
+    nb, nc, nx, ny, nz = field.shape
+    npad = (nx, ny, nz)[axis]
+    n = npad - 2 * ghost
+    for j in range(ghost):
+        if side == 0:
+            dst = ghost - 1 - j
+            if nbr >= 0:
+                src = ghost + n - 1 - j
+            elif nbr == REFLECTING:
+                src = ghost + j
             else:
-                dst = ghost + n + j
-                if nbr >= 0:
-                    src = ghost + j
-                elif nbr == REFLECTING:
-                    src = ghost + n - 1 - j
-                else:
-                    src = ghost + n - 1
-            blk = nbr if nbr >= 0 else np.int64(b)
-            flip = nbr == REFLECTING
-            for c in range(nc):
-                sign = -1.0 if (flip and c == flip_component) else 1.0
-                if axis == 0:
+                src = ghost
+        else:
+            dst = ghost + n + j
+            if nbr >= 0:
+                src = ghost + j
+            elif nbr == REFLECTING:
+                src = ghost + n - 1 - j
+            else:
+                src = ghost + n - 1
+        blk = nbr if nbr >= 0 else np.int64(b)
+        flip = nbr == REFLECTING
+        for c in range(nc):
+            sign = -1.0 if (flip and c == flip_component) else 1.0
+            if axis == 0:
+                for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
+                    for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
+                        field[b, c, dst, iy, iz] = sign * field[blk, c, src, iy, iz]
+            elif axis == 1:
+                for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
+                    for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
+                        field[b, c, ix, dst, iz] = sign * field[blk, c, ix, src, iz]
+            else:
+                for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
                     for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
-                        for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
-                            field[b, c, dst, iy, iz] = sign * field[blk, c, src, iy, iz]
-                elif axis == 1:
-                    for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
-                        for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
-                            field[b, c, ix, dst, iz] = sign * field[blk, c, ix, src, iz]
-                else:
-                    for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
-                        for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
-                            field[b, c, ix, iy, dst] = sign * field[blk, c, ix, iy, src]
+                        field[b, c, ix, iy, dst] = sign * field[blk, c, ix, iy, src]
 
 
 @njit(cache=True, inline="always")

@@ -149,6 +149,28 @@ def exchange_routes(mesh, cuts: np.ndarray, rank: int) -> list[list[Route]]:
     return routes
 
 
+def overlap_groups(mesh, cuts: np.ndarray, rank: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per axis (0, 1, 2): ``(inner, edge)``, the indices within ``rank``'s range of its blocks
+    whose ghost slabs along the axis need no other rank's strips (inner), and of the rest (edge).
+
+    While the strips of a ghost fill travel, the sweep can advance the inner blocks; the edge
+    blocks wait for them (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.start_ghosts`).
+    On an adaptive mesh every block is an edge block: a coarse/fine ghost is restricted or
+    prolonged from cells that other ranks' strips bring, through plans that cross blocks.
+    """
+    lo, hi = int(cuts[rank]), int(cuts[rank + 1])
+    local = np.arange(hi - lo, dtype=np.int64)
+    groups = []
+    for axis in range(3):
+        if mesh.adaptive or mesh.ghost[axis] == 0:
+            groups.append((local[:0], local))
+            continue
+        nbr = mesh.neighbor[lo:hi, axis, :]
+        remote = ((nbr >= 0) & ((nbr < lo) | (nbr >= hi))).any(axis=1)
+        groups.append((local[~remote], local[remote]))
+    return groups
+
+
 def _face_strips(mesh, axis: int, owner: np.ndarray) -> dict[tuple[int, int], list[tuple[int, int]]]:
     """(sender, receiver) -> [(block, side)]: the faces along ``axis`` whose neighbour another rank owns."""
     out: dict[tuple[int, int], list[tuple[int, int]]] = {}

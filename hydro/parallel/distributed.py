@@ -22,6 +22,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,14 +31,28 @@ from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh.boundary import (
     fill_field_ghosts, fill_ghosts, fill_ghosts_where, fill_state_ghost_slabs, fill_state_ghosts,
+    fill_state_ghosts_from_ranks,
 )
 
-from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, owned_ranges, owners,
-                            plan_routes)
-from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, Traffic, broadcast_arrays,
-                       exchange_strips, gather_owned_blocks, gather_rows, share_owned_blocks)
+from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, overlap_groups,
+                            owned_ranges, owners, plan_routes)
+from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips, Traffic,
+                       broadcast_arrays, exchange_strips, finish_strips, gather_owned_blocks, gather_rows,
+                       post_strips, share_owned_blocks)
 
 log = logging.getLogger(__name__)
+
+
+@dataclass
+class GhostFill:
+    """A ghost fill along one axis in two parts (:meth:`WholeMesh.start_ghosts`): the blocks
+    ``early`` (indices within the partition's ``blocks``) may be swept before
+    :meth:`WholeMesh.finish_ghosts`, the blocks ``late`` only after it; ``pending``: the
+    strips still travelling, or None."""
+
+    early: np.ndarray
+    late: np.ndarray
+    pending: PendingStrips | None = None
 
 
 class WholeMesh:
@@ -53,6 +68,17 @@ class WholeMesh:
     def fill_ghosts(self, state, mesh, axis: int) -> None:
         """Fill the ghosts of every block along ``axis``."""
         fill_state_ghosts(state, mesh, axis)
+
+    def start_ghosts(self, state, mesh, axis: int) -> GhostFill:
+        """Fill the ghosts along ``axis`` as far as this process can without waiting for
+        another's strips; a sweep may then advance the returned fill's ``early`` blocks before
+        :meth:`finish_ghosts` completes the rest.  One process fills every ghost here, and
+        every block is ``late`` (swept after :meth:`finish_ghosts`, as before the split)."""
+        self.fill_ghosts(state, mesh, axis)
+        return GhostFill(np.zeros(0, dtype=np.int64), np.arange(mesh.nblocks, dtype=np.int64))
+
+    def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
+        """Complete the ghost fill :meth:`start_ghosts` began (nothing left for one process)."""
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
                           wanted: np.ndarray | None = None) -> None:
@@ -140,6 +166,9 @@ class BlockRanges(WholeMesh):
         self.nblocks = mesh.nblocks
         self.routes = exchange_routes(mesh, cuts, comm.rank)
         self.neighbourhood = neighbourhood_routes(mesh, cuts, comm.rank)
+        #: Per axis: (inner, edge) owned blocks, by index within ``blocks``
+        #: (:func:`~.decomposition.overlap_groups`).
+        self.overlap = overlap_groups(mesh, cuts, comm.rank)
         #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their routes.
         self._plans: dict[int, dict] = {}
         #: The routes of the face fluxes per (axis, row length), built on first use.
@@ -163,6 +192,36 @@ class BlockRanges(WholeMesh):
             exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis, self.traffic)
             prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
                                  mesh.ndim)
+
+    def start_ghosts(self, state, mesh, axis: int) -> GhostFill:
+        """Post the strips along ``axis`` (:func:`~.exchange.post_strips`) and fill every owned
+        block's ghosts from what this rank holds, then return while the strips travel: the
+        fill's ``early`` blocks (the inner blocks of :func:`~.decomposition.overlap_groups`,
+        whose ghosts along ``axis`` are now complete) can be swept meanwhile.  The slabs of the
+        ``late`` blocks that face another rank's block are filled again by
+        :meth:`finish_ghosts`.  On an adaptive mesh the whole fill happens here
+        (:meth:`fill_ghosts`) and every block is late."""
+        inner, edge = self.overlap[axis]
+        if mesh.adaptive or int(mesh.ghost[axis]) == 0:
+            self.fill_ghosts(state, mesh, axis)
+            return GhostFill(inner, edge)
+        fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+        pending = post_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
+        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, int(mesh.ghost[axis]), self.lo,
+                               self.hi)
+        return GhostFill(inner, edge, pending)
+
+    def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
+        """Wait for the strips of :meth:`start_ghosts` and fill the edge blocks' slabs that face
+        another rank's block (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts_from_ranks`);
+        their other slabs keep what :meth:`start_ghosts` gave them, from the blocks as they were
+        before the early sweep."""
+        if fill.pending is None:
+            return
+        finish_strips(fill.pending)
+        fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+        fill_state_ghosts_from_ranks(*fields, mesh.neighbor, mesh.neighbor_level, axis, int(mesh.ghost[axis]),
+                                     fill.late + self.lo, self.lo, self.hi)
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
                           wanted: np.ndarray | None = None) -> None:

@@ -72,35 +72,64 @@ def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], t
     non-blocking both ways, then unpack; the bytes, messages and seconds go to ``traffic``.
     The buffers are kept on the routes' strips and reused (:meth:`Strips.buffer`); packing
     and unpacking are numba loops over the strips' flat indices."""
-    from mpi4py import MPI
+    finish_strips(post_strips(comm, routes, fields, tag, traffic, components))
 
+
+@dataclass
+class PendingStrips:
+    """An exchange of :func:`post_strips` whose messages may still be in flight."""
+
+    requests: list
+    received: list
+    fields: tuple
+    components: slice
+    traffic: Traffic
+    sent_bytes: int
+
+
+def post_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int, traffic: Traffic,
+                components: slice = slice(None)) -> PendingStrips:
+    """The first half of :func:`exchange_strips`: post the receives, pack and post the sends,
+    and return without waiting, so that work which needs none of the peers' strips can run
+    while they travel; :func:`finish_strips` waits and unpacks.  The sent strips are packed
+    here, from the fields as they are now."""
     started = time.perf_counter()
-    flats = [_flat(field) for field in fields]
-    requests, received, sent = [], [], []
+    requests, received, sent_bytes = [], [], 0
     for route in routes:
         buffer = route.receive.buffer(fields, components)
         requests.append(comm.Irecv(buffer, source=route.peer, tag=tag))
         received.append((buffer, route.receive))
+    flats = [_flat(field) for field in fields]
     for route in routes:
         buffer = route.send.buffer(fields, components)
         start = 0
         for flat, field in zip(flats, fields):
             start = pack_values(flat, route.send.indices(field, components), buffer, start)
         requests.append(comm.Isend(buffer, dest=route.peer, tag=tag))
-        sent.append(buffer)
-    waiting = time.perf_counter()
-    MPI.Request.Waitall(requests)
-    traffic.wait_seconds += time.perf_counter() - waiting
-    for buffer, strips in received:
-        start = 0
-        for flat, field in zip(flats, fields):
-            start = unpack_values(buffer, start, strips.indices(field, components), flat)
-    traffic.bytes_sent += sum(buffer.nbytes for buffer in sent)
-    traffic.bytes_received += sum(buffer.nbytes for buffer, _ in received)
-    traffic.messages_sent += len(sent)
-    traffic.messages_received += len(received)
-    traffic.exchanges += 1
+        sent_bytes += buffer.nbytes
+    traffic.messages_sent += len(routes)
     traffic.exchange_seconds += time.perf_counter() - started
+    return PendingStrips(requests, received, fields, components, traffic, sent_bytes)
+
+
+def finish_strips(pending: PendingStrips) -> None:
+    """Wait for the messages of :func:`post_strips` and unpack the received strips."""
+    from mpi4py import MPI
+
+    traffic = pending.traffic
+    waiting = time.perf_counter()
+    MPI.Request.Waitall(pending.requests)
+    traffic.wait_seconds += time.perf_counter() - waiting
+    flats = [_flat(field) for field in pending.fields]
+    for buffer, strips in pending.received:
+        start = 0
+        for flat, field in zip(flats, pending.fields):
+            start = unpack_values(buffer, start, strips.indices(field, pending.components), flat)
+    traffic.bytes_sent += pending.sent_bytes
+    traffic.bytes_received += sum(buffer.nbytes for buffer, _ in pending.received)
+    traffic.messages_received += len(pending.received)
+    traffic.exchanges += 1
+    traffic.exchange_seconds += time.perf_counter() - waiting
 
 
 @njit(cache=True)
