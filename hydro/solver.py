@@ -202,14 +202,14 @@ class Simulation:
         #: fracture, :func:`impactpipe.hydro.scheme.mixture.tension_factor`); None when there are none.
         self.grady_kipp = gradual if gradual.any() else None
         porous = self.porosity is not None
-        if porous and ((arrays.model != NONE) & (self.porosity[:, ALPHA0] > 1.0)).any():
-            k = int(np.flatnonzero((arrays.model != NONE) & (self.porosity[:, ALPHA0] > 1.0))[0])
-            raise ValueError(f"material {k} ({material_names[k]}): porosity with a strength model is not supported "
-                             f"(give the porous material strength model none)")
+        if porous and (gradual & (self.porosity[:, ALPHA0] > 1.0)).any():
+            k = int(np.flatnonzero(gradual & (self.porosity[:, ALPHA0] > 1.0))[0])
+            raise ValueError(f"material {k} ({material_names[k]}): porosity with the grady_kipp damage model is not "
+                             f"supported (give the porous material the instant tensile failure)")
         #: Counters of the compaction step (:data:`impactpipe.hydro.eos.porosity.COUNT_NAMES`), per block.
         self.porosity_counts = np.zeros((nb, len(POROSITY_COUNT_NAMES)), dtype=np.int64)
         fresh = porous and state.arhoq.shape[1] == 0
-        self.strength = MaterialStrength(arrays, mesh, state.nmat, damage, porous) if arrays.enabled else None
+        self.strength = MaterialStrength(arrays, mesh, state.nmat, damage, self.porosity) if arrays.enabled else None
         if self.strength is not None:
             self.strength.prepare_state(state)
             for k, strains in self.strength.flaw_strains.items():  # recorded, so a checkpoint resumes with them

@@ -169,6 +169,8 @@ class PorositySpec(Strict):
     eps_e: float | None = Field(None, le=0, description="volumetric strain where compaction starts (-)")
     kappa: float | None = Field(None, gt=0, description="exponential compaction rate (-)")
     alpha_x: float | None = Field(None, ge=1, description="distension where compaction turns to the power law (-)")
+    chi: float | None = Field(None, gt=0, le=1, description="elastic wave speed of the unstrained porous material over "
+                                                           "the matrix's (-, Collins et al. 2011; 1: the matrix's)")
 
 
 class Material(Strict):
@@ -747,13 +749,16 @@ def _material_errors(name: str, mat: dict[str, Any], source_dir: Path) -> list[t
         errors.extend(_damage_errors(name, strength))
     porosity = mat.get("porosity")
     if isinstance(porosity, (dict, str)):
-        errors.extend(_porosity_errors(name, {"preset": porosity} if isinstance(porosity, str) else porosity, smodel))
+        damage = strength.get("damage") if isinstance(strength, dict) else None
+        damage_model = _damage_block(damage).get("model", "instant") if isinstance(damage, (str, dict)) else None
+        errors.extend(_porosity_errors(name, {"preset": porosity} if isinstance(porosity, str) else porosity,
+                                       damage_model))
     return errors
 
 
-def _porosity_errors(name: str, porosity: dict[str, Any], smodel: Any) -> list[tuple[tuple, str]]:
+def _porosity_errors(name: str, porosity: dict[str, Any], damage_model: Any) -> list[tuple[tuple, str]]:
     """Errors of a material's ``porosity`` block: unknown preset, missing parameters, alpha_x above
-    alpha0, porosity on a material with a strength model (not supported)."""
+    alpha0, porosity on a material with Grady-Kipp damage (``damage_model``; not supported)."""
     loc = ("materials", name, "porosity")
     preset = porosity.get("preset")
     choices = presets.porosity_presets()
@@ -771,9 +776,9 @@ def _porosity_errors(name: str, porosity: dict[str, Any], smodel: Any) -> list[t
     if resolved["alpha_x"] > resolved["alpha0"]:
         return [(loc + ("alpha_x",), f"must be <= alpha0 = {resolved['alpha0']:g} (got {resolved['alpha_x']:g}): "
                                      f"compaction runs from alpha0 down through alpha_x to 1")]
-    if smodel not in (None, "none") and resolved["alpha0"] > 1.0:
-        return [(loc, f"porosity with a strength model ({smodel}) is not supported yet: give the porous material "
-                      f"strength model none")]
+    if damage_model == "grady_kipp" and resolved["alpha0"] > 1.0:
+        return [(loc, "porosity with the grady_kipp damage model is not supported yet: give the porous material "
+                      "the instant tensile failure (no damage block)")]
     return []
 
 

@@ -35,6 +35,8 @@ FLAW_DRAW_KEYS = ("flaw_seed", "flaw_count")
 #: Boolean keys of a Grady-Kipp block: the limit D <= n_act / n_tot (Benz & Asphaug 1995).
 GRADY_KIPP_SWITCHES = ("active_flaw_limit",)
 POROSITY_KEYS = ("alpha0", "eps_e", "kappa", "alpha_x")
+#: Porosity parameters a block or preset may leave out (:data:`impactpipe.hydro.eos.porosity.OPTIONAL_KEYS`).
+POROSITY_OPTIONAL_KEYS = ("chi",)
 #: Thermal-softening exponent for GEO presets, which publish none (the ROCK presets use 1.2).
 GEO_DEFAULT_XI = 1.2
 
@@ -154,4 +156,8 @@ def resolve_porosity(spec: dict[str, Any]) -> dict[str, float]:
     for key in POROSITY_KEYS:
         if key not in params:
             raise KeyError(key)
-    return {k: float(params[k]) for k in POROSITY_KEYS}
+    out = {k: float(params[k]) for k in POROSITY_KEYS}
+    for key in POROSITY_OPTIONAL_KEYS:
+        if key in params:
+            out[key] = float(params[key])
+    return out

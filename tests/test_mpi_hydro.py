@@ -1,6 +1,7 @@
 """The hydro stage shared between 2, 3 and 4 MPI ranks (oversubscribed) gives the single-process
 answer bit for bit, on uniform and adaptive meshes, in r-z and in 3d, with and without
-strength and tracers, and with external gravity (the column collapse):
+strength and tracers, with external gravity (the column collapse), and with a porous target with
+strength:
 every dataset of hydro.h5 (the snapshots, the tracers and their history),
 the hydro budget, the stage's counters and the summary's tracer counts; tracers that move into
 another rank's blocks keep their records; a run checkpointed on 2 ranks resumes on 3 or on
@@ -229,6 +230,21 @@ def test_the_tracer_scene_samples_tracers_and_records_their_peaks(serial):
     assert not np.array_equal(answer["tracers/position"], answer["tracers/initial_position"])
     assert np.isfinite(answer["tracers/peak_pressure"]).all()
     assert len(answer["tracers/history_time"]) >= 5
+
+
+def test_a_porous_run_with_strength_on_two_ranks_gives_the_single_process_answer_bit_for_bit(tmp_path):
+    """A porous target with strength and chi (the distension transported, compacted and exchanged with the
+    strength scalars between ranks): the hydro stage on two ranks gives the single-process answer bit for bit."""
+    config = CONFIGS / "impact_porous.yaml"
+    result = impactpipe_run(config, tmp_path / "serial")
+    assert result.returncode == 0, result.stderr
+    result = impactpipe_run(config, tmp_path / "shared", "--ranks", "2")
+    assert result.returncode == 0, result.stderr
+    assert_same_answer(tmp_path / "shared", tmp_path / "serial")
+    with h5py.File(tmp_path / "serial" / "hydro.h5", "r") as fh:
+        snap = fh["snapshots"][sorted(fh["snapshots"])[-1]]
+        distension = snap["extra/distension"][()][snap["partial_density"][()][:, 0] > 0.0]
+    assert distension.min() < 1.5 * (1 - 1e-3)   # the impact has compacted part of the target
 
 
 @pytest.mark.parametrize("nranks", [2, 3])

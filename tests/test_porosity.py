@@ -1,6 +1,8 @@
 """Porous materials (epsilon-alpha model, hydro.eos.porosity): the compaction curve, the packing
 checks, the porous Hugoniot against the analytic one of the solid EOS, and conservation."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -59,7 +61,11 @@ def test_porous_pressure_is_solid_pressure_at_matrix_density_over_alpha():
     ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 0.0, "alpha_x": 1.0}, "'kappa' must be > 0"),
     ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 1.0, "alpha_x": 1.6}, "'alpha_x' must be <= alpha0"),
     ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 1.0}, "missing key 'alpha_x'"),
-    ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 1.0, "alpha_x": 1.0, "chi": 1.0}, "unknown key 'chi'"),
+    ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 1.0, "alpha_x": 1.0, "chi": 1.2}, "'chi' must be > 0 and <= 1"),
+    ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 1.0, "alpha_x": 1.0, "chi": 0.0}, "'chi' must be > 0 and <= 1"),
+    ({"alpha0": 1.5, "eps_e": -0.01, "kappa": 1.0, "alpha_x": 1.5, "chi": 0.5}, "'alpha_x' must be <= the distension "
+                                                                               "at the elastic limit"),
+    ({"alpha0": 1.5, "eps_e": 0.0, "kappa": 1.0, "alpha_x": 1.0, "c": 1.0}, "unknown key 'c'"),
 ])
 def test_pack_porosity_names_the_bad_key(block, message):
     spec = {**BASALT, "porosity": block}
@@ -170,12 +176,110 @@ def test_planar_compaction_wave_behind_elastic_precursor():
     assert np.median(p[behind]) == pytest.approx(p_final, rel=0.02)
 
 
-def test_a_porous_material_with_a_strength_model_is_refused():
+def test_a_porous_material_with_grady_kipp_damage_is_refused():
     from impactpipe.pipeline.presets import resolve_strength
 
     spec = porous_basalt(1.5)
     mesh = BlockMesh.uniform("1d-planar", [0.0], [1.0], [16], [("outflow", "outflow")])
     state = HydroState.empty(mesh, 1)
     state.set_material(mesh, 1.0, 0, pack_eos([spec]), 1800.0, np.zeros(3), specific_energy=0.0)
-    with pytest.raises(ValueError, match=r"material 0 \(rubble\): porosity with a strength model is not supported"):
-        Simulation(mesh, ["rubble"], [spec], state, strength=[resolve_strength("geo", "weak", {})])
+    strength = {**resolve_strength("geo", "weak", {}), "damage": {"model": "grady_kipp", "weibull_m": 8.5,
+                                                                  "weibull_k": 3.0e39}}
+    with pytest.raises(ValueError, match=r"material 0 \(rubble\): porosity with the grady_kipp damage model"):
+        Simulation(mesh, ["rubble"], [spec], state, strength=[strength])
+
+
+def elastic_basalt(chi, eps_e=-2.0e-3, alpha0=1.5):
+    return {**BASALT, "porosity": {"alpha0": alpha0, "eps_e": eps_e, "kappa": 0.98, "alpha_x": 1.0, "chi": chi}}
+
+
+def matrix_sound_speed():
+    """c_s0 (m/s): the basalt matrix's sound speed at its reference density and e = 0."""
+    eos = pack_eos([BASALT])
+    return pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, BASALT["rho0"], 0.0)[1] ** 0.5
+
+
+def test_elastic_compaction_curve_of_chi():
+    """Collins et al. (2011): d alpha / d eps_v = alpha (1 - h^2) in the elastic regime, h = 1 + (chi - 1)
+    (alpha - 1) / (alpha0 - 1); the exponential branch starts from alpha_e = alpha_el(eps_e); chi = 1 keeps alpha0;
+    and the porous material at rest carries weak waves at chi c_s0: dP/drho of P_s(alpha(eps_v) rho) / alpha(eps_v)."""
+    from impactpipe.hydro.eos.porosity import ALPHA_E, EPS_E, elastic_strain, wave_speed_ratio
+
+    spec = elastic_basalt(0.5)
+    eos = pack_eos([spec])
+    row = pack_porosity([spec], eos)[0]
+    assert row[ALPHA_E] < 1.5 and distension_of_strain(row, row[EPS_E]) == pytest.approx(row[ALPHA_E], rel=1e-14)
+    assert elastic_strain(row, row[ALPHA_E]) == pytest.approx(-2.0e-3, rel=1e-12)
+    assert distension_of_strain(row, 1e-3) == 1.5 and distension_of_strain(row, 0.0) == 1.5
+    h = 1e-8
+    for eps in (-1e-4, -1e-3, -1.9e-3):
+        a = distension_of_strain(row, eps)
+        slope = (distension_of_strain(row, eps + h) - distension_of_strain(row, eps - h)) / (2 * h)
+        assert slope == pytest.approx(a * (1 - wave_speed_ratio(row, a) ** 2), rel=1e-6)
+    # continuous at eps_e (elastic -> exponential)
+    e = row[EPS_E]
+    assert distension_of_strain(row, e - 1e-12) == pytest.approx(distension_of_strain(row, e), rel=1e-10)
+    one = pack_porosity([elastic_basalt(1.0)], eos)[0]
+    assert distension_of_strain(one, -1.9e-3) == 1.5 and one[ALPHA_E] == 1.5
+    rho00 = BASALT["rho0"] / 1.5
+
+    def bulk_pressure(rho):
+        a = distension_of_strain(row, math.log(rho00 / rho))
+        return pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, a * rho, 0.0)[0] / a
+
+    d = 1e-6 * rho00
+    c2 = (bulk_pressure(rho00 * (1 + 1e-4) + d) - bulk_pressure(rho00 * (1 + 1e-4) - d)) / (2 * d)
+    assert c2 ** 0.5 == pytest.approx(0.5 * matrix_sound_speed(), rel=1e-3)
+
+
+def test_elastic_compaction_is_reversible_and_plastic_compaction_is_not():
+    from impactpipe.hydro.eos.porosity import ALPHA_E, compact
+
+    spec = elastic_basalt(0.5)
+    row = pack_porosity([spec], pack_eos([spec]))
+    rho00 = BASALT["rho0"] / 1.5
+
+    def step(dist, strain):
+        alpha = np.ones((1, 1, 1, 1, 1))
+        arho = np.full_like(alpha, rho00 * math.exp(-strain))
+        arhoq = np.zeros((1, 2, 1, 1, 1))
+        arhoq[0, 0] = dist * arho[0, 0]
+        compact(alpha, arho, arhoq, row, np.zeros((1, 1), dtype=np.int64), 0, 1)
+        return arhoq[0, 0, 0, 0, 0] / arho[0, 0, 0, 0, 0]
+
+    loaded = step(1.5, -1e-3)
+    assert loaded == pytest.approx(distension_of_strain(row[0], -1e-3), rel=1e-14) and loaded < 1.5
+    assert step(loaded, 0.0) == 1.5                                 # unloaded: the pores open again
+    crushed = step(loaded, -5e-3)
+    assert crushed < row[0, ALPHA_E]
+    assert step(crushed, 0.0) == crushed                            # past eps_e: they stay closed
+    assert step(crushed, -1e-3) == crushed
+
+
+def test_elastic_wave_speed_in_a_porous_plate():
+    """A weak planar pulse (a porous slab at 1 m/s onto a wall, strain 1e-3 below eps_e = -2e-3) runs through
+    porous basalt of chi = 0.5 at the porous elastic wave speed chi c_s0 (Collins et al. 2011), not at the
+    matrix's c_s0: the front (half the plateau pressure) within 1 % of (chi c_s0 - u) t, the plateau
+    pressure within 1 % of the acoustic rho_00 chi c_s0 u."""
+    chi, speed, cells = 0.5, 1.0, 512
+    spec = elastic_basalt(chi)
+    c = chi * matrix_sound_speed()
+    rho00 = spec["rho0"] / 1.5
+    mesh = BlockMesh.uniform("1d-planar", [0.0], [1.25], [cells * 5 // 4], [("reflecting", "outflow")])
+    state = HydroState.empty(mesh, 1)
+    x = mesh.cell_centers()[:, 0]
+    state.set_material(mesh, (x < 1.0).astype(float), 0, pack_eos([spec]), rho00, np.array([-speed, 0.0, 0.0]),
+                       specific_energy=0.0)
+    sim = Simulation(mesh, ["porous_basalt"], [spec], state)
+    end = 0.7 / (c - speed)
+    sim.run(end)
+    snap = sim.snapshot()
+    xs = snap.centers[:, 0]
+    p = snap.pressure.reshape(-1)
+    plateau = np.median(p[(xs > 0.1) & (xs < 0.5)])
+    assert plateau == pytest.approx(rho00 * c * speed, rel=0.01)
+    front = xs[np.flatnonzero(p > 0.5 * plateau).max()]
+    measured = front / end + speed
+    assert measured == pytest.approx(c, rel=0.01)
+    dist = snap.extra["distension"].reshape(-1)
+    assert dist[(xs > 0.1) & (xs < 0.5)].min() > 1.49  # elastic: the pores are only squeezed

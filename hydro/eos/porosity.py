@@ -38,8 +38,33 @@ the damage stays in the last), so the sweeps, the AMR transfers, the regrid, the
 the checkpoints carry it as they carry the strength scalars.  A material without porosity
 has alpha = 1 there.
 
+Elastic compaction (Collins, Melosh & Wuennemann 2011): with ``chi`` < 1 the unstrained porous
+material's elastic (bulk) wave speed is chi c_s0, c_s0 (m/s) the matrix's sound speed at rho_s0
+and e = 0, and in the elastic regime the distension follows the strain reversibly,
+
+    d alpha / d eps_v = alpha (1 - (c(alpha) / c_s0)^2),    c(alpha) = c_s0 h(alpha),
+    h(alpha) = 1 + (chi - 1) (alpha - 1) / (alpha_0 - 1)                (-)
+
+(c interpolated linearly in alpha between chi c_s0 at alpha_0 and c_s0 at alpha = 1), so that
+dP/drho = c_s0^2 (1 + (rho / alpha) d alpha / d rho) = c(alpha)^2 at rest: a weak wave runs at
+chi c_s0.  Integrated from alpha_0 at eps_v = 0 (partial fractions, :func:`elastic_strain`):
+
+    eps_el(alpha) = -(1/s) [ ln(alpha / alpha_0) / (s u) + ln((alpha - 1) / (alpha_0 - 1)) / 2
+                             - ln((u - alpha) / (u - alpha_0)) / (2 u) ],
+    s = (chi - 1) / (alpha_0 - 1),  u = 1 - 2 / s,
+
+inverted by Newton's method (:func:`elastic_distension`).  The exponential and power-law
+branches then start from alpha_e = alpha_el(eps_e) in place of alpha_0 (alpha_e = alpha_0
+for chi = 1, where the elastic regime keeps alpha_0).  Elastic compaction is reversible:
+:func:`compact` sets alpha <- alpha(eps_v) while alpha >= alpha_e (the material has not passed
+eps_e) and keeps the min rule below.  The same h(alpha) scales the porous material's
+shear modulus through its bulk modulus, G = G_0 + (G/K) rho c_s^2(alpha rho, e) h(alpha)^2
+(:mod:`impactpipe.hydro.strength.update`).  Without ``chi`` (chi = 1) nothing of this runs and
+the model is the one above, bit for bit.
+
 Parameters per material (``porosity`` key of a resolved EOS spec): ``alpha0`` (>= 1; 1 is no
-porosity), ``eps_e`` (<= 0), ``kappa`` (> 0), ``alpha_x`` (1 <= alpha_x <= alpha0).
+porosity), ``eps_e`` (<= 0), ``kappa`` (> 0), ``alpha_x`` (1 <= alpha_x <= alpha_e) and
+optionally ``chi`` (0 < chi <= 1, default 1).
 """
 
 from __future__ import annotations
@@ -61,7 +86,12 @@ ALPHA_X = 3     # transition distension alpha_x (-)
 EPS_X = 4       # strain where alpha reaches alpha_x (-), derived
 EPS_C = 5       # strain of full compaction (-), derived
 RHO00 = 6       # bulk density of the unstrained porous material rho_s0 / alpha_0 (kg/m^3), derived
-NPOROSITY = 7
+CHI = 7         # ratio chi = c_e / c_s0 of the unstrained porous material's elastic wave speed to the matrix's (-)
+ALPHA_E = 8     # distension at the elastic limit, alpha_el(eps_e) (-), derived (alpha_0 for chi = 1)
+NPOROSITY = 9
+#: Newton iterations of :func:`elastic_distension` (from the first-order guess, the error after
+#: three is below 1e-15 for |eps_v| <= 0.01).
+ELASTIC_NEWTON = 4
 
 #: Keys of a porosity spec: (key, check, what the check demands).
 KEYS = (
@@ -69,6 +99,10 @@ KEYS = (
     ("eps_e", lambda v: v <= 0.0, "must be <= 0"),
     ("kappa", lambda v: v > 0.0, "must be > 0"),
     ("alpha_x", lambda v: v >= 1.0, "must be >= 1"),
+)
+#: Optional keys of a porosity spec: (key, default, check, what the check demands).
+OPTIONAL_KEYS = (
+    ("chi", 1.0, lambda v: 0.0 < v <= 1.0, "must be > 0 and <= 1"),
 )
 #: Counter of :func:`compact`: cells where the transported distension was below 1 (round-off of
 #: the transport) and was set to 1.
@@ -96,18 +130,22 @@ def pack_porosity(specs: list[dict], eos) -> np.ndarray | None:
         rho_s0 = float(reference_density(eos.kind[k], eos.params[k], eos.table))
         block = spec.get("porosity")
         if not block:
-            rows[k, [ALPHA0, ALPHA_X, KAPPA]] = 1.0
+            rows[k, [ALPHA0, ALPHA_X, KAPPA, CHI, ALPHA_E]] = 1.0
             rows[k, RHO00] = rho_s0
             continue
         name = f"material {k} porosity"
-        known = [key for key, *_ in KEYS]
+        known = [key for key, *_ in KEYS] + [key for key, *_ in OPTIONAL_KEYS]
         for key in block:
             if key not in known:
                 raise ValueError(f"{name}: unknown key {key!r} (known: {known})")
         values = {}
-        for key, check, demand in KEYS:
+        checks = [(key, None, check, demand) for key, check, demand in KEYS] + list(OPTIONAL_KEYS)
+        for key, default, check, demand in checks:
             if key not in block:
-                raise ValueError(f"{name}: missing key {key!r}")
+                if default is None:
+                    raise ValueError(f"{name}: missing key {key!r}")
+                values[key] = default
+                continue
             value = block[key]
             if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
                 raise ValueError(f"{name}: key {key!r} must be a finite number, got {value!r}")
@@ -123,7 +161,15 @@ def pack_porosity(specs: list[dict], eos) -> np.ndarray | None:
         rows[k, EPS_E] = values["eps_e"]
         rows[k, KAPPA] = values["kappa"]
         rows[k, ALPHA_X] = values["alpha_x"]
-        eps_x = values["eps_e"] + math.log(values["alpha_x"] / values["alpha0"]) / values["kappa"]
+        rows[k, CHI] = values["chi"]
+        alpha_e = values["alpha0"]
+        if values["chi"] != 1.0 and values["alpha0"] > 1.0:
+            alpha_e = elastic_distension(rows[k], values["eps_e"])
+            if values["alpha_x"] > alpha_e:
+                raise ValueError(f"{name}: key 'alpha_x' must be <= the distension at the elastic limit "
+                                 f"alpha_e = {alpha_e:.10g} (chi = {values['chi']:g}), got {values['alpha_x']!r}")
+        rows[k, ALPHA_E] = alpha_e
+        eps_x = values["eps_e"] + math.log(values["alpha_x"] / alpha_e) / values["kappa"]
         rows[k, EPS_X] = eps_x
         rows[k, EPS_C] = eps_x + 2.0 * (1.0 - values["alpha_x"]) / (values["kappa"] * values["alpha_x"])
         rows[k, RHO00] = rho_s0 / values["alpha0"]
@@ -150,12 +196,50 @@ def distension_field(arho: np.ndarray, arhoq: np.ndarray, porosity: np.ndarray) 
 
 
 @njit(cache=True, inline="always")
+def wave_speed_ratio(row, alpha):
+    """h(alpha) = c(alpha) / c_s0 = 1 + (chi - 1) (alpha - 1) / (alpha_0 - 1) (-): the porous material's
+    elastic wave speed over the matrix's (Collins et al. 2011; module docstring); 1 for chi = 1."""
+    if row[CHI] == 1.0:
+        return 1.0
+    return 1.0 + (row[CHI] - 1.0) * (alpha - 1.0) / (row[ALPHA0] - 1.0)
+
+
+@njit(cache=True, inline="always")
+def elastic_strain(row, alpha):
+    """eps_el(alpha) (-): the volumetric strain at which elastic compaction (chi < 1, alpha_0 > 1)
+    has brought the distension from alpha_0 to ``alpha`` (1 < alpha <= alpha_0); the integral of
+    d eps_v = d alpha / (alpha (1 - h(alpha)^2)) from alpha_0 (module docstring)."""
+    a0 = row[ALPHA0]
+    s = (row[CHI] - 1.0) / (a0 - 1.0)
+    u = 1.0 - 2.0 / s
+    return -(math.log(alpha / a0) / (s * u) + 0.5 * math.log((alpha - 1.0) / (a0 - 1.0))
+             - 0.5 * math.log((u - alpha) / (u - a0)) / u) / s
+
+
+@njit(cache=True, inline="always")
+def elastic_distension(row, eps_v):
+    """alpha_el(eps_v) (-), the inverse of :func:`elastic_strain` for eps_v <= 0: Newton's method
+    (ELASTIC_NEWTON steps, d eps_el / d alpha = 1 / (alpha (1 - h^2))) from the first-order
+    alpha_0 exp((1 - chi^2) eps_v)."""
+    chi = row[CHI]
+    alpha = row[ALPHA0] * math.exp((1.0 - chi * chi) * eps_v)
+    for _ in range(ELASTIC_NEWTON):
+        h = wave_speed_ratio(row, alpha)
+        alpha -= (elastic_strain(row, alpha) - eps_v) * alpha * (1.0 - h * h)
+    return alpha
+
+
+@njit(cache=True, inline="always")
 def distension_of_strain(row, eps_v):
-    """alpha(eps_v) (-) of the epsilon-alpha model (module docstring) for the parameter row ``row``."""
+    """alpha(eps_v) (-) of the epsilon-alpha model (module docstring) for the parameter row ``row``:
+    alpha_0 for eps_v >= 0, the elastic curve alpha_el(eps_v) down to eps_e (alpha_0 throughout
+    for chi = 1), then the exponential and power-law branches from alpha_e."""
     if eps_v >= row[EPS_E]:
-        return row[ALPHA0]
+        if row[CHI] == 1.0 or eps_v >= 0.0:
+            return row[ALPHA0]
+        return elastic_distension(row, eps_v)
     if eps_v >= row[EPS_X]:
-        return row[ALPHA0] * math.exp(row[KAPPA] * (eps_v - row[EPS_E]))
+        return row[ALPHA_E] * math.exp(row[KAPPA] * (eps_v - row[EPS_E]))
     if eps_v >= row[EPS_C]:
         x = (row[EPS_C] - eps_v) / (row[EPS_C] - row[EPS_X])
         return 1.0 + (row[ALPHA_X] - 1.0) * x * x
@@ -172,11 +256,15 @@ def cell_distension(arhoq, nq, b, k, ix, iy, iz, ar):
 def compact(alpha, arho, arhoq, porosity, counts, lo, hi):
     """Compaction step for the interior cells of the blocks ``lo .. hi - 1``: for every porous
     material present (alpha_k > 0, alpha_k rho_k > 0), alpha <- max(1, min(alpha, alpha(eps_v)))
-    with eps_v = ln(rho_00 / rho_k), rho_k = alpha_k rho_k / alpha_k (module docstring).
+    with eps_v = ln(rho_00 / rho_k), rho_k = alpha_k rho_k / alpha_k (module docstring); with
+    chi < 1 a material still in its elastic regime (alpha >= alpha_e) takes alpha(eps_v) itself
+    (reversible elastic compaction).
 
     ``porosity`` (M, NPOROSITY) the packed parameters; the distension amounts are the
     second-to-last of each material's transported scalars in ``arhoq``.  A transported
-    distension below 1 (a mixture of round-off) is set to 1 and counted in ``counts[b, 0]``.
+    distension below 1 (a mixture of round-off, or a round-off trace of mass without volume,
+    alpha_k = 0 < alpha_k rho_k, that arrived without its distension) is set to 1 and counted in
+    ``counts[b, 0]``.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
@@ -194,12 +282,16 @@ def compact(alpha, arho, arhoq, porosity, counts, lo, hi):
                     for iz in range(gz, nz - gz):
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
-                        if not (a > 0.0 and ar > 0.0):
+                        if not ar > 0.0:
                             continue
                         dist = arhoq[b, slot, ix, iy, iz] / ar
                         if dist < 1.0:
                             dist = 1.0
                             counts[b, 0] += 1
-                        else:
-                            dist = max(1.0, min(dist, distension_of_strain(row, math.log(row[RHO00] * a / ar))))
+                        elif a > 0.0:
+                            curve = distension_of_strain(row, math.log(row[RHO00] * a / ar))
+                            if row[CHI] != 1.0 and dist >= row[ALPHA_E]:
+                                dist = max(1.0, curve)
+                            else:
+                                dist = max(1.0, min(dist, curve))
                         arhoq[b, slot, ix, iy, iz] = ar * dist

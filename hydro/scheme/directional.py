@@ -364,8 +364,8 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     (without shear modulus its signal speed is the bulk sound speed, bit for bit).  A Grady-Kipp
     material (``grady_kipp[m]``) bears (1 - D) of its EOS tension, as in
     :func:`impactpipe.hydro.scheme.mixture.material_state`; a porous material (``porosity[m]``
-    alpha0 > 1, its distension the second-to-last transported scalar) has the porous pressure and
-    sound speed of that function too.
+    alpha0 > 1, its distension the second-to-last transported scalar) has the porous pressure,
+    sound speed and tension limit Y_T (1 - D) / alpha of that function too.
     """
     a = alpha_f[ia]
     ar = arho_f[ia]
@@ -384,6 +384,8 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
         if grady_kipp is not None:
             if grady_kipp[m] and pk < 0.0:
                 pk *= tension_left(1.0, arhoq_f[iq + (nq - 1) * cs], ar)
+    if porosity is not None:
+        ytk /= dist
     p_min = -ytk
     if rk < DISTENDED_FRACTION * rho0_m:
         p_min = 0.0

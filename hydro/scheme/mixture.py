@@ -119,7 +119,8 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength, ten
     ALPHA_MIN or without mass is absent (present False, zeros).  A porous material
     (:mod:`impactpipe.hydro.eos.porosity`) of ``distension`` alpha > 1 has p_k = P(alpha rho_k, e_k) / alpha
     and c2_bulk = c_K^2(alpha rho_k, e_k), its solid EOS at the matrix density alpha rho_k, which also
-    decides whether it is distended below DISTENDED_FRACTION rho0 (a fracture, not its pores).
+    decides whether it is distended below DISTENDED_FRACTION rho0 (a fracture, not its pores), and
+    the tension limit -Y_T / alpha (the matrix's P_s >= -Y_T).
     """
     if not (a > ALPHA_MIN and ar > 0.0):
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0, False
@@ -129,7 +130,7 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength, ten
     pk /= distension
     if tension_share != 1.0 and pk < 0.0:
         pk *= tension_share
-    p_min = -tensile_strength
+    p_min = -tensile_strength / distension
     rho0 = reference_density(kind, params, table) / distension
     if rk < DISTENDED_FRACTION * rho0:
         p_min = 0.0
@@ -150,7 +151,8 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
     ``shear_modulus`` the (M, 2) shear table, ``tensile_strength`` (M,) Y_T (Pa), ``grady_kipp``
     (M,) booleans of the Grady-Kipp materials or None (:func:`tension_factor`), ``porosity`` the
     (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`) or None: a
-    porous material's distension is the second-to-last of its transported scalars.
+    porous material's distension is the second-to-last of its transported scalars, and its
+    tension limit Y_T,k (1 - D_k) / alpha_k (the matrix's, spread over the bulk).
 
     Returns (rho, phi, p, K, rho e, rho T, eos_clamps, tension_limits): the sums of the
     module docstring (rho T only with ``with_temperature``, else 0) and how many present
@@ -182,6 +184,9 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
         present, rk, ek, pk, c2b, c2k, flag, limited = material_state(
             a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k], ytk,
             tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar), dist)
+        if porosity is not None:
+            if present:
+                ytk /= dist
         if present:
             p += a * pk
             kmod += ar * c2k

@@ -63,6 +63,7 @@ from __future__ import annotations
 import numpy as np
 
 from impactpipe.hydro.eos import reference_densities
+from impactpipe.hydro.eos.porosity import ALPHA0
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
@@ -98,8 +99,12 @@ class MaterialStrength:
     """
 
     def __init__(self, arrays: StrengthArrays, mesh: BlockMesh, nmat: int, damage: DamageArrays | None = None,
-                 porous: bool = False):
+                 porosity: np.ndarray | None = None):
         self.arrays = arrays
+        #: (M, NPOROSITY) porosity rows of a porous scene (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
+        #: or None: a porous material's strength is its matrix's, scaled (:func:`update_stress`).
+        self.porosity = porosity
+        porous = porosity is not None
         self.mesh = mesh
         self.nmat = nmat
         self.damage = damage if damage is not None else pack_damage([None] * nmat)
@@ -218,7 +223,7 @@ class MaterialStrength:
         blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`) into the
         work arrays, then their ghosts: what the first half kick (:meth:`kick`) uses."""
         lo, hi = self._range(partition)
-        cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._reference_densities(eos),
+        cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
                                  self.arrays.model, self.ns, self.work, lo, hi, self.holds)
         for axis in range(self.mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns))
@@ -244,7 +249,8 @@ class MaterialStrength:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
-                          self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity)
+                          self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
+                          porosity=self.porosity)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns))
 
@@ -287,6 +293,15 @@ class MaterialStrength:
         if self._rho0 is None or self._rho0[0] is not eos:
             self._rho0 = (eos, reference_densities(eos))
         return self._rho0[1]
+
+    def _fill_densities(self, eos) -> np.ndarray:
+        """The densities (kg/m^3) that fill a cell (:func:`cell_velocity_and_stress`): the reference
+        densities, a porous material's the bulk rho_s0 / alpha_0 of its unstrained state (its pores
+        fill the cell; they are not void)."""
+        rho0 = self._reference_densities(eos)
+        if self.porosity is None:
+            return rho0
+        return rho0 / self.porosity[:, ALPHA0]
 
     def _fill_work_ghosts(self, partition, axis: int, slots: slice) -> None:
         """Ghosts of the work arrays' ``slots`` along ``axis``: copies of the neighbours' cells

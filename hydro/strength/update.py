@@ -72,6 +72,7 @@ import math
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed_in_line, temperature_in_line
+from impactpipe.hydro.eos.porosity import ALPHA0, wave_speed_ratio
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
@@ -231,6 +232,18 @@ def _clear_scalars(arhoq, b, first, count, ix, iy, iz):
             arhoq[b, q, ix, iy, iz] = 0.0
 
 
+@njit(cache=True, inline="always")
+def _clear_strength_scalars(arhoq, b, first, nq, porous, ix, iy, iz):
+    """:func:`_clear_scalars` of a material's ``nq`` scalars from ``first``, keeping a ``porous``
+    material's distension (slot ``nq - 2``, :mod:`impactpipe.hydro.eos.porosity`): a trace of it
+    in a void cell is still porous material, and the sweeps divide by its distension."""
+    if porous:
+        _clear_scalars(arhoq, b, first, nq - 2, ix, iy, iz)
+        _clear_scalars(arhoq, b, first + nq - 1, 1, ix, iy, iz)
+    else:
+        _clear_scalars(arhoq, b, first, nq, ix, iy, iz)
+
+
 @njit(cache=True, parallel=True)
 def cell_velocities(arho, mom, work, lo, hi):
     """New velocities v = (rho v) / rho (m/s), rho = sum_k alpha_k rho_k, of the interior cells
@@ -321,9 +334,18 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
-                  damage_model=None, damage_params=None, surface_gravity=None):
+                  damage_model=None, damage_params=None, surface_gravity=None, porosity=None):
     """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``;
     see the module docstring.
+    ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
+    or None.  A porous material k (alpha_0 > 1, distension alpha from the second-to-last of its
+    scalars) is its matrix's strength carried by the bulk: its EOS pressure p_k = P_s / alpha
+    and temperature at the matrix density alpha rho_k, its shear modulus from the porous bulk
+    modulus G = G_0 + (G/K) rho_k c_s^2(alpha rho_k) h(alpha)^2 (h the elastic wave-speed ratio,
+    :func:`impactpipe.hydro.eos.porosity.wave_speed_ratio`; 1 without ``chi``), its tensile limit
+    -Y_T (1 - D) / alpha (the matrix's P_s >= -Y_T (1 - D)) and its yield strength
+    Y = Y_s(alpha p_held, T, D) / alpha (the matrix's yield curve at the matrix pressure, spread
+    over the bulk); the low-density cut compares the matrix density alpha rho_k with rho0_k.
     ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
     reference_densities`).  ``damage_model[M]``, ``damage_params[M, NDAMAGE]``: the tensile
     damage models and their Weibull parameters (:func:`impactpipe.hydro.strength.parameters.
@@ -334,7 +356,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     its first ``ns`` stress slots are written for the interior cells that hold material (a
     void cell's stay zero, as :func:`cell_velocity_and_stress` left them).  The scalars of
     void cells and absent materials are set to zero, stored only where they are not zero
-    already.  Counters accumulate per block.
+    already (a porous material's distension excepted).  Counters accumulate per block.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
@@ -350,7 +372,11 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                 for iz in range(gz, nz - gz):
                     if work[b, WK_PHI, ix, iy, iz] <= 0.0:
                         # void: its stress in work is zero already (cell_velocity_and_stress)
-                        _clear_scalars(arhoq, b, 0, nmat * nq, ix, iy, iz)
+                        if porosity is None:
+                            _clear_scalars(arhoq, b, 0, nmat * nq, ix, iy, iz)
+                        else:
+                            for k in range(nmat):
+                                _clear_strength_scalars(arhoq, b, k * nq, nq, porosity[k, ALPHA0] > 1.0, ix, iy, iz)
                         continue
                     s0 = s1 = s2 = s3 = s4 = s5 = 0.0
                     # velocity gradient L[i][j] = d v_i / d x_j
@@ -380,7 +406,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
                         if not (a > ALPHA_MIN and ar > 0.0):
-                            _clear_scalars(arhoq, b, base, nq, ix, iy, iz)
+                            if porosity is None:
+                                _clear_scalars(arhoq, b, base, nq, ix, iy, iz)
+                            else:
+                                _clear_strength_scalars(arhoq, b, base, nq, porosity[k, ALPHA0] > 1.0, ix, iy, iz)
                             continue
                         inv = 1.0 / ar
                         sxx = arhoq[b, base, ix, iy, iz] * inv
@@ -393,8 +422,18 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         dmg = arhoq[b, base + nq - 1, ix, iy, iz] * inv
                         rk = ar / a
                         ek = arhoe[b, k, ix, iy, iz] * inv
-                        pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table, rk, ek)
-                        g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0)
+                        dist = 1.0
+                        stiffness = 1.0
+                        if porosity is not None:
+                            if porosity[k, ALPHA0] > 1.0:
+                                dist = arhoq[b, base + nq - 2, ix, iy, iz] * inv
+                                h = wave_speed_ratio(porosity[k], dist)
+                                stiffness = h * h
+                        pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk,
+                                                                     ek)
+                        pk /= dist
+                        g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0) * stiffness
+                        y_t = tensile_strength[k] / dist
                         gradual = False
                         if damage_model is not None:
                             gradual = damage_model[k] == GRADY_KIPP
@@ -419,7 +458,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                 dmg = d_new
                             if model[k] != ROCK:
                                 g *= 1.0 - dmg
-                        elif pk < -tensile_strength[k] * (1.0 - dmg):
+                        elif pk < -y_t * (1.0 - dmg):
                             # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
                             if dmg < 1.0:
                                 counts[b, CNT_TENSILE_FAILURE] += 1
@@ -433,22 +472,21 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             sxy = 0.0
                         # the mean stress the material bears: no more tension than it still holds,
                         # as in the sweeps, which open void instead of stretching it further
-                        tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, rk, ek)
+                        tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
                         if gradual and model[k] != ROCK:
                             p_held = damaged_pressure(p_matrix, dmg)
                             y = (1.0 - dmg) * equivalent_yield_stress(
                                 model[k], yield_strength(model[k], params[k], p_matrix, tk, 0.0))
                         else:
-                            p_held = damaged_pressure(p_matrix, dmg) if gradual else max(
-                                pk, -tensile_strength[k] * (1.0 - dmg))
+                            p_held = damaged_pressure(p_matrix, dmg) if gradual else max(pk, -y_t * (1.0 - dmg))
                             if surface_gravity is not None and work[b, WK_PHI, ix, iy, iz] < 1.0:
                                 layer = _surface_layer_pressure(rk, work[b, WK_PHI, ix, iy, iz], surface_gravity, dxs)
                                 if layer > p_held:
                                     p_held = layer
                                     counts[b, CNT_SURFACE_LAYER] += 1
-                            y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], p_held, tk,
-                                                                                 dmg))
-                        if rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
+                            y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], dist * p_held,
+                                                                                 tk, dmg)) / dist
+                        if dist * rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
                         sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz, y, g)
