@@ -53,7 +53,8 @@ def main():
     parser.add_argument("--chi", type=float, nargs="+", default=[0.5, 1.0], help="sound speed ratios to run")
     parser.add_argument("--cells", type=int, default=512, help="cells across the 1 m slab")
     args = parser.parse_args()
-    print("| chi | c_s0 (m/s) | chi c_s0 (m/s) | front speed (m/s) | error | plateau (MPa) | rho_00 c u (MPa) | error |")
+    print("| chi | c_s0 (m/s) | chi c_s0 (m/s) | front speed (m/s) | error | plateau (MPa) | rho_00 c u (MPa) "
+          "| error |")
     print("|---|---|---|---|---|---|---|---|")
     for chi in args.chi:
         wave_row(chi, args.cells)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from impactpipe.handoff.moments import cell_distension_excess
 from impactpipe.hydro.output.snapshot import Snapshot
 
 
@@ -46,6 +47,8 @@ class IntactBodies:
             the axis (kg m/s); 0 in 3d.
         cells: (F,) cells of each fragment.
         rings_left: 2d-cylindrical fragments that do not reach the axis, left to their blocks.
+        distension_excess: (F,) sum_c m_por,c (d_c - 1) over the fragment's cells (kg): its
+            mass-weighted distension is 1 + this / mass (:mod:`impactpipe.handoff.moments`).
     """
 
     mass: np.ndarray
@@ -57,12 +60,13 @@ class IntactBodies:
     radial_momentum: np.ndarray
     cells: np.ndarray
     rings_left: int
+    distension_excess: np.ndarray
 
     @classmethod
     def none(cls, n_materials: int) -> "IntactBodies":
         """No fragment made a single sphere."""
         return cls(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, n_materials)),
-                   np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64), 0)
+                   np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64), 0, np.zeros(0))
 
     @property
     def count(self) -> int:
@@ -76,13 +80,16 @@ class IntactBodies:
         return float(self.kinetic_energy.sum() - 0.5 * (self.mass * (self.velocity**2).sum(axis=1)).sum())
 
 
-def split_intact_bodies(snapshot: Snapshot, label: np.ndarray, bulk_density: float) -> tuple[Snapshot, IntactBodies]:
+def split_intact_bodies(snapshot: Snapshot, label: np.ndarray, bulk_density: float,
+                        porous: np.ndarray | None = None) -> tuple[Snapshot, IntactBodies]:
     """(the snapshot without the fragments' cells, the fragments as spheres); module docstring.
 
     Args:
         snapshot: the hand-off snapshot (a half-domain 3d run already mirrored).
         label: (NB, nx, ny, nz) int, the fragment of each cell (0, 1, ...) or -1.
         bulk_density: rho_T, the density of the fragments' spheres (kg/m^3).
+        porous: (M,) booleans of the porous materials, or None
+            (:func:`impactpipe.handoff.moments.cell_distension_excess`).
     """
     label = np.asarray(label, dtype=np.int64)
     if label.shape != snapshot.pressure.shape:
@@ -134,6 +141,7 @@ def split_intact_bodies(snapshot: Snapshot, label: np.ndarray, bulk_density: flo
         position[:, :ndim], body_velocity[:, :ndim] = centre, mean_velocity
         radial_momentum = np.zeros(count)
     speed2 = (velocity**2).sum(axis=1)[cells]
+    excess = cell_distension_excess(snapshot, porous)
     bodies = IntactBodies(
         mass=mass,
         position=position,
@@ -144,6 +152,8 @@ def split_intact_bodies(snapshot: Snapshot, label: np.ndarray, bulk_density: flo
         radial_momentum=radial_momentum,
         cells=np.bincount(which, minlength=count),
         rings_left=rings_left,
+        distension_excess=np.zeros(count) if excess is None else np.bincount(which, weights=excess[cells],
+                                                                              minlength=count),
     )
     keep = ~cells[:, None]
     rest = replace(snapshot, partial_density=np.where(keep, snapshot.partial_density, 0.0),

@@ -18,6 +18,15 @@ the kinetic energy of the velocity dispersion inside the ancestor is what its sp
 not carry (``HandoffBudget.unresolved_kinetic_energy``).  Leaves tile the domain, so an
 ancestor region is either covered by finer leaves, all merged, or lies inside one leaf at
 least ``edge`` wide, which stays as it is.
+
+Porous materials (docs/eos.md, "Porosity"): with ``porous`` (the (M,) mask of the porous
+materials) and the snapshot's ``distension`` field d_c (the porous materials' mass-weighted
+distension rho_solid / rho of a cell), a block also sums
+
+    E = sum_c m_por,c (d_c - 1)      (kg),   m_por,c = sum_(k porous) alpha_k rho_k V_c,
+
+so that 1 + E / m is the mass-weighted distension of all its mass (a non-porous material
+counting alpha = 1), and E adds over merged blocks; without porous materials E = 0.
 """
 
 from __future__ import annotations
@@ -44,6 +53,8 @@ class BlockMoments:
     lo, hi: (NB, 3) block corners (m).
     level: (NB,) refinement level of the block (0 = root).
     block_id: (NB,) the snapshot's block id (a merged block: that of its first leaf).
+    distension_excess: (NB,) E = sum_c m_por,c (d_c - 1) (kg): the block's mass-weighted distension
+        is 1 + E / m (module docstring); 0 without porous materials.
     """
 
     material_mass: np.ndarray
@@ -56,20 +67,33 @@ class BlockMoments:
     hi: np.ndarray
     level: np.ndarray
     block_id: np.ndarray
+    distension_excess: np.ndarray
 
 
-def block_moments(snapshot: Snapshot, chunk: int = 2048) -> BlockMoments:
-    """Mass, centre of mass, momentum and kinetic energy of every leaf block.
+def cell_distension_excess(snapshot: Snapshot, porous: np.ndarray | None) -> np.ndarray | None:
+    """m_por,c (d_c - 1) (kg) per cell (module docstring), (NB, nx, ny, nz).  ``porous``: (M,)
+    booleans of the porous materials, or None; None where there are none (or the snapshot has no
+    ``distension`` field)."""
+    if porous is None or "distension" not in snapshot.extra or not np.any(porous):
+        return None
+    mask = np.asarray(porous, dtype=bool)
+    porous_mass = snapshot.partial_density[:, mask].sum(axis=1) * snapshot.block_cell_volumes()
+    return np.where(porous_mass > 0.0, porous_mass * (snapshot.extra["distension"] - 1.0), 0.0)
+
+
+def block_moments(snapshot: Snapshot, chunk: int = 2048, porous: np.ndarray | None = None) -> BlockMoments:
+    """Mass, centre of mass, momentum, kinetic energy and distension excess (``porous``: the (M,) mask
+    of the porous materials, :func:`cell_distension_excess`) of every leaf block.
 
     Blocks are processed ``chunk`` at a time so that the cell-sized temporaries stay small.
     """
-    parts = [_chunk_moments(_block_range(snapshot, start, start + chunk))
+    parts = [_chunk_moments(_block_range(snapshot, start, start + chunk), porous)
              for start in range(0, snapshot.block_lo.shape[0], chunk)]
     if not parts:
         n_materials = snapshot.partial_density.shape[1]
         return BlockMoments(np.zeros((0, n_materials)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
                             np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
-                            np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+                            np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0))
     return BlockMoments(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(BlockMoments)))
 
 
@@ -150,6 +174,7 @@ def merge_fine_blocks(moments: BlockMoments, ndim: int, edge: float) -> BlockMom
         material_mass=summed(moments.material_mass), mass=mass, centre=centre, momentum=summed(moments.momentum),
         kinetic_energy=summed(moments.kinetic_energy), min_edge=extent[first].min(axis=1), lo=lo, hi=hi,
         level=moments.level[fine_index[first]] - levels_up[first], block_id=moments.block_id[fine_index[first]],
+        distension_excess=summed(moments.distension_excess),
     )
     kept = ~fine
     return BlockMoments(*(np.concatenate([getattr(moments, f.name)[kept], getattr(merged, f.name)])
@@ -170,7 +195,7 @@ def _block_range(snapshot: Snapshot, start: int, stop: int) -> Snapshot:
     )
 
 
-def _chunk_moments(snapshot: Snapshot) -> BlockMoments:
+def _chunk_moments(snapshot: Snapshot, porous: np.ndarray | None = None) -> BlockMoments:
     """:func:`block_moments` for all blocks of ``snapshot`` at once."""
     ndim = snapshot.ndim
     volume = snapshot.block_cell_volumes()
@@ -198,6 +223,8 @@ def _chunk_moments(snapshot: Snapshot) -> BlockMoments:
     momentum[:, :ndim] = (cell_mass[:, None] * velocity).sum(axis=(2, 3, 4))
     kinetic_energy = 0.5 * (cell_mass * (velocity**2).sum(axis=1)).sum(axis=(1, 2, 3))
     extent = (snapshot.block_hi - snapshot.block_lo)[:, :ndim]
+    excess = cell_distension_excess(snapshot, porous)
     return BlockMoments(material_mass, mass, centre, momentum, kinetic_energy, extent.min(axis=1),
                         np.asarray(snapshot.block_lo, float), np.asarray(snapshot.block_hi, float),
-                        np.asarray(snapshot.block_level, dtype=np.int64), np.asarray(snapshot.block_id, dtype=np.int64))
+                        np.asarray(snapshot.block_level, dtype=np.int64), np.asarray(snapshot.block_id, dtype=np.int64),
+                        np.zeros(mass.shape[0]) if excess is None else excess.sum(axis=(1, 2, 3)))

@@ -17,6 +17,7 @@ PARTICLE_UNITS = {
     "peak_pressure_max": "Pa",
     "origin_position": "m",
     "projectile_fraction": "dimensionless",
+    "distension": "dimensionless",
     "source_level": "dimensionless",
     "source_block": "dimensionless",
 }
@@ -41,6 +42,9 @@ class ParticleSet:
         peak_pressure_max: (N,) largest tracer peak pressure (Pa), NaN without tracers.
         origin_position: (N, 3) mass-weighted pre-impact position of the material (m).
         projectile_fraction: (N,) projectile mass fraction.
+        distension: (N,) mass-weighted distension rho_solid / rho of the particle's material at
+            hand-off (1: non-porous; docs/eos.md, "Porosity"; handoff/moments.py); NaN when read
+            from a hand-off file written before it was recorded.
         source_level: (N,) refinement level of the source block.
         source_block: (N,) id of the source block.
     """
@@ -55,6 +59,7 @@ class ParticleSet:
     peak_pressure_max: np.ndarray
     origin_position: np.ndarray
     projectile_fraction: np.ndarray
+    distension: np.ndarray
     source_level: np.ndarray
     source_block: np.ndarray
 
@@ -77,6 +82,7 @@ class ParticleSet:
             peak_pressure_max=np.full(n, np.nan),
             origin_position=np.full((n, 3), np.nan),
             projectile_fraction=np.zeros(n),
+            distension=np.ones(n),
             source_level=np.zeros(n, dtype=np.int64),
             source_block=np.full(n, -1, dtype=np.int64),
         )

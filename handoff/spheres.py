@@ -143,6 +143,7 @@ def blocks_to_spheres(
     total_mass: float,
     escape_speed: float,
     projectile_material_index: int | None = None,
+    porous_materials: np.ndarray | None = None,
     min_density_fraction: float = 0.75,
     min_mass_fraction: float = 4e-7,
     velocity_noise: float = 0.01,
@@ -168,6 +169,10 @@ def blocks_to_spheres(
         escape_speed: the escape speed the velocity noise refers to (m/s).
         projectile_material_index: index of the projectile material in
             ``snapshot.material_names``; None gives projectile_fraction NaN (unknown).
+        porous_materials: (M,) booleans, the porous materials of ``snapshot.material_names``
+            (docs/eos.md, "Porosity"), or None: each particle's ``distension`` is the
+            mass-weighted distension of its material (1 + E / m,
+            :mod:`impactpipe.handoff.moments`), 1 without porous materials.
         min_density_fraction: density floor rho_min = min_density_fraction x rho_T.
         min_mass_fraction: blocks below min_mass_fraction x total_mass make no particle.
         velocity_noise: noise speed as a fraction of ``escape_speed``.
@@ -196,9 +201,9 @@ def blocks_to_spheres(
         snapshot, tracers = mirror_across_y0(snapshot, tracers)
     bodies = None
     if intact_label is not None:
-        snapshot, bodies = split_intact_bodies(snapshot, intact_label, target_bulk_density)
+        snapshot, bodies = split_intact_bodies(snapshot, intact_label, target_bulk_density, porous_materials)
     cylindrical = snapshot.geometry == "2d-cylindrical"
-    leaf_moments = block_moments(snapshot)
+    leaf_moments = block_moments(snapshot, porous=porous_materials)
     moments = leaf_moments if block_edge is None else merge_fine_blocks(leaf_moments, snapshot.ndim, block_edge)
     mass_floor = min_mass_fraction * total_mass
     density_floor = min_density_fraction * target_bulk_density
@@ -271,6 +276,11 @@ def blocks_to_spheres(
         projectile_fraction = per_particle(fraction, np.nan)
         if bodies is not None:
             projectile_fraction[~from_block] = bodies.material_mass[:, projectile_material_index] / bodies.mass
+    excess_ratio = np.zeros(moments.mass.size)
+    np.divide(moments.distension_excess, moments.mass, out=excess_ratio, where=moments.mass > 0.0)
+    distension = per_particle(1.0 + excess_ratio, 1.0)
+    if bodies is not None:
+        distension[~from_block] = 1.0 + bodies.distension_excess / bodies.mass
 
     particles = ParticleSet(
         id=np.arange(1, n_particles + 1, dtype=np.int64),
@@ -283,6 +293,7 @@ def blocks_to_spheres(
         peak_pressure_max=per_particle(records.peak_pressure_max, np.nan),
         origin_position=per_particle(records.origin_position, np.nan),
         projectile_fraction=projectile_fraction,
+        distension=distension,
         source_level=per_particle(moments.level, -1),
         source_block=per_particle(moments.block_id, -1),
     )

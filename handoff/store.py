@@ -44,6 +44,11 @@ def write_particles(path: str | os.PathLike, particles: ParticleSet, budget: Han
                     write_dataset(group, f.name, value, BUDGET_UNITS[f.name])
 
 
+#: ParticleSet fields that hand-off files written before them lack, with the value they read as
+#: there: the distension, unknown (NaN).
+LATER_FIELDS = {"distension": np.nan}
+
+
 def read_particles(path: str | os.PathLike) -> ParticleSet:
     """The ParticleSet stored in a handoff.h5 file (units checked against PARTICLE_UNITS).
 
@@ -56,7 +61,11 @@ def read_particles(path: str | os.PathLike) -> ParticleSet:
     """
     with h5py.File(path, "r") as h5:
         group = h5["particles"]
-        return ParticleSet(**{f.name: _read(group, f.name, PARTICLE_UNITS[f.name]) for f in fields(ParticleSet)})
+        values = {f.name: _read(group, f.name, PARTICLE_UNITS[f.name]) for f in fields(ParticleSet)
+                  if f.name not in LATER_FIELDS or f.name in group}
+        for name in set(LATER_FIELDS) - set(values):
+            values[name] = np.full(group["mass"].shape, LATER_FIELDS[name])
+        return ParticleSet(**values)
 
 
 def read_budget(path: str | os.PathLike) -> HandoffBudget:

@@ -62,3 +62,31 @@ def test_validate_prints_the_porosity_choice_and_why():
     assert solid["target_reference_density"] == pytest.approx(2700.0)
     result = CliRunner().invoke(main, ["validate", str(CONFIG)])
     assert result.exit_code == 0 and "porosity_rule: 'on: porous_basalt alpha0 = 1.5" in result.output
+
+
+def test_handoff_spheres_carry_the_distension_of_their_material(porous_run):
+    """Each sphere's distension is its block's mass-weighted one, 1 + E / m with E = sum_c m_por,c (d_c - 1)
+    (handoff/moments.py): between 1 and alpha0, exactly 1 for spheres of projectile (solid) material alone,
+    and sum_p m_p (alpha_p - 1) is the snapshot's E up to what the mass floor dropped (at most
+    (alpha0 - 1) of the dropped mass)."""
+    from impactpipe.handoff import read_particles
+    from impactpipe.handoff.store import read_budget
+    from impactpipe.hydro.output.io import read_snapshot
+
+    particles = read_particles(porous_run / "handoff.h5")
+    budget = read_budget(porous_run / "handoff.h5")
+    alpha = particles.distension
+    assert np.isfinite(alpha).all() and alpha.min() >= 1.0 and alpha.max() <= 1.5 * (1 + 1e-12)
+    solid = particles.projectile_fraction == 1.0
+    assert solid.any() and (alpha[solid] == 1.0).all()
+    assert (alpha[particles.projectile_fraction == 0.0] > 1.0).any()
+    with h5py.File(porous_run / "handoff.h5", "r") as fh:
+        handoff_time = float(fh.attrs["handoff_time"])
+    with h5py.File(porous_run / "hydro.h5", "r") as fh:
+        times = [float(fh["snapshots"][name].attrs["time"]) for name in sorted(fh["snapshots"])]
+    snap = read_snapshot(porous_run / "hydro.h5", index=times.index(handoff_time))
+    volume = snap.block_cell_volumes()
+    porous_mass = snap.partial_density[:, 0] * volume
+    excess = float(np.where(porous_mass > 0.0, porous_mass * (snap.extra["distension"] - 1.0), 0.0).sum())
+    carried = float((particles.mass * (alpha - 1.0)).sum())
+    assert abs(carried - excess) <= 0.5 * budget.dropped_mass + 1e-9 * excess

@@ -105,7 +105,8 @@ OPTIONAL_KEYS = (
     ("chi", 1.0, lambda v: 0.0 < v <= 1.0, "must be > 0 and <= 1"),
 )
 #: Counter of :func:`compact`: cells where the transported distension was below 1 (round-off of
-#: the transport) and was set to 1.
+#: the transport) and was set to 1, or, in a trace of mass without volume, above alpha_0 and was
+#: set to alpha_0.
 COUNT_NAMES = ("distension_floor",)
 
 
@@ -263,7 +264,8 @@ def compact(alpha, arho, arhoq, porosity, counts, lo, hi):
     ``porosity`` (M, NPOROSITY) the packed parameters; the distension amounts are the
     second-to-last of each material's transported scalars in ``arhoq``.  A transported
     distension below 1 (a mixture of round-off, or a round-off trace of mass without volume,
-    alpha_k = 0 < alpha_k rho_k, that arrived without its distension) is set to 1 and counted in
+    alpha_k = 0 < alpha_k rho_k, that arrived without its distension) is set to 1, and that of
+    such a trace above alpha_0 (the ratio of two round-off amounts) to alpha_0, each counted in
     ``counts[b, 0]``.
     """
     nb, nmat, nx, ny, nz = alpha.shape
@@ -294,4 +296,7 @@ def compact(alpha, arho, arhoq, porosity, counts, lo, hi):
                                 dist = max(1.0, curve)
                             else:
                                 dist = max(1.0, min(dist, curve))
+                        elif dist > row[ALPHA0]:
+                            dist = row[ALPHA0]
+                            counts[b, 0] += 1
                         arhoq[b, slot, ix, iy, iz] = ar * dist

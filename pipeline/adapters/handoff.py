@@ -7,6 +7,7 @@ import time
 from typing import Any
 
 import h5py
+import numpy as np
 
 from impactpipe.hydro.output.io import read_snapshot, read_tracers
 from impactpipe.hydro.problems.impact import PROJECTILE_MATERIAL
@@ -22,6 +23,17 @@ from ..stages import StageContext
 
 
 log = logging.getLogger(__name__)
+
+def porous_materials(materials: dict[str, dict[str, Any]], names: list[str]) -> np.ndarray:
+    """(M,) booleans: which of the snapshot's materials ``names`` are porous (a resolved ``porosity``
+    block with alpha0 > 1; an impact's projectile is named "<material> (projectile)" when target
+    and projectile share their material, hydro/problems/impact.py)."""
+    out = []
+    for name in names:
+        block = materials.get(name.removesuffix(" (projectile)"), {}).get("porosity")
+        out.append(bool(block) and float(block["alpha0"]) > 1.0)
+    return np.array(out, dtype=bool)
+
 
 def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
     """Hand off the final hydro snapshot of ``ctx.run_dir``; returns the summary entries."""
@@ -54,6 +66,7 @@ def run_handoff_stage(ctx: StageContext) -> dict[str, Any]:
         total_mass=halves * mesh_mass_initial,
         escape_speed=values["escape_speed"],
         projectile_material_index=projectile_index,
+        porous_materials=porous_materials(config.resolved_materials(), snapshot.material_names),
         min_density_fraction=config.handoff.min_density_fraction,
         min_mass_fraction=config.handoff.min_mass_fraction,
         velocity_noise=config.handoff.velocity_noise,
