@@ -656,6 +656,19 @@ def test_3d_budget_round_trip_and_summary_types(tmp_path):
             assert len(value) == 3 and all(type(x) is float for x in value)
 
 
+def test_a_hand_off_file_without_the_distension_reads_it_as_unknown(tmp_path):
+    """Files written before particles carried their distension: read as NaN (unknown), the rest as written."""
+    particles, budget = handoff(trace_block_snapshot())
+    assert (particles.distension == 1.0).all()  # no porous material
+    path = tmp_path / "handoff.h5"
+    write_particles(path, particles, budget, {})
+    with h5py.File(path, "r+") as h5:
+        del h5["particles"]["distension"]
+    back = read_particles(path)
+    assert back.distension.shape == particles.mass.shape and np.isnan(back.distension).all()
+    np.testing.assert_array_equal(back.mass, particles.mass)
+
+
 def test_units_mismatch_is_refused(tmp_path):
     particles, budget = handoff(trace_block_snapshot())
     path = tmp_path / "handoff.h5"
