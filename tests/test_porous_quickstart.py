@@ -1,6 +1,8 @@
 """configs/porous_quickstart.yaml (the quickstart impact into a porous basalt target, alpha0 = 1.5)
-through all four stages: budgets closed, the target compacted where the projectile hit it, and
-the hand-off's density floor taken from the porous bulk density."""
+and configs/porous_strength_quickstart.yaml (the same with GEO weak strength and chi = 0.5 on the
+porous target) through all four stages: budgets closed, the target compacted where the
+projectile hit it and nowhere beyond alpha0, the hand-off's density floor taken from the porous
+bulk density, and with strength a deviatoric stress in the target."""
 
 import json
 from pathlib import Path
@@ -12,19 +14,31 @@ from click.testing import CliRunner
 
 from impactpipe.pipeline.cli import main
 
-CONFIG = Path(__file__).parent.parent / "configs" / "porous_quickstart.yaml"
+CONFIGS = Path(__file__).parent.parent / "configs"
+CONFIG = CONFIGS / "porous_quickstart.yaml"
 
 
-@pytest.fixture(scope="module")
-def porous_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("porous_quickstart")
-    result = CliRunner().invoke(main, ["run", str(CONFIG), "--out", str(out), "-q"])
+def run_config(tmp_path_factory, config: Path) -> Path:
+    """The run directory of ``impactpipe run config``."""
+    out = tmp_path_factory.mktemp(config.stem)
+    result = CliRunner().invoke(main, ["run", str(config), "--out", str(out), "-q"])
     assert result.exit_code == 0, result.output
     return out
 
 
-def test_every_stage_runs_and_the_budgets_close(porous_run):
-    summary = json.loads((porous_run / "summary.json").read_text())
+@pytest.fixture(scope="module")
+def porous_run(tmp_path_factory):
+    return run_config(tmp_path_factory, CONFIG)
+
+
+@pytest.fixture(scope="module")
+def porous_strength_run(tmp_path_factory):
+    return run_config(tmp_path_factory, CONFIGS / "porous_strength_quickstart.yaml")
+
+
+@pytest.mark.parametrize("run", ["porous_run", "porous_strength_run"])
+def test_every_stage_runs_and_the_budgets_close(run, request):
+    summary = json.loads((request.getfixturevalue(run) / "summary.json").read_text())
     assert set(summary["stages"]) == {"hydro", "handoff", "nbody", "analysis"}
     hydro, handoff, nbody = summary["hydro_budget"], summary["handoff_budget"], summary["nbody_budget"]
     assert abs(hydro["mass_error"]) < 1e-12
@@ -90,3 +104,17 @@ def test_handoff_spheres_carry_the_distension_of_their_material(porous_run):
     excess = float(np.where(porous_mass > 0.0, porous_mass * (snap.extra["distension"] - 1.0), 0.0).sum())
     carried = float((particles.mass * (alpha - 1.0)).sum())
     assert abs(carried - excess) <= 0.5 * budget.dropped_mass + 1e-9 * excess
+
+
+def test_the_porous_target_with_strength_compacts_and_carries_stress(porous_strength_run):
+    with h5py.File(porous_strength_run / "hydro.h5", "r") as fh:
+        snap = fh["snapshots"][sorted(fh["snapshots"])[-1]]
+        distension = snap["extra/distension"][()]
+        von_mises = snap["extra/von_mises_stress"][()]
+        arho = snap["partial_density"][()]
+    target = arho[:, 0] > 0.0
+    values = distension[target]
+    assert values.min() >= 1.0 and values.max() <= 1.5 * (1 + 1e-12)
+    compacted = values < 1.5 * (1 - 1e-3)
+    assert 0.0 < compacted.mean() < 1.0
+    assert von_mises[target].max() > 0.0

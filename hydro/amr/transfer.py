@@ -505,14 +505,7 @@ def _reflux_cell(cb, side, ix, iy, iz, volume, delta, alpha, arho, arhoe, arhoq,
     ``amounts``).
     """
     nmat = alpha.shape[1]
-    sign = 1.0 / volume if side == 0 else -1.0 / volume
-    filled = 0.0
-    for k in range(nmat):
-        filled += alpha[cb, k, ix, iy, iz]
-    strain = 0.0
-    if filled >= 1.0 - FULL_TOLERANCE:
-        for k in range(nmat):
-            strain += sign * delta[k]
+    sign, strain = _face_volume_change(cb, side, ix, iy, iz, volume, delta, alpha)
     for k in range(nmat):
         a = alpha[cb, k, ix, iy, iz]
         a_new = a + sign * delta[k] - a * strain
@@ -604,20 +597,30 @@ def reflux_register(plan, volume, register, block_level, level, fine_cells, fine
         register[e, :] = 0.0
 
 
+@njit(cache=True, inline="always")
+def _face_volume_change(b, side, ix, iy, iz, volume, delta, alpha):
+    """(sign, strain) of a correction ``delta`` of cell (ix, iy, iz) of block ``b`` through its
+    ``side`` face (:func:`_reflux_cell`): sign = +1/V on the low face, -1/V on the high face
+    (1/m^3), and the volume strain sign sum_k Delta(alpha_k) (-) that a cell without void
+    (sum_k alpha_k >= 1 - FULL_TOLERANCE) shares among its materials, 0 in a cell with void."""
+    sign = 1.0 / volume if side == 0 else -1.0 / volume
+    filled = 0.0
+    for k in range(alpha.shape[1]):
+        filled += alpha[b, k, ix, iy, iz]
+    strain = 0.0
+    if filled >= 1.0 - FULL_TOLERANCE:
+        for k in range(alpha.shape[1]):
+            strain += sign * delta[k]
+    return sign, strain
+
+
 @njit(cache=True)
 def _largest_fraction(b, side, ix, iy, iz, volume, delta, alpha, arho):
     """The largest t in [0, 1] for which the correction t ``delta`` of cell (ix, iy, iz) of block
     ``b`` through its ``side`` face (:func:`_reflux_cell`) leaves every partial density and volume
     fraction >= 0 (both are linear in t)."""
     nmat = alpha.shape[1]
-    sign = 1.0 / volume if side == 0 else -1.0 / volume
-    filled = 0.0
-    for k in range(nmat):
-        filled += alpha[b, k, ix, iy, iz]
-    strain = 0.0
-    if filled >= 1.0 - FULL_TOLERANCE:
-        for k in range(nmat):
-            strain += sign * delta[k]
+    sign, strain = _face_volume_change(b, side, ix, iy, iz, volume, delta, alpha)
     largest = 1.0
     for k in range(nmat):
         a = alpha[b, k, ix, iy, iz]

@@ -57,12 +57,10 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
     blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range,
     :mod:`impactpipe.hydro.parallel`); they read any block's interior cells."""
     for b in prange(lo, hi):
-        _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arho, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arhoe, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(mom, b, neighbor, neighbor_level, axis, ghost, axis)
-        _fill_block_ghosts(energy, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
+        for side in range(2):
+            nbr = neighbor[b, axis, side]
+            if nbr < 0 or neighbor_level[b, axis, side] == 0:
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
 
 
 @njit(cache=True, parallel=True)
@@ -71,12 +69,10 @@ def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, 
     refinement level's blocks before its substep's sweep (:mod:`impactpipe.hydro.amr.subcycle`)."""
     for e in prange(blocks.shape[0]):
         b = blocks[e]
-        _fill_block_ghosts(alpha, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arho, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arhoe, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(mom, b, neighbor, neighbor_level, axis, ghost, axis)
-        _fill_block_ghosts(energy, b, neighbor, neighbor_level, axis, ghost, -1)
-        _fill_block_ghosts(arhoq, b, neighbor, neighbor_level, axis, ghost, -1)
+        for side in range(2):
+            nbr = neighbor[b, axis, side]
+            if nbr < 0 or neighbor_level[b, axis, side] == 0:
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
 
 
 @njit(cache=True, parallel=True)
@@ -91,14 +87,20 @@ def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbo
         b = blocks[e]
         for side in range(2):
             nbr = neighbor[b, axis, side]
-            if nbr < 0 or neighbor_level[b, axis, side] != 0 or (lo <= nbr < hi):
-                continue
-            _fill_block_side(alpha, b, side, nbr, axis, ghost, -1)
-            _fill_block_side(arho, b, side, nbr, axis, ghost, -1)
-            _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1)
-            _fill_block_side(mom, b, side, nbr, axis, ghost, axis)
-            _fill_block_side(energy, b, side, nbr, axis, ghost, -1)
-            _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1)
+            if nbr >= 0 and neighbor_level[b, axis, side] == 0 and not (lo <= nbr < hi):
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
+
+
+@njit(cache=True)
+def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost):
+    """:func:`_fill_block_side` for every conserved field, the normal momentum flipped at a
+    reflecting face."""
+    _fill_block_side(alpha, b, side, nbr, axis, ghost, -1)
+    _fill_block_side(arho, b, side, nbr, axis, ghost, -1)
+    _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1)
+    _fill_block_side(mom, b, side, nbr, axis, ghost, axis)
+    _fill_block_side(energy, b, side, nbr, axis, ghost, -1)
+    _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1)
 
 
 @njit(cache=True)
