@@ -86,6 +86,19 @@ def test_closed_box_conserves_through_refinement_and_coarsening(boundary, nmat):
     assert_closed_box_conserves(sim, start, end, "momentum_with_outflow")
 
 
+def dense_disc_state(mesh):
+    """(state, u0): gas at rho 1 and p 1 with a disc (radius sqrt(0.02) about (0.3, 0.3)) of the
+    HEAVY material 1e3 times denser at the same pressure, everything moving at u0 = (1, 0.5)."""
+    eos = pack_eos([GAS, HEAVY])
+    state = HydroState.empty(mesh, 2)
+    c = mesh.cell_centers()
+    u0 = np.array([1.0, 0.5, 0.0])
+    state.set_material(mesh, 1.0, 0, eos, 1.0, u0, pressure=1.0)
+    disc = (((c[:, 0] - 0.3) ** 2 + (c[:, 1] - 0.3) ** 2) < 0.02).astype(float)
+    state.set_material(mesh, disc, 1, eos, 1000.0, u0, pressure=1.0)
+    return state, u0
+
+
 def assert_closed_box_conserves(sim, start: dict, end: dict, momentum: str = "momentum") -> None:
     """Mass, the ``momentum`` total and energy of a closed box from ``sim.totals()`` at ``start``
     and ``end`` to 1e-12, net of what the floors added or the void cleanup removed (counted),
@@ -110,13 +123,7 @@ def test_moving_interface_crosses_level_boundaries_at_uniform_pressure_and_veloc
     prolongation it was 1.4e-7 after 400 steps and 1.1e-5 after 800.
     """
     mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [32, 32], [("periodic", "periodic")] * 2, 8, max_level=2)
-    eos = pack_eos([GAS, HEAVY])
-    state = HydroState.empty(mesh, 2)
-    c = mesh.cell_centers()
-    u0 = np.array([1.0, 0.5, 0.0])
-    state.set_material(mesh, 1.0, 0, eos, 1.0, u0, pressure=1.0)
-    disc = (((c[:, 0] - 0.3) ** 2 + (c[:, 1] - 0.3) ** 2) < 0.02).astype(float)
-    state.set_material(mesh, disc, 1, eos, 1000.0, u0, pressure=1.0)
+    state, u0 = dense_disc_state(mesh)
     sim = Simulation(mesh, ["gas", "heavy"], [GAS, HEAVY], state, refinement=RefinementRule(interval=2))
     for _ in range(8):
         sim.run(100.0, max_steps=100)

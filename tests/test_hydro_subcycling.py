@@ -15,7 +15,7 @@ from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.exact.riemann import exact_riemann
 from test_hydro_amr import (ERROR_FACTOR, GAS, GAS_14, HEAVY, _density_l1, _disc_and_pulse, _sedov_density,
-                            assert_closed_box_conserves)
+                            assert_closed_box_conserves, dense_disc_state)
 
 
 def _box(levels, cells=16, mode="per_level", interval=2):
@@ -89,13 +89,7 @@ def test_dense_disc_crosses_level_faces_at_uniform_pressure_and_velocity():
     share of the register correction a reflux drove the disc's trace in a coarse cell to
     -2.0e-8 kg at root step 96: |u - u0| 8.2e-5."""
     mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [32, 32], [("periodic", "periodic")] * 2, 8, max_level=2)
-    eos = pack_eos([GAS, HEAVY])
-    state = HydroState.empty(mesh, 2)
-    c = mesh.cell_centers()
-    u0 = np.array([1.0, 0.5, 0.0])
-    state.set_material(mesh, 1.0, 0, eos, 1.0, u0, pressure=1.0)
-    disc = (((c[:, 0] - 0.3) ** 2 + (c[:, 1] - 0.3) ** 2) < 0.02).astype(float)
-    state.set_material(mesh, disc, 1, eos, 1000.0, u0, pressure=1.0)
+    state, u0 = dense_disc_state(mesh)
     sim = Simulation(mesh, ["gas", "heavy"], [GAS, HEAVY], state, refinement=RefinementRule(interval=2),
                      time_stepping="per_level")
     sim.run(100.0, max_steps=100)
