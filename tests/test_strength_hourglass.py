@@ -15,8 +15,9 @@ C, Z, DT = 0.5, 1.5e7, 1.0e-4
 
 def _box(boundary: str, velocity_of, shear_stress: float = 1.0e9):
     """(Simulation, mesh): 2d-planar 16^2 box of 1 m cells of basalt at rest density with the
-    velocity ``velocity_of(x, z)`` (m/s, a (3, ...) array), GEO strength and the deviatoric
-    stress S_xy = ``shear_stress`` (Pa) everywhere (the hourglass traction's cap)."""
+    velocity ``velocity_of(x, z)`` (m/s, a (3, ...) array), GEO strength with the hourglass
+    viscosity (C, Z) and the deviatoric stress S_xy = ``shear_stress`` (Pa) everywhere (the
+    hourglass traction's cap)."""
     mesh = BlockMesh.uniform("2d-planar", [0.0, 0.0], [16.0, 16.0], [16, 16], [(boundary, boundary)] * 2, 8)
     spec = preset_material("basalt")["eos"]
     centres = mesh.cell_centers()
@@ -24,6 +25,8 @@ def _box(boundary: str, velocity_of, shear_stress: float = 1.0e9):
     state.set_material(mesh, 1.0, 0, pack_eos([spec]), spec["rho0"], velocity_of(centres[:, 0], centres[:, 1]),
                        pressure=1.0e6)
     sim = Simulation(mesh, ["basalt"], [spec], state, strength=[resolve_strength("geo", "strong", {})])
+    # the model then fills the two ghost layers of its work arrays that the hourglass stencil reads
+    sim.strength.set_hourglass_viscosity(C, Z)
     sim.state.arhoq[:, 3] = sim.state.arho[:, 0] * shear_stress
     return sim, mesh
 

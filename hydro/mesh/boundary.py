@@ -37,17 +37,19 @@ def fill_ghosts(field, neighbor, neighbor_level, axis, ghost, flip_component, lo
     cells.
     """
     for b in prange(lo, hi):
-        _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component)
+        _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component, ghost)
 
 
 @njit(cache=True, parallel=True)
-def fill_ghosts_where(field, neighbor, neighbor_level, axis, ghost, lo, hi, wanted):
+def fill_ghosts_where(field, neighbor, neighbor_level, axis, ghost, lo, hi, wanted, layers):
     """:func:`fill_ghosts` of a field without sign flips for the blocks ``b`` of ``lo .. hi - 1``
     with ``wanted[b]`` != 0 only (the strength step's work arrays: a block without material
-    reads none of its ghosts)."""
+    reads none of its ghosts), and of the ``layers`` (1 .. ``ghost``) ghost layers next to the
+    interior only (the others keep what they held: the stress step's kernels read one layer,
+    its hourglass viscosity two)."""
     for b in prange(lo, hi):
         if wanted[b] != 0:
-            _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, -1)
+            _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, -1, layers)
 
 
 @njit(cache=True, parallel=True)
@@ -95,32 +97,34 @@ def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbo
 def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost):
     """:func:`_fill_block_side` for every conserved field, the normal momentum flipped at a
     reflecting face."""
-    _fill_block_side(alpha, b, side, nbr, axis, ghost, -1)
-    _fill_block_side(arho, b, side, nbr, axis, ghost, -1)
-    _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1)
-    _fill_block_side(mom, b, side, nbr, axis, ghost, axis)
-    _fill_block_side(energy, b, side, nbr, axis, ghost, -1)
-    _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1)
+    _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, ghost)
+    _fill_block_side(arho, b, side, nbr, axis, ghost, -1, ghost)
+    _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, ghost)
+    _fill_block_side(mom, b, side, nbr, axis, ghost, axis, ghost)
+    _fill_block_side(energy, b, side, nbr, axis, ghost, -1, ghost)
+    _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, ghost)
 
 
 @njit(cache=True)
-def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component):
-    """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring)."""
+def _fill_block_ghosts(field, b, neighbor, neighbor_level, axis, ghost, flip_component, layers):
+    """The ghost slabs of block ``b`` along ``axis`` (rules in the module docstring), their
+    ``layers`` layers next to the interior."""
     for side in range(2):
         nbr = neighbor[b, axis, side]
         if nbr >= 0 and neighbor_level[b, axis, side] != 0:
             continue
-        _fill_block_side(field, b, side, nbr, axis, ghost, flip_component)
+        _fill_block_side(field, b, side, nbr, axis, ghost, flip_component, layers)
 
 
 @njit(cache=True)
-def _fill_block_side(field, b, side, nbr, axis, ghost, flip_component):
+def _fill_block_side(field, b, side, nbr, axis, ghost, flip_component, layers):
     """The ghost slab of block ``b`` on ``side`` (0 low, 1 high) along ``axis`` from its same-level
-    neighbour ``nbr``, or by the domain-face rule ``nbr`` < 0 names (module docstring)."""
+    neighbour ``nbr``, or by the domain-face rule ``nbr`` < 0 names (module docstring): its
+    ``layers`` (1 .. ``ghost``) layers next to the interior, j = 0 .. layers - 1."""
     nb, nc, nx, ny, nz = field.shape
     npad = (nx, ny, nz)[axis]
     n = npad - 2 * ghost
-    for j in range(ghost):
+    for j in range(layers):
         if side == 0:
             dst = ghost - 1 - j
             if nbr >= 0:
@@ -168,20 +172,22 @@ def _hi(npad, ghost):
 
 
 def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = -1,
-                      wanted: np.ndarray | None = None) -> None:
+                      wanted: np.ndarray | None = None, layers: int | None = None) -> None:
     """Fill the ghosts of one field along ``axis``; coarse/fine faces by restriction and copies.
 
     For fields that are not conserved amounts (velocities, stresses of the strength step):
     coarse ghosts get the volume-weighted fine means, fine ghosts a copy of the coarse cell.
     ``wanted[NB]``: on a uniform mesh, fill only the same-level ghosts of the blocks where it
-    is not 0 (without sign flips; :func:`fill_ghosts_where`); an adaptive mesh fills every
-    block's, since its prolongation reads the coarse blocks' ghosts.
+    is not 0 (without sign flips; :func:`fill_ghosts_where`), and there only the ``layers``
+    ghost layers next to the interior (all by default); an adaptive mesh fills every block's
+    ghosts, every layer, since its prolongation reads the coarse blocks' ghosts.
     """
     g = int(mesh.ghost[axis])
     if g == 0:
         return
     if wanted is not None and not mesh.adaptive:
-        fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, wanted)
+        fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, wanted,
+                          g if layers is None else layers)
         return
     fill_ghosts(field, mesh.neighbor, mesh.neighbor_level, axis, g, flip_component, 0, mesh.nblocks)
     if mesh.adaptive:

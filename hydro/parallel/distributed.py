@@ -81,12 +81,12 @@ class WholeMesh:
         """Complete the ghost fill :meth:`start_ghosts` began (nothing left for one process)."""
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
-                          wanted: np.ndarray | None = None) -> None:
+                          wanted: np.ndarray | None = None, layers: int | None = None) -> None:
         """Fill the ghosts of the ``components`` of a derived field (velocities, stresses) of
         every block along ``axis`` (on a uniform mesh only of the blocks where ``wanted[b]`` is
-        not 0, when given), without sign flips
-        (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`)."""
-        fill_field_ghosts(field[:, components], mesh, axis, wanted=wanted)
+        not 0, when given, and of those only the ``layers`` ghost layers next to the interior),
+        without sign flips (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`)."""
+        fill_field_ghosts(field[:, components], mesh, axis, wanted=wanted, layers=layers)
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """(largest signal rate (1/s), first block with a non-finite rate or -1) over every process."""
@@ -224,10 +224,11 @@ class BlockRanges(WholeMesh):
                                      fill.late + self.lo, self.lo, self.hi)
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
-                          wanted: np.ndarray | None = None) -> None:
+                          wanted: np.ndarray | None = None, layers: int | None = None) -> None:
         """Receive the neighbours' strips of the ``components`` of ``field`` along ``axis``, then
         fill the owned blocks' ghosts of those components (on a uniform mesh only of the blocks
-        where ``wanted[b]`` is not 0, when given)."""
+        where ``wanted[b]`` is not 0, when given, and of those only the ``layers`` ghost layers
+        next to the interior)."""
         g = int(mesh.ghost[axis])
         if g == 0:
             return
@@ -238,7 +239,7 @@ class BlockRanges(WholeMesh):
                             components)
         if wanted is not None and not mesh.adaptive:
             fill_ghosts_where(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
-                              wanted)
+                              wanted, g if layers is None else layers)
         else:
             fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
         if mesh.adaptive:

@@ -17,8 +17,10 @@ momentum sources with a kick - update - kick splitting (velocity Verlet; docs/st
 4. :meth:`~MaterialStrength.kick` over dt / 2 with S^(n+1), then gravity over dt / 2.
 
 The work arrays' ghosts are filled after each of steps 1 to 3, for the slots that step wrote
-(reflecting walls mirror them: the normal velocity and the shear components with one index
-normal to the wall change sign).  The state's ghosts are not used.  Updating the stress between two
+and a kernel reads in a ghost, one layer deep unless the hourglass viscosity reads two
+(:meth:`MaterialStrength._ghost_reads`; reflecting walls mirror them: the normal velocity and
+the shear components with one index normal to the wall change sign).  The state's ghosts are
+not used.  Updating the stress between two
 half kicks is neutral for elastic waves up to the CFL limit; updating it before one full kick
 (the scheme this replaced) amplified them by 2 % per step at cfl 0.4 (docs/strength.md).
 
@@ -303,29 +305,54 @@ class MaterialStrength:
             return rho0
         return rho0 / self.porosity[:, ALPHA0]
 
-    def _fill_work_ghosts(self, partition, axis: int, slots: slice) -> None:
-        """Ghosts of the work arrays' ``slots`` along ``axis``: copies of the neighbours' cells
-        (coarse/fine faces: restriction and copies; neighbours of another MPI rank: received
-        strips; ``partition.fill_field_ghosts``), then the wall sign flips.  A copied velocity
-        or fill equals the one computed from copied conserved ghosts, so the work arrays never
-        need the state's ghosts.  On a uniform mesh only the blocks holding material get
-        ghosts (:attr:`holds`): the stress step reads none of a void block's (every kernel
-        skips its void cells), and half of an impact's blocks are void.  Their stale ghosts
-        may be flipped at a wall; nothing reads them."""
-        partition.fill_field_ghosts(self.work, self.mesh, axis, slots, self.holds)
-        for side in (0, 1):
-            flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-            self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if slots.start <= c < slots.stop])
+    def _ghost_reads(self) -> tuple[int, frozenset]:
+        """(layers, slots): how many ghost layers of the work arrays the kernels of the stress
+        step read, and the work slots they read in no ghost.  The velocity gradient
+        (:func:`update_stress`) and the stress divergence read the cells next to a cell, one
+        layer, and on a 2-D mesh neither S_zz (the hoop stress of r-z, read in its own cell
+        only) nor, in r-z, v_theta (the update sets the theta derivatives to zero).  The
+        hourglass viscosity reads two layers and every slot."""
+        if self.hourglass[0] > 0.0 or self.mesh.ndim != 2:
+            return GHOST, frozenset()
+        skipped = {WK_S + 2}
+        if self.mesh.geometry_code == CYLINDRICAL:
+            skipped.add(WK_V + 2)
+        return 1, frozenset(skipped)
 
-    def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components) -> None:
-        """Negate ``components`` of ``array`` in the ghost slabs of the reflecting faces on ``side`` of ``axis``."""
+    def _fill_work_ghosts(self, partition, axis: int, slots: slice) -> None:
+        """Ghosts of the work arrays' ``slots`` along ``axis`` that some kernel reads
+        (:meth:`_ghost_reads`): copies of the neighbours' cells (coarse/fine faces: restriction
+        and copies; neighbours of another MPI rank: received strips;
+        ``partition.fill_field_ghosts``), then the wall sign flips.  A copied velocity or fill
+        equals the one computed from copied conserved ghosts, so the work arrays never need the
+        state's ghosts.  On a uniform mesh only the blocks holding material get ghosts
+        (:attr:`holds`), and of those only the layers the kernels read: the stress step reads
+        none of a void block's (every kernel skips its void cells), and half of an impact's
+        blocks are void.  The ghosts left stale may be flipped at a wall; nothing reads them.
+        An adaptive mesh fills every layer of every block (its prolongation reads the coarse
+        blocks' ghosts)."""
+        layers, skipped = self._ghost_reads()
+        if self.mesh.adaptive:
+            layers = GHOST
+        start = slots.start
+        for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
+            if stop > start:
+                partition.fill_field_ghosts(self.work, self.mesh, axis, slice(start, stop), self.holds, layers)
+                for side in (0, 1):
+                    flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
+                    self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if start <= c < stop], layers)
+            start = stop + 1
+
+    def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int) -> None:
+        """Negate ``components`` of ``array`` in the ``layers`` ghost layers next to the interior
+        of the reflecting faces on ``side`` of ``axis``."""
         mesh = self.mesh
         blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
-        if blocks.size == 0:
+        if blocks.size == 0 or not components:
             return
         n = mesh.interior_shape[axis]
         index = [blocks, 0, slice(None), slice(None), slice(None)]
-        index[2 + axis] = slice(0, GHOST) if side == 0 else slice(GHOST + n, GHOST + n + GHOST)
+        index[2 + axis] = slice(GHOST - layers, GHOST) if side == 0 else slice(GHOST + n, GHOST + n + layers)
         for comp in components:
             index[1] = comp
             array[tuple(index)] *= -1.0
