@@ -74,11 +74,87 @@ def _face_geometry(cylindrical, d, r0, i, dx0, dx1, dx2, h):
     return 1.0 / h, 1.0 / h, area, area
 
 
+@njit(cache=True, inline="always")
+def _face_stress(ndim, work, b, ix, iy, iz, d, side, phi_c):
+    """The stress on the face on ``side`` (0 low, 1 high) along axis ``d`` of the cell
+    (ix, iy, iz) of block b, fill ``phi_c`` > 0: (1.0 where the neighbour holds material, else
+    0.0 and no stress, the traction S_face components t0, t1, t2 (Pa) along the face normal,
+    t.v_face (W/m^2)).  The same numbers from either cell of the face (the sums are symmetric),
+    so momentum and energy are conserved to round-off.  Called with constant ``d`` and ``side``,
+    so the slots and indices are fixed at compile time."""
+    jx, jy, jz = ix, iy, iz
+    step = 1 if side == 1 else -1
+    if d == 0:
+        jx += step
+    elif d == 1:
+        jy += step
+    else:
+        jz += step
+    phi_n = work[b, WK_PHI, jx, jy, jz]
+    if phi_n <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    # 0.5 min(phi_c, phi_n) / phi: exactly 0.5 on the emptier side (no division)
+    shared = min(phi_c, phi_n)
+    wc = 0.5 if shared == phi_c else 0.5 * shared / phi_c
+    wn = 0.5 if shared == phi_n else 0.5 * shared / phi_n
+    t0 = (wc * work[b, WK_S + stress_slot(0, d), ix, iy, iz]
+          + wn * work[b, WK_S + stress_slot(0, d), jx, jy, jz])
+    t1 = (wc * work[b, WK_S + stress_slot(1, d), ix, iy, iz]
+          + wn * work[b, WK_S + stress_slot(1, d), jx, jy, jz])
+    v0 = 0.5 * (work[b, WK_V, ix, iy, iz] + work[b, WK_V, jx, jy, jz])
+    v1 = 0.5 * (work[b, WK_V + 1, ix, iy, iz] + work[b, WK_V + 1, jx, jy, jz])
+    t2 = 0.0
+    v2 = 0.0
+    if ndim > 2:
+        t2 = (wc * work[b, WK_S + stress_slot(2, d), ix, iy, iz]
+              + wn * work[b, WK_S + stress_slot(2, d), jx, jy, jz])
+        v2 = 0.5 * (work[b, WK_V + 2, ix, iy, iz] + work[b, WK_V + 2, jx, jy, jz])
+    return 1.0, t0, t1, t2, t0 * v0 + t1 * v1 + t2 * v2
+
+
+@njit(cache=True, inline="always")
+def _add_face(dt, b, ix, iy, iz, d, side, face, geo, edge, neighbor, neighbor_level, boundary, face_flux, col0,
+              d_mom0, d_mom1, d_mom2, d_e):
+    """Add the flux of the ``face`` values (:func:`_face_stress`) through the face on ``side``
+    along axis ``d`` of the cell (ix, iy, iz) of block b to its momentum and energy changes
+    (d_mom0, d_mom1, d_mom2, d_e), which it returns; ``geo`` the faces' geometry along ``d``
+    (:func:`_face_geometry`), ``edge`` whether the face is a block face.  What crosses a domain
+    face goes to ``boundary``, what crosses a block face to another refinement level to
+    ``face_flux`` (module docstring)."""
+    carries, t0, t1, t2, power = face
+    if carries == 0.0:
+        return d_mom0, d_mom1, d_mom2, d_e
+    inv_lo, inv_hi, area_lo, area_hi = geo
+    w = dt * (inv_hi if side == 1 else -inv_lo)
+    d_mom0 += w * t0
+    d_mom1 += w * t1
+    d_mom2 += w * t2
+    d_e += w * power
+    # domain faces: what leaves (flux -S n A dt) is counted
+    if edge and neighbor[b, d, side] < 0:
+        wa = -dt * (area_hi if side == 1 else -area_lo)
+        boundary[b, BND_MOMENTUM] += wa * t0
+        boundary[b, BND_MOMENTUM + 1] += wa * t1
+        boundary[b, BND_MOMENTUM + 2] += wa * t2
+        boundary[b, BND_ENERGY] += wa * power
+    elif edge and neighbor_level[b, d, side] != 0:
+        amount = -dt * (area_hi if side == 1 else area_lo)
+        j1 = iy if d == 0 else ix
+        j2 = iy if d == 2 else iz
+        face_flux[d, b, side, col0, j1, j2] = amount * t0
+        face_flux[d, b, side, col0 + 1, j1, j2] = amount * t1
+        face_flux[d, b, side, col0 + 2, j1, j2] = amount * t2
+        face_flux[d, b, side, col0 + 3, j1, j2] = amount * power
+    return d_mom0, d_mom1, d_mom2, d_e
+
+
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
                             boundary, face_flux, col0, lo, hi):
     """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the
-    blocks ``lo .. hi - 1``; see the module docstring."""
+    blocks ``lo .. hi - 1``; see the module docstring.  A cell sums its faces low then high
+    along axis 0, then along 1 and 2, one call of :func:`_face_stress` and :func:`_add_face`
+    per face with the axis and side as constants."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
@@ -102,71 +178,42 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
                     phi_c = work[b, WK_PHI, ix, iy, iz]
                     if phi_c <= 0.0:
                         continue
-                    d_mom0 = 0.0
-                    d_mom1 = 0.0
-                    d_mom2 = 0.0
-                    d_e = 0.0
-                    for d in range(ndim):
-                        # face areas over the cell volume (1/m) and physical face areas (m^2)
-                        inv_lo, inv_hi, area_lo, area_hi = geo0 if d == 0 else (geo1 if d == 1 else geo2)
-                        for side in range(2):
-                            jx, jy, jz = ix, iy, iz
-                            step = 1 if side == 1 else -1
-                            if d == 0:
-                                jx += step
-                            elif d == 1:
-                                jy += step
-                            else:
-                                jz += step
-                            phi_n = work[b, WK_PHI, jx, jy, jz]
-                            if phi_n <= 0.0:
-                                continue
-                            # 0.5 min(phi_c, phi_n) / phi: exactly 0.5 on the emptier side (no division)
-                            shared = min(phi_c, phi_n)
-                            wc = 0.5 if shared == phi_c else 0.5 * shared / phi_c
-                            wn = 0.5 if shared == phi_n else 0.5 * shared / phi_n
-                            t0 = (wc * work[b, WK_S + stress_slot(0, d), ix, iy, iz]
-                                  + wn * work[b, WK_S + stress_slot(0, d), jx, jy, jz])
-                            t1 = (wc * work[b, WK_S + stress_slot(1, d), ix, iy, iz]
-                                  + wn * work[b, WK_S + stress_slot(1, d), jx, jy, jz])
-                            v0 = 0.5 * (work[b, WK_V, ix, iy, iz] + work[b, WK_V, jx, jy, jz])
-                            v1 = 0.5 * (work[b, WK_V + 1, ix, iy, iz] + work[b, WK_V + 1, jx, jy, jz])
-                            t2 = 0.0
-                            v2 = 0.0
-                            if ndim > 2:
-                                t2 = (wc * work[b, WK_S + stress_slot(2, d), ix, iy, iz]
-                                      + wn * work[b, WK_S + stress_slot(2, d), jx, jy, jz])
-                                v2 = 0.5 * (work[b, WK_V + 2, ix, iy, iz] + work[b, WK_V + 2, jx, jy, jz])
-                            power = t0 * v0 + t1 * v1 + t2 * v2
-                            w = dt * (inv_hi if side == 1 else -inv_lo)
-                            d_mom0 += w * t0
-                            d_mom1 += w * t1
-                            d_mom2 += w * t2
-                            d_e += w * power
-                            # domain faces: what leaves (flux -S n A dt) is counted
-                            i_face = (ix if d == 0 else iy if d == 1 else iz)
-                            n_used = (nx if d == 0 else ny if d == 1 else nz)
-                            at_edge = (side == 0 and i_face == GHOST) or (side == 1 and i_face == n_used - GHOST - 1)
-                            if at_edge and neighbor[b, d, side] < 0:
-                                wa = -dt * (area_hi if side == 1 else -area_lo)
-                                boundary[b, BND_MOMENTUM] += wa * t0
-                                boundary[b, BND_MOMENTUM + 1] += wa * t1
-                                boundary[b, BND_MOMENTUM + 2] += wa * t2
-                                boundary[b, BND_ENERGY] += wa * power
-                            elif at_edge and neighbor_level[b, d, side] != 0:
-                                amount = -dt * (area_hi if side == 1 else area_lo)
-                                j1 = iy if d == 0 else ix
-                                j2 = iy if d == 2 else iz
-                                face_flux[d, b, side, col0, j1, j2] = amount * t0
-                                face_flux[d, b, side, col0 + 1, j1, j2] = amount * t1
-                                face_flux[d, b, side, col0 + 2, j1, j2] = amount * t2
-                                face_flux[d, b, side, col0 + 3, j1, j2] = amount * power
+                    dm0 = 0.0
+                    dm1 = 0.0
+                    dm2 = 0.0
+                    de = 0.0
+                    dm0, dm1, dm2, de = _add_face(dt, b, ix, iy, iz, 0, 0,
+                                                  _face_stress(ndim, work, b, ix, iy, iz, 0, 0, phi_c), geo0,
+                                                  ix == GHOST, neighbor, neighbor_level, boundary, face_flux, col0,
+                                                  dm0, dm1, dm2, de)
+                    dm0, dm1, dm2, de = _add_face(dt, b, ix, iy, iz, 0, 1,
+                                                  _face_stress(ndim, work, b, ix, iy, iz, 0, 1, phi_c), geo0,
+                                                  ix == nx - GHOST - 1, neighbor, neighbor_level, boundary,
+                                                  face_flux, col0, dm0, dm1, dm2, de)
+                    if ndim > 1:
+                        dm0, dm1, dm2, de = _add_face(dt, b, ix, iy, iz, 1, 0,
+                                                      _face_stress(ndim, work, b, ix, iy, iz, 1, 0, phi_c), geo1,
+                                                      iy == GHOST, neighbor, neighbor_level, boundary, face_flux,
+                                                      col0, dm0, dm1, dm2, de)
+                        dm0, dm1, dm2, de = _add_face(dt, b, ix, iy, iz, 1, 1,
+                                                      _face_stress(ndim, work, b, ix, iy, iz, 1, 1, phi_c), geo1,
+                                                      iy == ny - GHOST - 1, neighbor, neighbor_level, boundary,
+                                                      face_flux, col0, dm0, dm1, dm2, de)
+                    if ndim > 2:
+                        dm0, dm1, dm2, de = _add_face(dt, b, ix, iy, iz, 2, 0,
+                                                      _face_stress(ndim, work, b, ix, iy, iz, 2, 0, phi_c), geo2,
+                                                      iz == GHOST, neighbor, neighbor_level, boundary, face_flux,
+                                                      col0, dm0, dm1, dm2, de)
+                        dm0, dm1, dm2, de = _add_face(dt, b, ix, iy, iz, 2, 1,
+                                                      _face_stress(ndim, work, b, ix, iy, iz, 2, 1, phi_c), geo2,
+                                                      iz == nz - GHOST - 1, neighbor, neighbor_level, boundary,
+                                                      face_flux, col0, dm0, dm1, dm2, de)
                     if cylindrical:
                         r_lo = block_lo[b, 0] + (ix - gx) * dx0
                         r_hi = r_lo + dx0
-                        d_mom0 -= dt * work[b, WK_S + 2, ix, iy, iz] * 2.0 * (r_hi - r_lo) / (r_hi * r_hi - r_lo * r_lo)
-                    mom[b, 0, ix, iy, iz] += d_mom0
-                    mom[b, 1, ix, iy, iz] += d_mom1
+                        dm0 -= dt * work[b, WK_S + 2, ix, iy, iz] * 2.0 * (r_hi - r_lo) / (r_hi * r_hi - r_lo * r_lo)
+                    mom[b, 0, ix, iy, iz] += dm0
+                    mom[b, 1, ix, iy, iz] += dm1
                     if ndim > 2:
-                        mom[b, 2, ix, iy, iz] += d_mom2
-                    energy[b, 0, ix, iy, iz] += d_e
+                        mom[b, 2, ix, iy, iz] += dm2
+                    energy[b, 0, ix, iy, iz] += de
