@@ -46,7 +46,8 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed
    material at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0; Grady-Kipp:
    von Mises and GEO yield at (1 - D) Y(p_m, T_k, 0), the damaged share of the intact
-   matrix's strength, ROCK at Y(p_b, T_k, D)), T_k from the EOS, and
+   matrix's strength, ROCK at Y(p_b, T_k, D)), T_k from the EOS (T_k and Y are evaluated only
+   where the updated S is not zero: with S = 0 there is nothing to return, as Y >= 0), and
    Y = 0 for material expanded below STRENGTH_MIN_DENSITY_FRACTION of its reference density
    (fragmented or vapour: a deviatoric stress held by it would put S:D / rho_k of work into
    very little mass); with a surface gravity g (:meth:`impactpipe.hydro.strength.model.
@@ -470,13 +471,19 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             sxz = syz = 0.0
                         if ns < 4:
                             sxy = 0.0
+                        # a material without deviatoric stress does not yield whatever its yield
+                        # strength (>= 0): its temperature and yield strength are not evaluated
+                        stressed = (sxx != 0.0 or syy != 0.0 or szz != 0.0 or sxy != 0.0 or sxz != 0.0
+                                    or syz != 0.0)
                         # the mean stress the material bears: no more tension than it still holds,
                         # as in the sweeps, which open void instead of stretching it further
-                        tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
+                        y = 0.0
                         if gradual and model[k] != ROCK:
                             p_held = damaged_pressure(p_matrix, dmg)
-                            y = (1.0 - dmg) * equivalent_yield_stress(
-                                model[k], yield_strength(model[k], params[k], p_matrix, tk, 0.0))
+                            if stressed:
+                                tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
+                                y = (1.0 - dmg) * equivalent_yield_stress(
+                                    model[k], yield_strength(model[k], params[k], p_matrix, tk, 0.0))
                         else:
                             p_held = damaged_pressure(p_matrix, dmg) if gradual else max(pk, -y_t * (1.0 - dmg))
                             if surface_gravity is not None and work[b, WK_PHI, ix, iy, iz] < 1.0:
@@ -484,8 +491,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                 if layer > p_held:
                                     p_held = layer
                                     counts[b, CNT_SURFACE_LAYER] += 1
-                            y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k], dist * p_held,
-                                                                                 tk, dmg)) / dist
+                            if stressed:
+                                tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
+                                y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k],
+                                                                                     dist * p_held, tk, dmg)) / dist
                         if dist * rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
