@@ -72,7 +72,7 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
             rho0 = strength._reference_densities(eos)
             face = strength.face_flux[:, blocks].copy() if strength.face_flux.shape[1] else strength.face_flux
             cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, a.model, strength.ns, work, 0, len(blocks),
-                                     np.zeros(len(blocks), dtype=np.uint8))
+                                     np.zeros(len(blocks), dtype=np.uint8), np.zeros(len(blocks), dtype=np.uint8))
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
                                     counters[0], face, 3 * strength.nmat, 0, len(blocks))
             cell_velocities(arho, mom, work, 0, len(blocks))

@@ -123,6 +123,8 @@ class MaterialStrength:
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         #: per block, whether it has a cell holding material at the last :meth:`load_stress` (1) or not (0)
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
+        #: per block, whether some cell has mass at the last :meth:`load_stress` (1) or not (0)
+        self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
         self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
         self.face_flux = self._face_flux_arrays(mesh)
@@ -171,6 +173,7 @@ class MaterialStrength:
         self.mesh = mesh
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
+        self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.face_flux = self._face_flux_arrays(mesh)
         self.counts = summed_rows(self.counts, mesh.nblocks)
         self.amounts = summed_rows(self.amounts, mesh.nblocks)
@@ -226,7 +229,7 @@ class MaterialStrength:
         work arrays, then their ghosts: what the first half kick (:meth:`kick`) uses."""
         lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
-                                 self.arrays.model, self.ns, self.work, lo, hi, self.holds)
+                                 self.arrays.model, self.ns, self.work, lo, hi, self.holds, self.has_mass)
         for axis in range(self.mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns))
 
@@ -246,13 +249,13 @@ class MaterialStrength:
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
-                          self.surface_gravity)
+                          self.surface_gravity, has_mass=self.has_mass)
         else:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
-                          porosity=self.porosity)
+                          porosity=self.porosity, has_mass=self.has_mass)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns))
 

@@ -131,11 +131,14 @@ def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
 
 
 @njit(cache=True, parallel=True)
-def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds):
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
-    blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards), and into
+    blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards), into
     ``holds[b]`` whether block b has a cell that holds material (1) or not (0): the kernels
-    of the stress step read no ghost of a block without one, so its ghosts need no filling.
+    of the stress step read no ghost of a block without one, so its ghosts need no filling;
+    and into ``has_mass[b]`` whether some cell of block b has mass, rho > 0 (1) or not (0):
+    a cell without mass holds no transported scalars (every kernel that removes a material's
+    last mass zeroes them), so :func:`update_stress` has nothing to do in a block without.
 
     A cell's fill is min(phi, sum_k alpha_k rho_k / rho0_k), phi = sum_k alpha_k
     (``rho0[M]`` the materials' reference densities, kg/m^3; materials without one, rho0 = 0,
@@ -164,6 +167,7 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     gz = GHOST if nz > 1 else 0
     for b in prange(lo, hi):
         held = 0
+        massive = 0
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -177,6 +181,8 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
                         r0 = rho0[k]
                         solid += ar / r0 if r0 > 0.0 else alpha[b, k, ix, iy, iz]
                     fill = min(phi, solid)
+                    if rho > 0.0:
+                        massive = 1
                     if not (rho > 0.0 and fill >= PHI_VOID):
                         if work[b, WK_PHI, ix, iy, iz] != 0.0:
                             for d in range(3):
@@ -207,6 +213,7 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
                             s5 += scale * arhoq[b, q + 5, ix, iy, iz]
                     _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5)
         holds[b] = held
+        has_mass[b] = massive
 
 
 @njit(cache=True, inline="always")
@@ -335,7 +342,7 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
-                  damage_model=None, damage_params=None, surface_gravity=None, porosity=None):
+                  damage_model=None, damage_params=None, surface_gravity=None, porosity=None, has_mass=None):
     """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``;
     see the module docstring.
     ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
@@ -352,6 +359,8 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     damage models and their Weibull parameters (:func:`impactpipe.hydro.strength.parameters.
     pack_damage`); None where every material fails instantly (then ``arhoq`` has no flaw slots).
     ``surface_gravity[3]``: the gravity g (m/s^2) of the surface-layer pressure (step 4); None: none.
+    ``has_mass[NB]``: the blocks with mass (:func:`cell_velocity_and_stress`); the others are
+    skipped (their cells hold no scalars to clear).  None: every block is visited.
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
@@ -367,6 +376,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
     for b in prange(lo, hi):
+        if has_mass is not None:
+            if has_mass[b] == 0:
+                continue
         dxs = (block_dx[b, 0], block_dx[b, 1], block_dx[b, 2])
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
