@@ -19,15 +19,25 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
 
 1. Gather (:func:`impactpipe.hydro.scheme.mixture.mixture_state`): mixture density
    rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k (equal-strain mixture;
-   void counts as a zero-pressure component), bulk modulus K = sum alpha_k rho_k c_k^2
-   (c_k the longitudinal signal speed), signal speed c = sqrt(K / rho), the sound speed of
-   the equal-strain mixture.  A partly filled cell keeps the wave speed of its material
-   (K / rho = c_k^2), and a trace of a material (a volume fraction of 1e-10 holding a
-   round-off share of the energy, hence an enormous c_k) does not set the time step.
+   void counts as a zero-pressure component), signal speed c = sqrt(K_L / rho) with
+   K_L = sum alpha_k rho_k c_k^2 (c_k the longitudinal signal speed), the sound speed of
+   the equal-strain mixture, and the pressure's bulk modulus K = sum alpha_k rho_k c_K,k^2
+   (c_K,k the EOS sound speed; :func:`_bulk_modulus`).  A partly filled cell keeps the wave
+   speed of its material (K_L / rho = c_k^2), and a trace of a material (a volume fraction of
+   1e-10 holding a round-off share of the energy, hence an enormous c_k) does not set the
+   time step.
 2. MUSCL-Hancock: MC-limited slopes of (u_n, u_t1, u_t2, p) and per material
    (alpha_k, rho_k, e_k); half-step predictor with the primitive equations
    u_t = -u u_x - p_x / rho, p_t = -u p_x - K u_x, alpha_t = -u alpha_x,
    rho_k,t = -u rho_k,x - rho_k u_x, e_k,t = -u e_k,x - (p_k / rho_k) u_x.
+   The pressure predictor uses the bulk modulus K, not K_L = K + 4 G / 3: the sweeps carry
+   the pressure only, and the deviatoric share 4 G / 3 of a uniaxial strain's stress is the
+   strength update's (docs/strength.md).  With K_L the face pressures of a sweep along x
+   fell by dt/2 (4 G / 3) u_x more than the pressure itself does, and the split pair of
+   sweeps left the viscous stress sigma_xx - sigma_zz = dt (4 G / 3) u_x (a viscosity
+   G dt / 3, first order in the time step) on every shearing flow of a material with
+   strength: in the cohesionless column collapse (docs/validation.md) it held the run-out
+   (L_f - L0) / L0 to 0.875 at Courant number 0.4 against 1.234 at 0.1.
    The flow (u, p) is reconstructed where the cell and its neighbours are filled to
    PHI_FLOW_SECOND_ORDER (0.9) and hold materials of like density (rho_k within a factor
    DENSITY_RATIO_SECOND_ORDER of each other); the materials (alpha_k, rho_k, e_k) only where
@@ -345,6 +355,18 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
 
 
 @njit(cache=True, inline="always")
+def _bulk_modulus(sc, i, nmat):
+    """Bulk modulus K = sum_k alpha_k K_k (Pa) of cell i's equal-strain mixture, K_k = rho_k c_K,k^2
+    the materials' EOS moduli from their W rows (zero for an absent material): the modulus of
+    the pressure p = sum_k alpha_k p_k, which the Hancock predictor evolves (module docstring, step 2)."""
+    kmod = 0.0
+    for k in range(nmat):
+        r = W_MAT + W_STRIDE * k
+        kmod += sc[i, r] * sc[i, r + 4]
+    return kmod
+
+
+@njit(cache=True, inline="always")
 def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
                   kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp,
                   porosity):
@@ -421,7 +443,7 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     sc[i, W_C] = np.sqrt(kmod / ar)
     sc[i, W_RHO] = ar
     sc[i, W_P] = a * pk
-    sc[i, W_K] = kmod
+    sc[i, W_K] = _bulk_modulus(sc, i, tensile_strength.shape[0])
     inv = 1.0 / ar
     sc[i, W_UN] = mom_f[imn] * inv
     sc[i, W_UT1] = mom_f[im1] * inv
@@ -457,7 +479,7 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
     if rho > 0.0 and phi >= PHI_VOID:
         sc[i, W_RHO] = rho
         sc[i, W_P] = p
-        sc[i, W_K] = kmod
+        sc[i, W_K] = _bulk_modulus(sc, i, alpha.shape[1])
         inv = 1.0 / rho
         sc[i, W_UN] = mom[b, axis, ix, iy, iz] * inv
         sc[i, W_UT1] = mom[b, t1, ix, iy, iz] * inv
