@@ -174,6 +174,10 @@ class Simulation:
         #: (:mod:`impactpipe.hydro.scheme.plain_pencils`); False sends every pencil through the general
         #: path, which gives the same answer to round-off at about twice the cost.
         self.plain_pencils = True
+        #: The sweeps' pressure predictor takes the bulk modulus K, not K + 4G/3, in cells holding a
+        #: material with a shear modulus (:func:`impactpipe.hydro.scheme.directional.sweep`); set by the
+        #: granular column collapse, where K + 4G/3 left a viscosity G dt / 3 on its flow.
+        self.bulk_pressure_predictor = False
         self.dt_first: float | None = None
         self.last_dt = 0.0
         #: Called as ``observer(event, axis)`` between the operations of a step, for diagnostics
@@ -361,7 +365,7 @@ class Simulation:
               self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
               self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
               self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-              blocks, self.grady_kipp, self.porosity)
+              blocks, self.grady_kipp, self.porosity, self.bulk_pressure_predictor)
 
     def _observe(self, event: str, axis: int) -> None:
         if self.observer is not None:

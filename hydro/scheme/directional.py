@@ -21,8 +21,10 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    rho = sum alpha_k rho_k, velocity, pressure p = sum alpha_k p_k (equal-strain mixture;
    void counts as a zero-pressure component), signal speed c = sqrt(K_L / rho) with
    K_L = sum alpha_k rho_k c_k^2 (c_k the longitudinal signal speed), the sound speed of
-   the equal-strain mixture, and the pressure's bulk modulus K = sum alpha_k rho_k c_K,k^2
-   (c_K,k the EOS sound speed; :func:`_bulk_modulus`).  A partly filled cell keeps the wave
+   the equal-strain mixture, and the modulus K of the pressure predictor: K_L, or with
+   ``bulk_predictor`` the bulk modulus sum alpha_k rho_k c_K,k^2 (c_K,k the EOS sound speed;
+   :func:`_bulk_modulus`) where a material with a shear modulus is present (elsewhere the
+   two are equal, and K_L is kept bit for bit).  A partly filled cell keeps the wave
    speed of its material (K_L / rho = c_k^2), and a trace of a material (a volume fraction of
    1e-10 holding a round-off share of the energy, hence an enormous c_k) does not set the
    time step.
@@ -30,14 +32,18 @@ Stencil, cell i with ghosts g = 2 (``|`` faces)::
    (alpha_k, rho_k, e_k); half-step predictor with the primitive equations
    u_t = -u u_x - p_x / rho, p_t = -u p_x - K u_x, alpha_t = -u alpha_x,
    rho_k,t = -u rho_k,x - rho_k u_x, e_k,t = -u e_k,x - (p_k / rho_k) u_x.
-   The pressure predictor uses the bulk modulus K, not K_L = K + 4 G / 3: the sweeps carry
-   the pressure only, and the deviatoric share 4 G / 3 of a uniaxial strain's stress is the
-   strength update's (docs/strength.md).  With K_L the face pressures of a sweep along x
-   fell by dt/2 (4 G / 3) u_x more than the pressure itself does, and the split pair of
-   sweeps left the viscous stress sigma_xx - sigma_zz = dt (4 G / 3) u_x (a viscosity
+   With ``bulk_predictor`` (:attr:`impactpipe.hydro.solver.Simulation.bulk_pressure_predictor`,
+   set by the granular column collapse) K is the bulk modulus, not K_L = K + 4 G / 3: the
+   sweeps carry the pressure only, and the deviatoric share 4 G / 3 of a uniaxial strain's
+   stress is the strength update's (docs/strength.md).  With K_L the face pressures of a sweep
+   along x fall by dt/2 (4 G / 3) u_x more than the pressure itself does, and a split pair of
+   sweeps leaves the viscous stress sigma_xx - sigma_zz = dt (4 G / 3) u_x (a viscosity
    G dt / 3, first order in the time step) on every shearing flow of a material with
    strength: in the cohesionless column collapse (docs/validation.md) it held the run-out
-   (L_f - L0) / L0 to 0.875 at Courant number 0.4 against 1.234 at 0.1.
+   (L_f - L0) / L0 to 0.875 at Courant number 0.4 against 1.234 at 0.1.  The other scenes
+   keep K_L: with K, the 1-D spall test (tests/test_fracture_hydro.py) failed its target at
+   3.64 us, before the rarefactions meet (4.33 us); the K_L term damps the ringing of its
+   elastic waves.
    The flow (u, p) is reconstructed where the cell and its neighbours are filled to
    PHI_FLOW_SECOND_ORDER (0.9) and hold materials of like density (rho_k within a factor
    DENSITY_RATIO_SECOND_ORDER of each other); the materials (alpha_k, rho_k, e_k) only where
@@ -171,7 +177,8 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux, plain_pencils, blocks, grady_kipp=None, porosity=None):
+          floors, amounts, failure, face_flux, plain_pencils, blocks, grady_kipp=None, porosity=None,
+          bulk_predictor=False):
     """Advance the blocks listed in ``blocks`` by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -187,7 +194,9 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
     (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), None in scenes without them.
     ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`),
-    None in scenes without porous materials.
+    None in scenes without porous materials.  ``bulk_predictor``: the pressure predictor of
+    cells holding a material with a shear modulus uses the bulk modulus K, not K_L (module
+    docstring, step 2).
     """
     _, nmat, nx, ny, nz = alpha.shape
     npad = (nx, ny, nz)
@@ -288,14 +297,14 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
                                           shear_m, True, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                                          porosity)
+                                          porosity, bulk_predictor)
                     else:
                         for i in range(ncell):
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
                                           shear_m, False, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                                          porosity)
+                                          porosity, False)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
@@ -305,7 +314,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     for i in range(ncell):
                         _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
                                      arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                                     nq, wq_row, floors, grady_kipp, porosity)
+                                     nq, wq_row, floors, grady_kipp, porosity, bulk_predictor)
                     # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                     for i in range(1, ncell - 1):
                         _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
@@ -358,7 +367,9 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
 def _bulk_modulus(sc, i, nmat):
     """Bulk modulus K = sum_k alpha_k K_k (Pa) of cell i's equal-strain mixture, K_k = rho_k c_K,k^2
     the materials' EOS moduli from their W rows (zero for an absent material): the modulus of
-    the pressure p = sum_k alpha_k p_k, which the Hancock predictor evolves (module docstring, step 2)."""
+    the pressure p = sum_k alpha_k p_k, which the Hancock predictor evolves (module docstring,
+    step 2).  Used where a material with a shear modulus is present; elsewhere K_L = K and the
+    gathers keep their sum K_L bit for bit."""
     kmod = 0.0
     for k in range(nmat):
         r = W_MAT + W_STRIDE * k
@@ -367,9 +378,19 @@ def _bulk_modulus(sc, i, nmat):
 
 
 @njit(cache=True, inline="always")
+def _holds_sheared(sc, i, shear_modulus):
+    """Whether cell i holds a material (rho_k > 0 in its W rows) whose shear table row
+    ``shear_modulus[k]`` is not zero (:mod:`impactpipe.hydro.strength.parameters`)."""
+    for k in range(shear_modulus.shape[0]):
+        if sc[i, W_MAT + W_STRIDE * k + 1] > 0.0 and (shear_modulus[k, 0] != 0.0 or shear_modulus[k, 1] != 0.0):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
 def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
                   kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                  porosity):
+                  porosity, bulk_predictor):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
     (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
@@ -443,7 +464,7 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     sc[i, W_C] = np.sqrt(kmod / ar)
     sc[i, W_RHO] = ar
     sc[i, W_P] = a * pk
-    sc[i, W_K] = _bulk_modulus(sc, i, tensile_strength.shape[0])
+    sc[i, W_K] = _bulk_modulus(sc, i, tensile_strength.shape[0]) if sheared and bulk_predictor else kmod
     inv = 1.0 / ar
     sc[i, W_UN] = mom_f[imn] * inv
     sc[i, W_UT1] = mom_f[im1] * inv
@@ -452,7 +473,8 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
 
 @njit(cache=True, inline="always")
 def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, arhoq, mom, eos_kind, eos_params,
-                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors, grady_kipp, porosity):
+                 eos_table, shear_modulus, tensile_strength, nq, wq_row, floors, grady_kipp, porosity,
+                 bulk_predictor):
     """Step 1 for cell i of the pencil: the cell values of the W rows.
 
     The mixture and per-material states from :func:`impactpipe.hydro.scheme.mixture.mixture_state`
@@ -479,7 +501,8 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
     if rho > 0.0 and phi >= PHI_VOID:
         sc[i, W_RHO] = rho
         sc[i, W_P] = p
-        sc[i, W_K] = _bulk_modulus(sc, i, alpha.shape[1])
+        sheared = bulk_predictor and _holds_sheared(sc, i, shear_modulus)
+        sc[i, W_K] = _bulk_modulus(sc, i, alpha.shape[1]) if sheared else kmod
         inv = 1.0 / rho
         sc[i, W_UN] = mom[b, axis, ix, iy, iz] * inv
         sc[i, W_UT1] = mom[b, t1, ix, iy, iz] * inv
