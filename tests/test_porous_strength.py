@@ -15,6 +15,7 @@ from impactpipe.hydro.eos import (energy_from_pressure, pack_eos, pressure_sound
 from impactpipe.hydro.eos.porosity import pack_porosity, wave_speed_ratio
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
+from impactpipe.hydro.problems.impact import sphere_fraction
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.parameters import GEO
 from impactpipe.hydro.strength.update import CNT_TENSILE_FAILURE, CNT_YIELD, WK_PHI, update_stress
@@ -132,14 +133,7 @@ def test_porous_body_with_strength_at_rest_stays_at_rest():
     water = preset_material("water")["eos"]
     mesh = BlockMesh.uniform("2d-planar", [0.0, 0.0], [1.0, 1.0], [32, 32], [("periodic", "periodic")] * 2, 16)
     eos = pack_eos([spec, water])
-    c = mesh.cell_centers()
-    n = 8
-    inside = np.zeros_like(c[:, 0])
-    dx = mesh.min_cell_size()
-    for a in (np.arange(n) + 0.5) / n - 0.5:
-        for b in (np.arange(n) + 0.5) / n - 0.5:
-            inside += ((c[:, 0] + a * dx - 0.5) ** 2 + (c[:, 1] + b * dx - 0.5) ** 2) < 0.3 ** 2
-    frac = inside / n ** 2
+    frac = sphere_fraction(mesh, (0.5, 0.5), 0.3, 8)
     pressure = 1.0e6
     e_matrix = energy_from_pressure(eos.kind[0], eos.params[0], eos.table, BASALT["rho0"], ALPHA0 * pressure)
     state = HydroState.empty(mesh, 2)

@@ -9,6 +9,7 @@ from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_densities
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
+from impactpipe.hydro.problems.impact import sphere_fraction
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.update import WK_PHI, update_stress
 from impactpipe.pipeline.presets import resolve_strength
@@ -21,14 +22,7 @@ def _disc_scene(pressure):
     mesh = BlockMesh.uniform("2d-planar", [0.0, 0.0], [1.0, 1.0], [32, 32], [("periodic", "periodic")] * 2, 16)
     specs = [preset_material("basalt")["eos"], preset_material("water")["eos"]]
     eos = pack_eos(specs)
-    c = mesh.cell_centers()
-    n = 8
-    inside = np.zeros_like(c[:, 0])
-    dx = mesh.min_cell_size()
-    for a in (np.arange(n) + 0.5) / n - 0.5:
-        for b in (np.arange(n) + 0.5) / n - 0.5:
-            inside += ((c[:, 0] + a * dx - 0.5) ** 2 + (c[:, 1] + b * dx - 0.5) ** 2) < 0.3 ** 2
-    frac = inside / n**2
+    frac = sphere_fraction(mesh, (0.5, 0.5), 0.3, 8)
     state = HydroState.empty(mesh, 2)
     state.set_material(mesh, 1.0, 1, eos, specs[1]["rho0"], np.zeros(3), pressure=pressure)
     state.set_material(mesh, frac, 0, eos, specs[0]["rho0"], np.zeros(3), pressure=pressure)
