@@ -15,10 +15,8 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
-from impactpipe.hydro import BlockMesh, HydroState, Simulation
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed
+from impactpipe.hydro.problems import porous_slab
 from impactpipe.hydro.problems.common import preset_material
 
 
@@ -30,19 +28,9 @@ def wave_row(chi: float, cells: int, speed: float = 1.0) -> None:
     spec = {**basalt, "porosity": {"alpha0": 1.5, "eps_e": -2.0e-3, "kappa": 0.98, "alpha_x": 1.0, "chi": chi}}
     c = chi * c_s0
     rho00 = basalt["rho0"] / 1.5
-    mesh = BlockMesh.uniform("1d-planar", [0.0], [1.25], [cells * 5 // 4], [("reflecting", "outflow")])
-    state = HydroState.empty(mesh, 1)
-    x = mesh.cell_centers()[:, 0]
-    state.set_material(mesh, (x < 1.0).astype(float), 0, pack_eos([spec]), rho00, np.array([-speed, 0.0, 0.0]),
-                       specific_energy=0.0)
-    sim = Simulation(mesh, ["porous_basalt"], [spec], state)
-    end = 0.7 / (c - speed)
-    sim.run(end)
-    snap = sim.snapshot()
-    xs = snap.centers[:, 0]
-    p = snap.pressure.reshape(-1)
-    plateau = np.median(p[(xs > 0.1) & (xs < 0.5)])
-    measured = xs[np.flatnonzero(p > 0.5 * plateau).max()] / end + speed
+    sim = porous_slab.setup(spec, speed, cells)
+    sim.run(0.7 / (c - speed))
+    plateau, measured = porous_slab.wave_front(sim.snapshot(), speed)
     acoustic = rho00 * c * speed
     print(f"| {chi:g} | {c_s0:.1f} | {c:.1f} | {measured:.1f} | {measured / c - 1:+.2e} | {plateau / 1e6:.4f} | "
           f"{acoustic / 1e6:.4f} | {plateau / acoustic - 1:+.2e} |")
