@@ -52,6 +52,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     NAMOUNT,
     NFLOOR,
     allocate_scratch,
+    transport_ghost_layers,
 )
 from impactpipe.hydro.scheme.timestep import allocate_rate_work, cell_thermodynamics, max_signal_rate
 from impactpipe.storage import atomic_path, compression
@@ -226,6 +227,9 @@ class Simulation:
         elif state.arhoq.shape[1] and not porous:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
+        #: Ghost layers of each column of ``state.arhoq`` that a step fills for the sweeps
+        #: (:func:`~impactpipe.hydro.scheme.pencil_layout.transport_ghost_layers`; every layer on an adaptive mesh).
+        self._q_layers = transport_ghost_layers(state.nmat, nq, porous)
         if fresh:
             for k in range(state.nmat):
                 state.arhoq[:, nq * k + nq - 2] = self.porosity[k, ALPHA0] * state.arho[:, k]
@@ -323,7 +327,7 @@ class Simulation:
         st = self.state
         own = self.partition.blocks
         for axis in axes:
-            fill = self.partition.start_ghosts(st, self.mesh, axis)
+            fill = self.partition.start_ghosts(st, self.mesh, axis, self._q_layers)
             self._sweep(axis, dt, fill.early)
             self.partition.finish_ghosts(fill, st, self.mesh, axis)
             self._observe("ghosts", axis)

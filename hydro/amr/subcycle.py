@@ -51,7 +51,7 @@ from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_FINE, R_F1, R_F2, R_SIDE,
                                            prolong_state_ghosts, register_fluxes, reflux_register, restrict_ghosts)
 from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
-from impactpipe.hydro.mesh.boundary import fill_state_ghost_slabs_of
+from impactpipe.hydro.mesh.boundary import every_layer, fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
 
 #: The ``time_stepping`` modes: one step for all levels, or a step per level.
@@ -279,8 +279,9 @@ class LevelStepper:
         level), prolongation from level - 1 at the fraction ``theta`` of its step."""
         mesh, st = sim.mesh, sim.state
         fields = _fields(st)
-        fill_state_ghost_slabs_of(*fields, mesh.neighbor, mesh.neighbor_level, axis, int(mesh.ghost[axis]),
-                                  plans["blocks"][level])
+        g = int(mesh.ghost[axis])
+        fill_state_ghost_slabs_of(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, plans["blocks"][level],
+                                  every_layer(st.arhoq, g))
         if not mesh.adaptive:
             return
         restrict, weight = plans["restrict"][axis, level], plans["restrict_weight"][axis, level]

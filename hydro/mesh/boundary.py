@@ -54,19 +54,22 @@ def fill_ghosts_where(field, neighbor, neighbor_level, axis, ghost, lo, hi, want
 
 @njit(cache=True, parallel=True)
 def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
-                           hi):
+                           hi, q_layers):
     """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the
     blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range,
-    :mod:`impactpipe.hydro.parallel`); they read any block's interior cells."""
+    :mod:`impactpipe.hydro.parallel`); they read any block's interior cells.  Column c of
+    ``arhoq`` gets its ``q_layers[c]`` (int64, 1 .. ``ghost``) ghost layers next to the
+    interior only (:func:`every_layer`: all of them), the other fields every layer."""
     for b in prange(lo, hi):
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
-                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
 
 
 @njit(cache=True, parallel=True)
-def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, blocks):
+def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, blocks,
+                              q_layers):
     """:func:`fill_state_ghost_slabs` for the blocks listed in ``blocks`` (int64) only: one
     refinement level's blocks before its substep's sweep (:mod:`impactpipe.hydro.amr.subcycle`)."""
     for e in prange(blocks.shape[0]):
@@ -74,35 +77,46 @@ def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, 
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
-                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
 
 
 @njit(cache=True, parallel=True)
 def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost,
-                                 blocks, lo, hi):
+                                 blocks, lo, hi, q_layers):
     """For the blocks listed in ``blocks`` (int64), the ghost slabs along ``axis`` whose same-level
     neighbour lies outside ``lo .. hi - 1`` (another MPI rank's block, its strips just received),
-    every conserved field; the other slabs are left as they are (filled before, from blocks
-    that may have been advanced since: :meth:`impactpipe.hydro.parallel.distributed.BlockRanges.
-    start_ghosts`)."""
+    every conserved field (the layers of :func:`fill_state_ghost_slabs`); the other slabs are
+    left as they are (filled before, from blocks that may have been advanced since:
+    :meth:`impactpipe.hydro.parallel.distributed.BlockRanges.start_ghosts`)."""
     for e in prange(blocks.shape[0]):
         b = blocks[e]
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr >= 0 and neighbor_level[b, axis, side] == 0 and not (lo <= nbr < hi):
-                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
+
+
+def every_layer(arhoq: np.ndarray, ghost: int) -> np.ndarray:
+    """``q_layers`` of :func:`fill_state_ghost_slabs` that fills every ghost layer of every column of ``arhoq``."""
+    return np.full(arhoq.shape[1], ghost, dtype=np.int64)
 
 
 @njit(cache=True)
-def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost):
+def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers):
     """:func:`_fill_block_side` for every conserved field, the normal momentum flipped at a
-    reflecting face."""
+    reflecting face, column c of ``arhoq`` ``q_layers[c]`` layers deep."""
     _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, ghost)
     _fill_block_side(arho, b, side, nbr, axis, ghost, -1, ghost)
     _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, ghost)
     _fill_block_side(mom, b, side, nbr, axis, ghost, axis, ghost)
     _fill_block_side(energy, b, side, nbr, axis, ghost, -1, ghost)
-    _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, ghost)
+    n = (arhoq.shape[2], arhoq.shape[3], arhoq.shape[4])[axis] - 2 * ghost
+    for j in range(ghost):
+        dst, src = _slab_cells(side, nbr, ghost, n, j)
+        blk = nbr if nbr >= 0 else np.int64(b)
+        for c in range(arhoq.shape[1]):
+            if j < q_layers[c]:
+                _copy_slab(arhoq, b, blk, c, axis, dst, src, 1.0, ghost)
 
 
 @njit(cache=True)
@@ -121,42 +135,56 @@ def _fill_block_side(field, b, side, nbr, axis, ghost, flip_component, layers):
     """The ghost slab of block ``b`` on ``side`` (0 low, 1 high) along ``axis`` from its same-level
     neighbour ``nbr``, or by the domain-face rule ``nbr`` < 0 names (module docstring): its
     ``layers`` (1 .. ``ghost``) layers next to the interior, j = 0 .. layers - 1."""
-    nb, nc, nx, ny, nz = field.shape
-    npad = (nx, ny, nz)[axis]
-    n = npad - 2 * ghost
+    n = (field.shape[2], field.shape[3], field.shape[4])[axis] - 2 * ghost
     for j in range(layers):
-        if side == 0:
-            dst = ghost - 1 - j
-            if nbr >= 0:
-                src = ghost + n - 1 - j
-            elif nbr == REFLECTING:
-                src = ghost + j
-            else:
-                src = ghost
-        else:
-            dst = ghost + n + j
-            if nbr >= 0:
-                src = ghost + j
-            elif nbr == REFLECTING:
-                src = ghost + n - 1 - j
-            else:
-                src = ghost + n - 1
+        dst, src = _slab_cells(side, nbr, ghost, n, j)
         blk = nbr if nbr >= 0 else np.int64(b)
         flip = nbr == REFLECTING
-        for c in range(nc):
+        for c in range(field.shape[1]):
             sign = -1.0 if (flip and c == flip_component) else 1.0
-            if axis == 0:
-                for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
-                    for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
-                        field[b, c, dst, iy, iz] = sign * field[blk, c, src, iy, iz]
-            elif axis == 1:
-                for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
-                    for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
-                        field[b, c, ix, dst, iz] = sign * field[blk, c, ix, src, iz]
-            else:
-                for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
-                    for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
-                        field[b, c, ix, iy, dst] = sign * field[blk, c, ix, iy, src]
+            _copy_slab(field, b, blk, c, axis, dst, src, sign, ghost)
+
+
+@njit(cache=True, inline="always")
+def _slab_cells(side, nbr, ghost, n, j):
+    """(ghost index, source index) along the axis of ghost layer j (0 next to the interior) on
+    ``side`` of a block with ``n`` interior cells, by the rules of the module docstring."""
+    if side == 0:
+        dst = ghost - 1 - j
+        if nbr >= 0:
+            src = ghost + n - 1 - j
+        elif nbr == REFLECTING:
+            src = ghost + j
+        else:
+            src = ghost
+    else:
+        dst = ghost + n + j
+        if nbr >= 0:
+            src = ghost + j
+        elif nbr == REFLECTING:
+            src = ghost + n - 1 - j
+        else:
+            src = ghost + n - 1
+    return dst, src
+
+
+@njit(cache=True, inline="always")
+def _copy_slab(field, b, blk, c, axis, dst, src, sign, ghost):
+    """``field[b, c]`` at index ``dst`` along ``axis`` = ``sign`` times ``field[blk, c]`` at ``src``
+    (the interior range of the other axes)."""
+    _, _, nx, ny, nz = field.shape
+    if axis == 0:
+        for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
+            for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
+                field[b, c, dst, iy, iz] = sign * field[blk, c, src, iy, iz]
+    elif axis == 1:
+        for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
+            for iz in range(_lo(nz, ghost), _hi(nz, ghost)):
+                field[b, c, ix, dst, iz] = sign * field[blk, c, ix, src, iz]
+    else:
+        for ix in range(_lo(nx, ghost), _hi(nx, ghost)):
+            for iy in range(_lo(ny, ghost), _hi(ny, ghost)):
+                field[b, c, ix, iy, dst] = sign * field[blk, c, ix, iy, src]
 
 
 @njit(cache=True, inline="always")
@@ -196,8 +224,10 @@ def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = 
         prolong_field_ghosts(field, plans["prolong"])
 
 
-def fill_state_ghosts(state, mesh, axis: int) -> None:
-    """Fill the ghosts of every conserved field of ``state`` along ``axis``.
+def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None) -> None:
+    """Fill the ghosts of every conserved field of ``state`` along ``axis``; ``q_layers``:
+    the ghost layers of each column of ``state.arhoq`` (:func:`fill_state_ghost_slabs`; None:
+    every layer, which an adaptive mesh needs, since its prolongation reads the coarse ghosts).
 
     Coarse/fine faces: restriction, then the conservative limited prolongation of
     :func:`impactpipe.hydro.amr.transfer.prolong_state_ghosts`.
@@ -206,7 +236,9 @@ def fill_state_ghosts(state, mesh, axis: int) -> None:
     if g == 0:
         return
     fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks)
+    if q_layers is None or mesh.adaptive:
+        q_layers = every_layer(state.arhoq, g)
+    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, q_layers)
     if not mesh.adaptive:
         return
     plans = axis_plans(mesh, axis)

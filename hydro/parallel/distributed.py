@@ -30,7 +30,7 @@ import numpy as np
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh.boundary import (
-    fill_field_ghosts, fill_ghosts, fill_ghosts_where, fill_state_ghost_slabs, fill_state_ghosts,
+    every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_where, fill_state_ghost_slabs, fill_state_ghosts,
     fill_state_ghosts_from_ranks,
 )
 
@@ -65,16 +65,18 @@ class WholeMesh:
     def __init__(self):
         self.traffic = Traffic()
 
-    def fill_ghosts(self, state, mesh, axis: int) -> None:
-        """Fill the ghosts of every block along ``axis``."""
-        fill_state_ghosts(state, mesh, axis)
+    def fill_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> None:
+        """Fill the ghosts of every block along ``axis``; ``q_layers``: the ghost layers of each
+        column of ``state.arhoq`` (None: every layer; :func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts`)."""
+        fill_state_ghosts(state, mesh, axis, q_layers)
 
-    def start_ghosts(self, state, mesh, axis: int) -> GhostFill:
-        """Fill the ghosts along ``axis`` as far as this process can without waiting for
-        another's strips; a sweep may then advance the returned fill's ``early`` blocks before
-        :meth:`finish_ghosts` completes the rest.  One process fills every ghost here, and
-        every block is ``late`` (swept after :meth:`finish_ghosts`, as before the split)."""
-        self.fill_ghosts(state, mesh, axis)
+    def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> GhostFill:
+        """Fill the ghosts along ``axis`` (``q_layers`` as in :meth:`fill_ghosts`) as far as this
+        process can without waiting for another's strips; a sweep may then advance the returned
+        fill's ``early`` blocks before :meth:`finish_ghosts` completes the rest.  One process
+        fills every ghost here, and every block is ``late`` (swept after :meth:`finish_ghosts`,
+        as before the split)."""
+        self.fill_ghosts(state, mesh, axis, q_layers)
         return GhostFill(np.zeros(0, dtype=np.int64), np.arange(mesh.nblocks, dtype=np.int64))
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
@@ -174,18 +176,21 @@ class BlockRanges(WholeMesh):
         #: The routes of the face fluxes per (axis, row length), built on first use.
         self._flux_routes: dict[tuple[int, int], list] = {}
 
-    def fill_ghosts(self, state, mesh, axis: int) -> None:
+    def fill_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> None:
         """Receive the neighbours' strips along ``axis`` from their owners, then fill the owned
-        blocks' ghosts (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghost_slabs`)."""
+        blocks' ghosts (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghost_slabs`; ``q_layers``
+        the ghost layers of each column of ``state.arhoq``, None or on an adaptive mesh every layer)."""
         g = int(mesh.ghost[axis])
         if g == 0:
             return
+        if q_layers is None or mesh.adaptive:
+            q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
         if mesh.adaptive:
             plans = self.plans(mesh, axis)
             exchange_strips(self.comm, plans["restrict_routes"], fields, RESTRICT_TAG + axis, self.traffic)
-        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
+        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
         if mesh.adaptive:
             for arr in fields:
                 restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
@@ -193,22 +198,24 @@ class BlockRanges(WholeMesh):
             prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
                                  mesh.ndim)
 
-    def start_ghosts(self, state, mesh, axis: int) -> GhostFill:
+    def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> GhostFill:
         """Post the strips along ``axis`` (:func:`~.exchange.post_strips`) and fill every owned
         block's ghosts from what this rank holds, then return while the strips travel: the
         fill's ``early`` blocks (the inner blocks of :func:`~.decomposition.overlap_groups`,
         whose ghosts along ``axis`` are now complete) can be swept meanwhile.  The slabs of the
         ``late`` blocks that face another rank's block are filled again by
-        :meth:`finish_ghosts`.  On an adaptive mesh the whole fill happens here
-        (:meth:`fill_ghosts`) and every block is late."""
+        :meth:`finish_ghosts` (every layer).  On an adaptive mesh the whole fill happens here
+        (:meth:`fill_ghosts`) and every block is late.  ``q_layers`` as in :meth:`fill_ghosts`."""
         inner, edge = self.overlap[axis]
-        if mesh.adaptive or int(mesh.ghost[axis]) == 0:
+        g = int(mesh.ghost[axis])
+        if mesh.adaptive or g == 0:
             self.fill_ghosts(state, mesh, axis)
             return GhostFill(inner, edge)
+        if q_layers is None:
+            q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         pending = post_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
-        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, int(mesh.ghost[axis]), self.lo,
-                               self.hi)
+        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
         return GhostFill(inner, edge, pending)
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
@@ -220,8 +227,9 @@ class BlockRanges(WholeMesh):
             return
         finish_strips(fill.pending)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        fill_state_ghosts_from_ranks(*fields, mesh.neighbor, mesh.neighbor_level, axis, int(mesh.ghost[axis]),
-                                     fill.late + self.lo, self.lo, self.hi)
+        g = int(mesh.ghost[axis])
+        fill_state_ghosts_from_ranks(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, fill.late + self.lo,
+                                     self.lo, self.hi, every_layer(state.arhoq, g))
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
                           wanted: np.ndarray | None = None, layers: int | None = None) -> None:

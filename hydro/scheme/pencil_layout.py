@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.mixture import MATERIAL_ROWS
 
 #: A face pressure below -TENSION_TOLERANCE * K (K the cell's bulk modulus) from a cell at
@@ -117,6 +118,26 @@ def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int, nq: int = 0) -
     pencil's cells advance one pointer rather than one per row (the compiler keeps too many
     row pointers of a row-major scratch on the stack)."""
     return np.zeros((nthreads, pencil_cells + 1, scratch_rows(nmat, nq)))
+
+
+def transport_ghost_layers(nmat: int, nq: int, porous: bool) -> np.ndarray:
+    """Ghost layers (1 or GHOST = 2) of each column of ``arhoq`` (M NQ, int64) the sweep reads.
+
+    The gather reads each material's damage (the last of its NQ scalars) and in a ``porous``
+    scene its distension (the one before) in every cell of the pencil, both ghost layers
+    included: they set the cell's pressure and tension limit, and the MC slope of the first
+    ghost cell takes them from the second.  The other scalars (stress, plastic strain,
+    flaws) move at the donor cell's specific value, first order
+    (:mod:`impactpipe.hydro.scheme.directional`, step 5): the faces g .. g + n take it from
+    the cells g - 1 .. g + n, the first ghost layer at most.  The gather reads them in the
+    second layer as well, into scratch rows that no face uses.
+    """
+    layers = np.ones(nmat * nq, dtype=np.int64)
+    for k in range(nmat if nq > 0 else 0):
+        layers[nq * k + nq - 1] = GHOST
+        if porous:
+            layers[nq * k + nq - 2] = GHOST
+    return layers
 
 
 @njit(cache=True, inline="always")
