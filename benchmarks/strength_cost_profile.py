@@ -1,15 +1,20 @@
 """Per-kernel time of the hydro step with and without strength (the cost of strength, by part).
 
 Builds the cases of benchmarks/hydro_throughput.py (the --quick meshes, or the full ones with
---full), takes 2 warm-up steps, then profiles --steps steps of each case with cProfile (each
-numba kernel call is one Python-level call, so its time is the kernel's) and prints each
-case's kernels by their own time in ns per cell-update, then the ratio of the totals
+--full), takes 2 warm-up steps and --settle more (default 0: the steps right after first
+contact, when most of the target has not yet felt the shock; later in a run, once the target
+carries stress, the stress update costs more; each case prints the step and time where its
+profile starts and, with strength, the share of the cells with mass that carry a deviatoric
+stress), then profiles --steps steps of each case with cProfile (each numba kernel call is
+one Python-level call, so its time is the kernel's) and prints each case's kernels by their
+own time in ns per cell-update, then the ratio of the totals
 (docs/strength.md, "Cost").  The cases alternate --repeats times.  The clock is the process's
 CPU time: on a shared machine other jobs stretch the wall-clock time of a step, much less
 its CPU time.
 
     NUMBA_NUM_THREADS=1 python benchmarks/strength_cost_profile.py --full
     NUMBA_NUM_THREADS=1 python benchmarks/strength_cost_profile.py 2d-cyl-tillotson 2d-cyl-strength
+    NUMBA_NUM_THREADS=1 python benchmarks/strength_cost_profile.py --full --settle 400
 """
 
 import argparse
@@ -18,6 +23,8 @@ import pstats
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -42,17 +49,33 @@ def profile_steps(sim, steps: int) -> tuple[float, dict[str, float]]:
     return sum(own.values()), own
 
 
+def stressed_share(sim) -> float:
+    """Share of the interior cells with mass (sum_k alpha_k rho_k > 0) where some material's
+    deviatoric stress is not 0 (``sim`` with strength)."""
+    arho = sim.mesh.interior(sim.state.arho)
+    arhoq = sim.mesh.interior(sim.state.arhoq)
+    nq, ns = sim.strength.nq, sim.strength.ns
+    stress = [nq * k + j for k in range(sim.state.nmat) for j in range(ns)]
+    stressed = (arhoq[:, stress] != 0.0).any(axis=1)
+    mass = arho.sum(axis=1) > 0.0
+    return float((stressed & mass).sum() / max(int(mass.sum()), 1))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("cases", nargs="*", default=["2d-cyl-tillotson", "2d-cyl-strength"])
     parser.add_argument("--full", action="store_true", help="the full-size meshes (default: --quick ones)")
     parser.add_argument("--steps", type=int, default=20, help="profiled steps per repeat (default 20)")
     parser.add_argument("--repeats", type=int, default=3, help="alternating repeats (default 3)")
+    parser.add_argument("--settle", type=int, default=0,
+                        help="untimed steps after the warm-up, to profile a later window of the run (default 0)")
     args = parser.parse_args()
     sims = {case: build(case, quick=not args.full) for case in args.cases}
-    for sim in sims.values():
-        for _ in range(WARMUP_STEPS):
+    for case, sim in sims.items():
+        for _ in range(WARMUP_STEPS + args.settle):
             sim.step()
+        share = "" if sim.strength is None else f", stressed share of the cells with mass {stressed_share(sim):.3f}"
+        print(f"{case}: profiled from step {sim.step_count}, t = {sim.time:.4g} s{share}")
     results = {case: [] for case in args.cases}
     for _ in range(args.repeats):
         for case, sim in sims.items():
