@@ -56,6 +56,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     transport_ghost_layers,
 )
 from impactpipe.hydro.scheme.timestep import allocate_rate_work, cell_thermodynamics, max_signal_rate
+from impactpipe.hydro.scheme.step_tension import UNLIMITED_TENSION, open_void_in_tension
 from impactpipe.storage import atomic_path, compression
 
 logger = logging.getLogger(__name__)
@@ -180,6 +181,11 @@ class Simulation:
         #: material with a shear modulus (:func:`impactpipe.hydro.scheme.directional.sweep`); set by the
         #: granular column collapse, where K + 4G/3 left a viscosity G dt / 3 on its flow.
         self.bulk_pressure_predictor = False
+        #: The tensile limit acts on the state at the end of each step's sweeps, not within them
+        #: (:mod:`impactpipe.hydro.scheme.step_tension`); set by the granular column collapse, where the
+        #: limit between the split sweeps made the deposit depend on the time step.  Not with porous or
+        #: Grady-Kipp materials.
+        self.step_tensile_limit = False
         self.dt_first: float | None = None
         self.last_dt = 0.0
         #: Called as ``observer(event, axis)`` between the operations of a step, for diagnostics
@@ -347,6 +353,10 @@ class Simulation:
                 reflux(axis, plans["reflux"], plans["reflux_volume"], self._face_flux, st.alpha, st.arho, st.arhoe,
                        st.arhoq, st.momentum, st.energy, self.floors, self.amounts)
                 self._observe("reflux", axis)
+        if self.step_tensile_limit:
+            lo, hi, _ = own.indices(self.mesh.nblocks)
+            open_void_in_tension(st.alpha, st.arho, st.arhoe, st.arhoq, self.eos.kind, self.eos.params, self.eos.table,
+                                 self.tensile_strength, self.floors, lo, hi)
         if self.porosity is not None:
             lo, hi, _ = own.indices(self.mesh.nblocks)
             compact(st.alpha, st.arho, st.arhoq, self.porosity, self.porosity_counts, lo, hi)
@@ -372,9 +382,18 @@ class Simulation:
         sweep(axis, dt, self.mesh.geometry_code, st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own],
               st.momentum[own], st.energy[own], self.mesh.block_lo[own], self.mesh.block_dx[own],
               self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
-              self.eos.table, self.shear_modulus, self.tensile_strength, self._scratch, self.boundary[own],
+              self.eos.table, self.shear_modulus, self._sweep_tensile_strength(), self._scratch, self.boundary[own],
               self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
               blocks, self.grady_kipp, self.porosity, self.bulk_pressure_predictor)
+
+    def _sweep_tensile_strength(self) -> np.ndarray:
+        """The tensile strengths Y_T (Pa) the sweeps hold: the materials', or UNLIMITED_TENSION for every
+        material with :attr:`step_tensile_limit` (the limit then acts after the sweeps)."""
+        if not self.step_tensile_limit:
+            return self.tensile_strength
+        if self.porosity is not None or self.grady_kipp is not None:
+            raise ValueError("step_tensile_limit is not supported with porous or grady_kipp materials")
+        return np.full_like(self.tensile_strength, UNLIMITED_TENSION)
 
     def _observe(self, event: str, axis: int) -> None:
         if self.observer is not None:

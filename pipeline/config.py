@@ -656,8 +656,8 @@ def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple,
         cfl = hydro.get("cfl", Hydro.model_fields["cfl"].default)
         if isinstance(cfl, (int, float)) and cfl > column_collapse.MAX_CFL:
             errors.append((("hydro", "cfl"), f"must be <= {column_collapse.MAX_CFL:g} for the column_collapse scene "
-                                             f"(got {cfl:g}{'' if 'cfl' in hydro else ', the default'}): at larger "
-                                             f"steps the deposit depends on the time step "
+                                             f"(got {cfl:g}): the deposit's "
+                                             f"independence of the time step is measured up to there "
                                              f"(docs/validation.md, granular column collapse)"))
     if scene.get("problem", "impact") != "impact":
         errors.extend(_impact_only_errors(str(scene.get("problem")), hydro))
