@@ -48,9 +48,11 @@ def open_void_in_tension(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_ta
     scalars (the damage D_k of material k the last of its NQ); ``tensile_strength`` (M,) Y_T (Pa).
     Material k is touched where present (alpha_k > ALPHA_MIN, alpha_k rho_k > 0), at
     rho_k >= DISTENDED_FRACTION rho0_k (below it the sweeps hold its pressure at zero) and at
-    P_k < -Y_T,k (1 - D_k).  rho' from Newton steps rho <- rho + (P_target - P) / c_K^2, which for
-    an EOS convex in rho reach P >= P_target from below in one or two steps; each cell touched
-    counts in ``floors[b, FLOOR_TENSILE_LIMIT]``.
+    P_k < -Y_T,k (1 - D_k).  rho' from Newton steps rho <- rho + (P_target - P) / c_K^2 (c_K^2 the
+    EOS's squared bulk sound speed, m^2/s^2), repeated while P < P_target (at most
+    TENSION_ITERATIONS; for an EOS convex in rho the first step lands at or above P_target), so
+    the strength update finds the material at its limit, not past it; each cell touched counts
+    in ``floors[b, FLOOR_TENSILE_LIMIT]``.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
