@@ -186,6 +186,7 @@ class Simulation:
         #: limit between the split sweeps made the deposit depend on the time step.  Not with porous or
         #: Grady-Kipp materials.
         self.step_tensile_limit = False
+        self._unlimited_tension: np.ndarray | None = None
         self.dt_first: float | None = None
         self.last_dt = 0.0
         #: Called as ``observer(event, axis)`` between the operations of a step, for diagnostics
@@ -393,7 +394,9 @@ class Simulation:
             return self.tensile_strength
         if self.porosity is not None or self.grady_kipp is not None:
             raise ValueError("step_tensile_limit is not supported with porous or grady_kipp materials")
-        return np.full_like(self.tensile_strength, UNLIMITED_TENSION)
+        if self._unlimited_tension is None:
+            self._unlimited_tension = np.full_like(self.tensile_strength, UNLIMITED_TENSION)
+        return self._unlimited_tension
 
     def _observe(self, event: str, axis: int) -> None:
         if self.observer is not None:
