@@ -48,8 +48,9 @@ import numpy as np
 from numba import njit
 
 from impactpipe.hydro.amr.plans import axis_plans
-from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_FINE, R_F1, R_F2, R_SIDE,
-                                           prolong_state_ghosts, register_fluxes, reflux_register, restrict_ghosts)
+from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_COARSE, R_CX, R_CY, R_CZ, R_FINE, R_F1,
+                                           R_F2, R_SIDE, prolong_state_ghosts, register_fluxes, reflux_register,
+                                           restrict_ghosts)
 from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
 from impactpipe.hydro.mesh.boundary import every_layer, fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
@@ -71,7 +72,9 @@ def level_plans(mesh: BlockMesh) -> dict:
     (block, padded cell) of the level-(l - 1) interior cells that any axis's prolongation into
     level l reads (a source cell and its face neighbours), the cells taken at the substep's time;
     ``fine_faces[a]``: the fine cells beside each coarse face cell of the reflux plan
-    (:func:`_fine_face_cells`), which take what the coarse cell cannot of a register correction.
+    (:func:`_fine_face_cells`), which take what the coarse cell cannot of a register correction,
+    and ``near[a]`` the coarse cell's face neighbours in its block (:func:`_near_cells`), which
+    take what neither holds.
     """
     key = "level_plans"
     if key in mesh.cache:
@@ -95,6 +98,7 @@ def level_plans(mesh: BlockMesh) -> dict:
     out["interpolated"] = [_stencil_cells(mesh, np.concatenate(rows) if rows else np.zeros((0, 4), np.int64))
                            for rows in sources]
     out["fine_faces"] = [_fine_face_cells(mesh, axis) for axis in range(mesh.ndim if mesh.adaptive else 0)]
+    out["near"] = [_near_cells(mesh, axis) for axis in range(mesh.ndim if mesh.adaptive else 0)]
     mesh.cache[key] = out
     return out
 
@@ -124,6 +128,28 @@ def _fine_face_cells(mesh: BlockMesh, axis: int) -> tuple[np.ndarray, np.ndarray
         ring = (r_lo + mesh.block_dx[cells[:, :, 0], 0]) ** 2 - r_lo ** 2
         weight = ring / ring.sum(axis=1, keepdims=True)
     return cells, volume, weight
+
+
+def _near_cells(mesh: BlockMesh, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """For each row e of the reflux plan of ``axis``, the face neighbours of the coarse cell inside
+    its block along every used axis: (cells (E, 2 ndim, 4) block and padded cell, block -1 where the
+    neighbour lies outside the block, volumes (E, 2 ndim) m^3, 0 there)."""
+    plan = axis_plans(mesh, axis)["reflux"]
+    cells = np.zeros((len(plan), 2 * mesh.ndim, 4), dtype=np.int64)
+    cells[:, :, 0] = plan[:, R_COARSE, None]
+    cells[:, :, 1:] = plan[:, None, [R_CX, R_CY, R_CZ]]
+    for d in range(mesh.ndim):
+        for step in range(2):
+            cells[:, 2 * d + step, 1 + d] += 2 * step - 1
+    inside = np.ones(cells.shape[:2], dtype=bool)
+    for d in range(mesh.ndim):
+        inside &= (cells[:, :, 1 + d] >= GHOST) & (cells[:, :, 1 + d] < GHOST + mesh.block_cells)
+    interior = np.where(np.arange(3) < mesh.ndim, cells[:, :, 1:] - GHOST, 0)
+    interior[~inside] = 0
+    volume = np.where(inside, mesh.cell_volumes()[cells[:, :, 0], interior[:, :, 0], interior[:, :, 1],
+                                                  interior[:, :, 2]], 0.0)
+    cells[~inside, 0] = -1
+    return cells, volume
 
 
 def _stencil_cells(mesh: BlockMesh, cells: np.ndarray) -> np.ndarray:
@@ -268,8 +294,8 @@ class LevelStepper:
             for axis in range(mesh.ndim):
                 plan = axis_plans(mesh, axis)
                 reflux_register(plan["reflux"], plan["reflux_volume"], self._registers[axis], mesh.block_level, level,
-                                *plans["fine_faces"][axis], st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum,
-                                st.energy, sim.floors, sim.amounts)
+                                *plans["fine_faces"][axis], *plans["near"][axis], st.alpha, st.arho, st.arhoe,
+                                st.arhoq, st.momentum, st.energy, sim.floors, sim.amounts)
                 sim._observe("reflux", axis)
         return updates
 

@@ -62,6 +62,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_MASS_FLOOR,
     AMOUNT_MASS_VOID,
     FLOOR_PARTIAL_DENSITY,
+    FLOOR_REGISTER_REDISTRIBUTION,
     FULL_TOLERANCE,
     PHI_SECOND_ORDER,
 )
@@ -558,25 +559,31 @@ def register_fluxes(axis, plan, face_flux, register, block_level, level):
 
 
 @njit(cache=True)
-def reflux_register(plan, volume, register, block_level, level, fine_cells, fine_volume, fine_weight, alpha, arho,
-                    arhoe, arhoq, mom, energy, floors, amounts):
+def reflux_register(plan, volume, register, block_level, level, fine_cells, fine_volume, fine_weight, near_cells,
+                    near_volume, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts):
     """Correct the coarse cells at ``level`` by their flux register rows (:func:`register_fluxes`), then
     clear those rows: after the finer level's substeps have caught up with the coarse step, what
     crossed each coarse/fine face is the same amount on both sides.
 
-    That amount is F* = F_c + s R (F_c the coarse amount, R = sum_f F_f - F_c the register row):
-    the fine one (s = 1) unless it would drive a material of the coarse cell below zero (the
-    fine faces carried more of a trace out over a coarse step than the cell held); then s < 1
-    is the largest share that keeps every partial density and volume fraction of the coarse
-    cell >= 0 (:func:`_largest_fraction`).  The coarse cell takes s R (:func:`_reflux_cell`);
-    the fine face cells across from it, ``fine_cells[e, j]`` (block, padded cell) of volume
-    ``fine_volume[e, j]`` (m^3) and face-area share ``fine_weight[e, j]``, take -(1 - s) R w_j
-    through their face, so both sides agree on F* and every amount is kept.  A fine cell's
-    material driven below zero by that is removed and counted, as in :func:`_reflux_cell`
-    (keeping the fine cells >= 0 instead, where both cannot be, removed twice the mass in the
-    moving-interface scene of tests/test_hydro_amr.py; docs/hydro.md, "Time step").
+    Every amount is kept when the cells together gain sigma R (R = sum_f F_f - F_c the register
+    row, F_c the coarse amount, sigma = +1 on the coarse cell's low face, -1 on its high face,
+    the columns as :func:`reflux`).  The coarse cell takes s R (:func:`_reflux_cell`), s = 1
+    unless that would drive one of its materials below zero; then s < 1 is the largest share
+    that keeps every partial density and volume fraction >= 0 (:func:`_largest_fraction`): the
+    coarse face took from the fine cells' restricted ghost what they have since moved on, or the
+    fine faces more of a trace than the cell held.  The remainder (1 - s) R goes, in turn, to
+    the fine face cells across from it (``fine_cells[e, j]`` (block, padded cell) of volume
+    ``fine_volume[e, j]`` (m^3) and face-area share ``fine_weight[e, j]``), then to the coarse
+    cell's face neighbours in its block (``near_cells[e, j]``, ``near_volume[e, j]``; block -1
+    where there is none), each set taking of every material what it holds
+    (:func:`_absorb_shares`, counted as ``register_redistribution``), so no amount is lost; what
+    neither holds goes to the fine face cells by their area shares, and a material that drives
+    below zero is removed and counted, as in :func:`_reflux_cell` (``negative_partial_density``,
+    ``mass_added_by_floors``).
     """
     part = np.empty(register.shape[1])
+    rest = np.empty(register.shape[1])
+    weights = np.empty((max(fine_cells.shape[1], near_cells.shape[1]), register.shape[1]))
     for e in range(plan.shape[0]):
         cb = plan[e, R_COARSE]
         if block_level[cb] != level:
@@ -586,15 +593,100 @@ def reflux_register(plan, volume, register, block_level, level, fine_cells, fine
         share = _largest_fraction(cb, side, ix, iy, iz, volume[e], register[e], alpha, arho)
         for q in range(part.shape[0]):
             part[q] = share * register[e, q]
+            rest[q] = (1.0 - share) * register[e, q]
         _reflux_cell(cb, side, ix, iy, iz, volume[e], part, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts)
         if share < 1.0:
+            floors[cb, FLOOR_REGISTER_REDISTRIBUTION] += 1
+            _absorb_shares(fine_cells[e], fine_volume[e], fine_weight[e], side, rest, arho, weights)
+            _absorb(fine_cells[e], fine_volume[e], side, rest, weights, alpha, arho, arhoe, arhoq, mom, energy, floors,
+                    amounts)
+            _absorb_shares(near_cells[e], near_volume[e], near_volume[e], side, rest, arho, weights)
+            _absorb(near_cells[e], near_volume[e], side, rest, weights, alpha, arho, arhoe, arhoq, mom, energy, floors,
+                    amounts)
             for j in range(fine_cells.shape[1]):
-                for q in range(part.shape[0]):
-                    part[q] = -(1.0 - share) * fine_weight[e, j] * register[e, q]
-                _reflux_cell(fine_cells[e, j, 0], 1 - side, fine_cells[e, j, 1], fine_cells[e, j, 2],
-                             fine_cells[e, j, 3], fine_volume[e, j], part, alpha, arho, arhoe, arhoq, mom, energy,
-                             floors, amounts)
+                for q in range(rest.shape[0]):
+                    weights[j, q] = fine_weight[e, j]
+            _absorb(fine_cells[e], fine_volume[e], side, rest, weights, alpha, arho, arhoe, arhoq, mom, energy, floors,
+                    amounts)
         register[e, :] = 0.0
+
+
+@njit(cache=True)
+def _absorb(cells, volumes, side, rest, weights, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts):
+    """Cell j of ``cells`` (rows block, padded cell; block -1 skipped) of volume ``volumes[j]`` (m^3)
+    gains sigma weights[j, q] rest[q] of every column q (:func:`_reflux_cell` through the coarse
+    cell's ``side``); ``rest`` keeps what the cells did not take, rest[q] (1 - sum_j weights[j, q])."""
+    part = np.empty(rest.shape[0])
+    for j in range(cells.shape[0]):
+        if cells[j, 0] < 0:
+            continue
+        for q in range(rest.shape[0]):
+            part[q] = weights[j, q] * rest[q]
+        _reflux_cell(cells[j, 0], side, cells[j, 1], cells[j, 2], cells[j, 3], volumes[j], part, alpha, arho, arhoe,
+                     arhoq, mom, energy, floors, amounts)
+    for q in range(rest.shape[0]):
+        taken = 0.0
+        for j in range(cells.shape[0]):
+            if cells[j, 0] >= 0:
+                taken += weights[j, q]
+        rest[q] *= 1.0 - taken
+
+
+@njit(cache=True)
+def _absorb_shares(cells, volumes, area, side, rest, arho, weights):
+    """``weights[j, q]``: the share of column q of the remainder ``rest`` (a gain sigma rest, sigma = +1
+    through the coarse cell's low ``side``) that cell j of ``cells`` (block -1: none) takes so that
+    none of its materials goes below zero; sum_j weights[j, q] <= 1.
+
+    Material k's columns (volume, mass, internal energy, transported scalars): where the cells
+    gain k, or lose T_k < 0 (kg) and each holds its share, m_jk + a_j T_k >= 0, by the shares
+    a_j = ``area[j]`` / sum area; else t_k m_jk / sum_j m_jk, t_k = min(1, sum_j m_jk / -T_k), as
+    much as they hold.  Momentum and total energy go with the mass moved,
+    sum_k weights[j, k] |T_k| / sum_k |T_k| (the shares a_j where no mass moves), so the moved
+    parcel keeps its velocity.
+    """
+    nmat = arho.shape[1]
+    nq = (rest.shape[0] - 3 * nmat - 4) // nmat
+    sigma = 1.0 if side == 0 else -1.0
+    total = 0.0
+    for j in range(cells.shape[0]):
+        if cells[j, 0] >= 0:
+            total += area[j]
+    for j in range(cells.shape[0]):
+        share = area[j] / total if cells[j, 0] >= 0 and total > 0.0 else 0.0
+        for q in range(rest.shape[0]):
+            weights[j, q] = share
+    moved = 0.0
+    for k in range(nmat):
+        change = sigma * rest[nmat + k]
+        moved += abs(change)
+        if change >= 0.0:
+            continue
+        held = 0.0
+        short = False
+        for j in range(cells.shape[0]):
+            if cells[j, 0] >= 0:
+                m = arho[cells[j, 0], k, cells[j, 1], cells[j, 2], cells[j, 3]] * volumes[j]
+                held += m
+                short = short or m + weights[j, nmat + k] * change < 0.0
+        if not short:
+            continue
+        scale = min(1.0, held / -change) / held if held > 0.0 else 0.0
+        for j in range(cells.shape[0]):
+            w = arho[cells[j, 0], k, cells[j, 1], cells[j, 2], cells[j, 3]] * volumes[j] * scale if cells[j, 0] >= 0 \
+                else 0.0
+            weights[j, k] = w
+            weights[j, nmat + k] = w
+            weights[j, 2 * nmat + k] = w
+            for i in range(nq):
+                weights[j, 3 * nmat + 4 + nq * k + i] = w
+    if moved > 0.0:
+        for j in range(cells.shape[0]):
+            carried = 0.0
+            for k in range(nmat):
+                carried += weights[j, nmat + k] * abs(rest[nmat + k])
+            for q in range(3 * nmat, 3 * nmat + 4):
+                weights[j, q] = carried / moved
 
 
 @njit(cache=True, inline="always")

@@ -66,10 +66,11 @@ FLOOR_EOS_CLAMP = 5
 FLOOR_VELOCITY_LIMIT = 6
 FLOOR_TENSILE_LIMIT = 7
 FLOOR_ENERGY_LIMIT = 8
-NFLOOR = 9
+FLOOR_REGISTER_REDISTRIBUTION = 9
+NFLOOR = 10
 FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
                "void_cleanup", "first_order_fallback", "eos_clamp", "small_cell_velocity_limit",
-               "tensile_limit", "small_cell_energy_limit")
+               "tensile_limit", "small_cell_energy_limit", "register_redistribution")
 # Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
 AMOUNT_MASS_FLOOR = 0
 AMOUNT_ENERGY_FLOOR = 1
