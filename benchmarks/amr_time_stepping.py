@@ -4,8 +4,10 @@ The 2d-cylindrical Sedov blast of benchmarks/amr_ghost_profile.py (one ideal gas
 cells per axis, 3 levels) runs from t = 0 to ``--end`` (s) with ``hydro.time_stepping`` global
 and per_level, after a short run of both (``--warm-up`` s) so that every kernel is compiled;
 prints, per mode, the wall seconds of the run, root steps, cell-updates (each level's cells
-once per substep of its own), the regrids' share of the wall time and the density L1 error
-against the exact solution (docs/hydro.md, "Time step").  ``--scene impact`` runs instead the
+once per substep of its own), the regrids' share of the wall time, the density L1 error
+against the exact solution (docs/hydro.md, "Time step"), the mass the floors added, the root
+steps taken again (``level_step_retakes``), the budget's unaccounted mass and energy (relative,
+the floors counted) and, for the impact, the relative change of the momentum along z.  ``--scene impact`` runs instead the
 hydro-only impact of docs/hydro.md (basalt Tillotson without strength, R_T = 1 km, R_P =
 100 m, 8 cells per projectile radius, 4 levels, 2d-cylindrical) to ``--end`` 1 s and prints
 no L1 error:
@@ -19,6 +21,7 @@ import time
 
 import numpy as np
 
+from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.exact.sedov import sedov_solution
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
@@ -50,6 +53,13 @@ def density_l1(sim) -> float:
     return float((np.abs(snap.density.reshape(-1) - exact) * snap.volumes).sum() / snap.volumes.sum())
 
 
+def momentum_change(budget: dict) -> float:
+    """(on the mesh + left - initial) / |initial| of the momentum along z (the impact's axis), the
+    floors' momentum not taken back (the budget counts none for momentum)."""
+    change = budget["momentum_y_on_mesh"] + budget["momentum_y_left_mesh"] - budget["momentum_y_initial"]
+    return change / abs(budget["momentum_y_initial"])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", choices=("sedov", "impact"), default="sedov")
@@ -62,14 +72,18 @@ def main() -> None:
         build(mode).run(args.warm_up)
     for mode in ("global", "per_level"):
         sim = build(mode)
+        initial = sim.totals()
         started = time.perf_counter()
         sim.run(args.end)
         wall = time.perf_counter() - started
+        budget = conservation_budget(initial, sim.totals(), sim.floor_amounts)
         print(f"{mode:9s} wall {wall:7.2f} s  root steps {sim.step_count:5d}  cell-updates {sim.cell_updates:.4e}  "
               f"({sim.cell_updates / wall:.3e} /s)  regrids {sim.regrid_seconds:5.2f} s  "
               f"blocks per level {np.bincount(sim.mesh.block_level, minlength=3).tolist()}  "
               + (f"density L1 {density_l1(sim):.4e}  " if args.scene == "sedov" else "")
-              + f"floor mass {sim.floor_amounts['mass_added_by_floors']:.2e} kg",
+              + f"floor mass {sim.floor_amounts['mass_added_by_floors']:.2e} kg  retaken {sim.level_step_retakes}  "
+              f"unaccounted mass {budget['mass_unaccounted']:.1e} energy {budget['energy_unaccounted']:.1e}"
+              + (f"  z-momentum change {momentum_change(budget):.4e}" if args.scene == "impact" else ""),
               flush=True)
 
 

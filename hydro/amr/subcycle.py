@@ -55,6 +55,10 @@ from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
 from impactpipe.hydro.mesh.boundary import every_layer, fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
 
+#: Half width (cells) of the box around a register row's coarse cell whose cells take what
+#: neither side of the face holds of its correction (:func:`_near_cells`).
+NEAR_RADIUS = 2
+
 #: The ``time_stepping`` modes: one step for all levels, or a step per level.
 GLOBAL = "global"
 PER_LEVEL = "per_level"
@@ -73,7 +77,7 @@ def level_plans(mesh: BlockMesh) -> dict:
     level l reads (a source cell and its face neighbours), the cells taken at the substep's time;
     ``fine_faces[a]``: the fine cells beside each coarse face cell of the reflux plan
     (:func:`_fine_face_cells`), which take what the coarse cell cannot of a register correction,
-    and ``near[a]`` the coarse cell's face neighbours in its block (:func:`_near_cells`), which
+    and ``near[a]`` the cells around the coarse cell in its block (:func:`_near_cells`), which
     take what neither holds.
     """
     key = "level_plans"
@@ -131,16 +135,18 @@ def _fine_face_cells(mesh: BlockMesh, axis: int) -> tuple[np.ndarray, np.ndarray
 
 
 def _near_cells(mesh: BlockMesh, axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """For each row e of the reflux plan of ``axis``, the face neighbours of the coarse cell inside
-    its block along every used axis: (cells (E, 2 ndim, 4) block and padded cell, block -1 where the
-    neighbour lies outside the block, volumes (E, 2 ndim) m^3, 0 there)."""
+    """For each row e of the reflux plan of ``axis``, the interior cells of the coarse cell's block
+    within NEAR_RADIUS cells of it along every used axis (itself included): (cells (E, N, 4) block
+    and padded cell, block -1 where the box leaves the block, volumes (E, N) m^3, 0 there).  They
+    take what neither side of the face holds of a register correction
+    (:func:`~impactpipe.hydro.amr.transfer.reflux_register`)."""
     plan = axis_plans(mesh, axis)["reflux"]
-    cells = np.zeros((len(plan), 2 * mesh.ndim, 4), dtype=np.int64)
+    span = np.arange(-NEAR_RADIUS, NEAR_RADIUS + 1)
+    offsets = np.stack(np.meshgrid(*([span] * mesh.ndim), indexing="ij"), axis=-1).reshape(-1, mesh.ndim)
+    cells = np.zeros((len(plan), len(offsets), 4), dtype=np.int64)
     cells[:, :, 0] = plan[:, R_COARSE, None]
     cells[:, :, 1:] = plan[:, None, [R_CX, R_CY, R_CZ]]
-    for d in range(mesh.ndim):
-        for step in range(2):
-            cells[:, 2 * d + step, 1 + d] += 2 * step - 1
+    cells[:, :, 1:1 + mesh.ndim] += offsets[None, :, :]
     inside = np.ones(cells.shape[:2], dtype=bool)
     for d in range(mesh.ndim):
         inside &= (cells[:, :, 1 + d] >= GHOST) & (cells[:, :, 1 + d] < GHOST + mesh.block_cells)

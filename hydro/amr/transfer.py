@@ -573,12 +573,12 @@ def reflux_register(plan, volume, register, block_level, level, fine_cells, fine
     coarse face took from the fine cells' restricted ghost what they have since moved on, or the
     fine faces more of a trace than the cell held.  The remainder (1 - s) R goes, in turn, to
     the fine face cells across from it (``fine_cells[e, j]`` (block, padded cell) of volume
-    ``fine_volume[e, j]`` (m^3) and face-area share ``fine_weight[e, j]``), then to the coarse
-    cell's face neighbours in its block (``near_cells[e, j]``, ``near_volume[e, j]``; block -1
-    where there is none), each set taking of every material what it holds
-    (:func:`_absorb_shares`, counted as ``register_redistribution``), so no amount is lost; what
-    neither holds goes to the fine face cells by their area shares, and a material that drives
-    below zero is removed and counted, as in :func:`_reflux_cell` (``negative_partial_density``,
+    ``fine_volume[e, j]`` (m^3) and face-area share ``fine_weight[e, j]``), then to the cells
+    around the coarse cell in its block (``near_cells[e, j]``, ``near_volume[e, j]``; block -1
+    where there is none), each set taking of every material what it holds (:func:`_absorb_shares`;
+    counted as ``register_redistribution``), so no amount is lost; what none of them holds goes
+    to the fine face cells by their area shares, and a material driven below zero there is
+    removed and counted, as in :func:`_reflux_cell` (``negative_partial_density``,
     ``mass_added_by_floors``).
     """
     part = np.empty(register.shape[1])
