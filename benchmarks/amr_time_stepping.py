@@ -7,10 +7,10 @@ prints, per mode, the wall seconds of the run, root steps, cell-updates (each le
 once per substep of its own), the regrids' share of the wall time, the density L1 error
 against the exact solution (docs/hydro.md, "Time step"), the mass the floors added, the root
 steps taken again (``level_step_retakes``), the budget's unaccounted mass and energy (relative,
-the floors counted) and, for the impact, the relative change of the momentum along z.  ``--scene impact`` runs instead the
-hydro-only impact of docs/hydro.md (basalt Tillotson without strength, R_T = 1 km, R_P =
-100 m, 8 cells per projectile radius, 4 levels, 2d-cylindrical) to ``--end`` 1 s and prints
-no L1 error:
+the floors counted) and, for the impact, the relative change of the momentum along z.
+``--scene impact`` runs instead the hydro-only impact of docs/hydro.md (basalt Tillotson
+without strength, R_T = 1 km, R_P = 100 m, 8 cells per projectile radius, 4 levels,
+2d-cylindrical) to ``--end`` 1 s and prints no L1 error:
 
     NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py
     NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py --scene impact --end 1.0

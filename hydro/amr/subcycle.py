@@ -21,7 +21,9 @@ through the flux registers (:func:`~impactpipe.hydro.amr.transfer.register_fluxe
 fine amounts dt_f A_f F_f of both substeps less the coarse dt_c A_c F_c, so what crossed every
 coarse/fine face is the same amount on both sides and the totals are kept to round-off: the
 fine amount, or, where that would drive a material of the coarse cell below zero, the share of
-it that does not (the fine cells beside the face taking the rest).
+it that does not (the fine cells beside the face, then the cells around the coarse cell,
+taking the rest as far as they hold it).  A root step whose end state allows a step more
+than LEVEL_STEP_GROWTH shorter is taken again (:meth:`~impactpipe.hydro.solver.Simulation._level_step`).
 
 Ghosts of level l along the sweep axis (:meth:`LevelStepper.fill_level_ghosts`): copies from the
 same level's blocks, restriction from level l + 1 (which is at level l's time when level l
