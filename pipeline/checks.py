@@ -30,10 +30,11 @@ def check(config: Config) -> dict[str, Any]:
 
 
 def warnings(config: Config, values: dict[str, Any]) -> list[str]:
-    """Physics the config asks for that is not modelled and resolutions too coarse to trust,
-    as ``file: warning: key: message`` lines."""
+    """Physics the config asks for that is not modelled, resolutions too coarse to trust and
+    time stepping not yet sound for the scene, as ``file: warning: key: message`` lines."""
     return [f"{config._source}: warning: {message}"
-            for message in derived.physics_warnings(values) + derived.resolution_warnings(config)]
+            for message in (derived.physics_warnings(values) + derived.resolution_warnings(config)
+                            + derived.time_stepping_warnings(config))]
 
 
 def located(config: Config, messages: list[str]) -> list[str]:
