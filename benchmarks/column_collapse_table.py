@@ -10,7 +10,9 @@ has been still, the run-out (L_f - L0) / L0 and height H_f / L0 against the laws
 
     python benchmarks/column_collapse_table.py --aspect 0.5 1 3.2 6 --phi 25 --cfl 0.2 --cells 16 --end 10
 
-``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them.
+``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them;
+``--room R`` lengthens the mesh to R run-outs of the law beyond the column (a deposit that
+reaches the far edge stops the run with an error).
 ``--plot DIR`` writes, per run, DIR/profile_a<a>_phi<phi>_cfl<cfl>_n<cells>.png: the deposit's
 thickness h(x) / L0 at t = tau and at the end against x / L0, with the laws' run-out L_f and
 height H_f marked.
@@ -35,11 +37,13 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "column_collapse.yaml
 
 
 def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
-        surface_layer: bool, plot: Path | None = None) -> dict:
+        surface_layer: bool, plot: Path | None = None, room: float | None = None) -> dict:
     """One collapse; returns the row's numbers (lengths in units of L0, times in tau)."""
     config = load_config(CONFIG)
     scene = config.scene.model_dump(exclude={"problem", "geometry"})
     scene.update(width=scene["height"] / aspect, cells_per_height=cells, hourglass=hourglass)
+    if room is not None:
+        scene["room"] = room
     materials = config.resolved_materials()
     strength = materials[scene["material"]]["strength"]
     strength.update(Y0=cohesion, mu_i=math.tan(math.radians(phi)))
@@ -100,6 +104,8 @@ def main() -> None:
     parser.add_argument("--no-surface-layer", action="store_true",
                         help="without the surface-layer pressure of the yield strength (as before it existed)")
     parser.add_argument("--plot", type=Path, default=None, help="folder for the thickness profile plots")
+    parser.add_argument("--room", type=float, default=None,
+                        help="scene.room: mesh length beyond the column in run-outs of the law (the config's if omitted)")
     args = parser.parse_args()
     print("| a | phi | cfl | cells/H0 | KE/peak at end | front still for | run-out (law) | height (law) | centroid |")
     print("|---|---|---|---|---|---|---|---|---|")
@@ -108,7 +114,7 @@ def main() -> None:
             for cfl in args.cfl:
                 for cells in args.cells:
                     r = run(aspect, phi, cfl, cells, args.end, args.cohesion, args.hourglass,
-                            not args.no_surface_layer, args.plot)
+                            not args.no_surface_layer, args.plot, args.room)
                     print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
                           f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
                           f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "
