@@ -122,7 +122,8 @@ class Simulation:
             default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
         time_stepping: ``"global"`` (one step, the finest cells' CFL step, for every level) or
             ``"per_level"`` (level l steps dt_0 / 2^l, :mod:`impactpipe.hydro.amr.subcycle`; one
-            process, without strength, gravity, porosity or tracers).
+            process, without strength, gravity or porosity; tracers move once per root step and
+            record peaks after each substep of the level holding them).
         gravity: gravity, applied in two half kicks around the stress update, or None: an object
             with ``prepare(state, mesh, partition)`` (once per step, before the kicks),
             ``advance(state, dt, block_lo, block_dx, partition)``, ``spec()`` (what a checkpoint
@@ -292,7 +293,7 @@ class Simulation:
 
     def check_time_stepping(self) -> None:
         """Raise ValueError for an unknown ``time_stepping``, or naming what ``"per_level"`` does not
-        support yet in this Simulation (strength, gravity, porosity, tracers, several MPI ranks)."""
+        support yet in this Simulation (strength, gravity, porosity, several MPI ranks)."""
         if self.time_stepping not in TIME_STEPPING:
             raise ValueError(f"time_stepping must be one of {', '.join(TIME_STEPPING)} (got {self.time_stepping!r})")
         if self.time_stepping != PER_LEVEL:
@@ -300,7 +301,6 @@ class Simulation:
         missing = [what for what, present in (("material strength", self.strength is not None),
                                               ("gravity", self.gravity is not None),
                                               ("porosity", self.porosity is not None),
-                                              ("tracers", self.tracers is not None),
                                               ("more than one MPI rank", not isinstance(self.partition, WholeMesh)))
                    if present]
         if missing:
@@ -334,14 +334,16 @@ class Simulation:
                                self.time, -1, None, {})
         dt = min(dt, dt_max)
         self._save_good()
+        if self.tracers is not None:
+            self.tracers.before_step(self)
         if per_level:
             dt = self._level_step(dt)
             self.time += dt
             self.step_count += 1
             self.last_dt = dt
+            if self.tracers is not None:
+                self.tracers.after_step(self, dt)
             return dt
-        if self.tracers is not None:
-            self.tracers.before_step(self)
         axes = list(range(self.mesh.ndim))
         if self.step_count % 2:
             axes.reverse()
@@ -420,7 +422,9 @@ class Simulation:
         mesh of several levels, where the signal speed grew during the root step so much that
         the state at its end allows only dt' < dt / :data:`LEVEL_STEP_GROWTH` (level_time_step of
         the rates at the end), the root step is taken again from the last good copy at dt'
-        (counted in ``level_step_retakes``, at most :data:`LEVEL_STEP_RETAKES` times).
+        (counted in ``level_step_retakes``, at most :data:`LEVEL_STEP_RETAKES` times); the tracers'
+        records are put back with the state (:meth:`restore_last_good`), so the peaks that the
+        discarded root step's substeps recorded are dropped and the retaken one records its own.
         """
         updates = self._level_stepper.advance(self, dt)
         retakes = 0

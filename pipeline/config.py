@@ -324,7 +324,7 @@ class Hydro(Strict):
     time_stepping: Literal["global", "per_level"] = Field(
         "global", description="global: one time step (the finest cells' CFL step) for every level; per_level: "
                               "level l steps dt_0 / 2^l with flux registers at level faces (one rank, no strength, "
-                              "gravity, porosity or tracers yet)")
+                              "gravity or porosity yet)")
     cfl: float = Field(0.4, gt=0, le=1)
     end_time: float | Literal["auto"] = "auto"
     output_times: list[float] | None = None

@@ -285,7 +285,7 @@ def resolution_warnings(config) -> list[str]:
 
 def time_stepping_warnings(config) -> list[str]:
     """``hydro.time_stepping: per_level`` on an impact, which validates (without strength,
-    gravity, porosity or tracers) but is not yet sound there at every resolution: one line."""
+    gravity or porosity) but is not yet sound there at every resolution: one line."""
     if config.hydro.time_stepping != "per_level" or config.scene.problem != "impact":
         return []
     return ["hydro.time_stepping: per_level on an impact is not yet sound at every resolution: at 10 cells per "
@@ -416,7 +416,7 @@ SCENE_GRAVITY = {"column_collapse": "external gravity (the column_collapse scene
 
 def _time_stepping_errors(config: Config, values: dict[str, Any]) -> list[str]:
     """``hydro.time_stepping: per_level`` with physics its level recursion does not carry yet
-    (impactpipe.hydro.amr.subcycle): material strength, gravity, porosity, tracers."""
+    (impactpipe.hydro.amr.subcycle): material strength, gravity, porosity."""
     if config.hydro.time_stepping != "per_level":
         return []
     missing = [f"material strength ({name})" for name, choice in values.get("strength", {}).items()
@@ -427,8 +427,6 @@ def _time_stepping_errors(config: Config, values: dict[str, Any]) -> list[str]:
         missing.append("self-gravity (hydro.self_gravity)")
     if values.get("porosity"):
         missing.append("porosity")
-    if values.get("tracers"):
-        missing.append("tracers (hydro.tracers.enabled)")
     if not missing:
         return []
     return [f"hydro.time_stepping: per_level does not support {', '.join(missing)} yet; use global"]

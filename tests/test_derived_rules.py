@@ -91,14 +91,23 @@ def test_an_under_resolved_projectile_is_warned_about_before_any_work(tmp_path):
 
 
 def test_per_level_time_stepping_on_an_impact_is_warned_about(tmp_path):
-    """A strengthless impact without tracers validates with ``per_level`` and gets a warning naming the key
-    and the docs; the global step and a per_level Sod do not."""
+    """A strengthless impact, with or without tracers, validates with ``per_level`` and gets a warning
+    naming the key and the docs (with self-gravity it is refused); the global step and a per_level Sod
+    do not."""
     impact = Path(__file__).parent / "configs" / "mpi" / "impact_uniform.yaml"
     per_level = tmp_path / "per_level.yaml"
     per_level.write_text(impact.read_text().replace("max_levels: 1", "max_levels: 2\n  time_stepping: per_level"))
     result = CliRunner().invoke(main, ["validate", str(per_level)])
     assert result.exit_code == 0, result.output
     assert "warning: hydro.time_stepping: per_level on an impact is not yet sound at every resolution" in result.output
+    with_tracers = tmp_path / "per_level_tracers.yaml"
+    with_tracers.write_text(per_level.read_text().replace("tracers: {enabled: false}", "tracers: {enabled: true}"))
+    result = CliRunner().invoke(main, ["validate", str(with_tracers)])
+    assert result.exit_code == 0 and "does not support" not in result.output, result.output
+    gravity = tmp_path / "per_level_gravity.yaml"
+    gravity.write_text(with_tracers.read_text().replace("max_levels: 2", "max_levels: 2\n  self_gravity: true"))
+    result = CliRunner().invoke(main, ["validate", str(gravity)])
+    assert result.exit_code != 0 and "per_level does not support self-gravity" in result.output, result.output
     assert derived.time_stepping_warnings(load_config(impact)) == []
     sod = load_config(Path(__file__).parent / "configs" / "sod.yaml", overrides={"hydro.time_stepping": "per_level"})
     assert derived.time_stepping_warnings(sod) == []

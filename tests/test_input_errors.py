@@ -59,7 +59,7 @@ def test_hydro_end_time_of_a_verification_scene_is_an_error(tmp_path):
 
 
 def test_time_stepping_is_global_or_per_level_and_per_level_refuses_what_it_does_not_carry(tmp_path):
-    """``hydro.time_stepping``: an unknown mode, and per_level with tracers or on several MPI ranks, are
+    """``hydro.time_stepping``: an unknown mode, and per_level with self-gravity or on several MPI ranks, are
     refused before any work; per_level alone validates."""
     from impactpipe.pipeline.adapters.hydro import too_many_ranks
     from impactpipe.pipeline.checks import check
@@ -70,7 +70,7 @@ def test_time_stepping_is_global_or_per_level_and_per_level_refuses_what_it_does
     case8c = (HERE.parent / "configs" / "reference" / "case8c.yaml").read_text()
     rejected(tmp_path, case8c.replace("  self_gravity: false\n", "  self_gravity: true\n  time_stepping: per_level\n"),
              "19: hydro.time_stepping: per_level does not support material strength (basalt), self-gravity "
-             "(hydro.self_gravity), tracers (hydro.tracers.enabled) yet; use global")
+             "(hydro.self_gravity) yet; use global")
     path = tmp_path / "per_level.yaml"
     path.write_text(sedov + "  time_stepping: per_level\n")
     result = CliRunner().invoke(main, ["validate", str(path)])

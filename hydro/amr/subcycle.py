@@ -42,6 +42,14 @@ The split sweeps alternate their order per substep: the n-th substep of level l 
 the start of the run, 2^l per root step) sweeps x y z for even n and z y x for odd n, so a
 level's pair of substeps is Strang-symmetric and the order follows from the step count alone
 (a restart continues bit for bit).  On one level this is the global step, bit for bit.
+
+Tracers (:mod:`impactpipe.hydro.tracers.motion`) move once per root step, by Heun with the
+velocity field at the root step's start and end (second order in dt_0, as the global step's
+Heun is in its dt).  Their peak pressure and temperature are recorded at the root step's end
+and, in between, after each substep of level l >= 1 (once its finer levels and its reflux
+are done, so level l and the finer levels are at the substep's end time t_n + s) for the
+tracers whose point x_n + s v_n(x_n) on the predicted path lies in a level-l block: a tracer
+in fine blocks is sampled as often as the global step samples it.
 """
 
 from __future__ import annotations
@@ -268,7 +276,9 @@ class LevelStepper:
 
     def _advance_level(self, sim, plans: dict, level: int, dt: float, substep: int, theta: float,
                        finest: int) -> int:
-        """Level ``level`` by ``dt`` (s), then its finer levels twice by dt / 2 and the reflux;
+        """Level ``level`` by ``dt`` (s), then its finer levels twice by dt / 2 and the reflux, then
+        (level >= 1, with tracers) the peak records of the tracers in this level's blocks at the
+        substep's end (:meth:`~impactpipe.hydro.tracers.motion.Tracers.level_substep`);
         ``substep`` counts this level's substeps from the start of the run, ``theta`` is the
         fraction of the coarser level's step at which this substep starts."""
         mesh, st = sim.mesh, sim.state
@@ -305,6 +315,8 @@ class LevelStepper:
                                 *plans["fine_faces"][axis], *plans["near"][axis], st.alpha, st.arho, st.arhoe,
                                 st.arhoq, st.momentum, st.energy, sim.floors, sim.amounts)
                 sim._observe("reflux", axis)
+        if level > 0 and sim.tracers is not None:
+            sim.tracers.level_substep(sim, level, (substep - sim.step_count * 2 ** level + 1) * dt)
         return updates
 
     def fill_level_ghosts(self, sim, plans: dict, axis: int, level: int, theta: float) -> None:
