@@ -10,10 +10,12 @@ steps taken again (``level_step_retakes``), the budget's unaccounted mass and en
 the floors counted) and, for the impact, the relative change of the momentum along z.
 ``--scene impact`` runs instead the hydro-only impact of docs/hydro.md (basalt Tillotson
 without strength, R_T = 1 km, R_P = 100 m, 8 cells per projectile radius, 4 levels,
-2d-cylindrical) to ``--end`` 1 s and prints no L1 error:
+2d-cylindrical) to ``--end`` 1 s and prints no L1 error; ``--scene strength_impact`` the
+same impact with GEO ``weak`` strength (docs/hydro.md, "Time step"):
 
     NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py
     NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py --scene impact --end 1.0
+    NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py --scene strength_impact --end 0.3
 """
 
 import argparse
@@ -25,6 +27,7 @@ from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.exact.sedov import sedov_solution
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
+from impactpipe.pipeline.presets import resolve_strength
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 717.5}
 
@@ -37,10 +40,14 @@ def sedov(cells: int, mode: str):
     return sim
 
 
-def impact(mode: str):
-    """The hydro-only impact (module docstring) on 4 levels, stepped by ``mode``."""
+def impact(mode: str, strength: bool = False):
+    """The hydro-only impact (module docstring) on 4 levels, stepped by ``mode``; with GEO
+    ``weak`` strength when ``strength``."""
+    basalt = preset_material("basalt")
+    if strength:
+        basalt["strength"] = resolve_strength("geo", "weak", {})
     sim = PROBLEMS["impact"].setup({"cells_per_projectile_radius": 8, "levels": 4, "end_time": 1.0},
-                                   {"basalt": preset_material("basalt")}, geometry="2d-cylindrical")
+                                   {"basalt": basalt}, geometry="2d-cylindrical")
     sim.time_stepping = mode
     return sim
 
@@ -62,12 +69,14 @@ def momentum_change(budget: dict) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scene", choices=("sedov", "impact"), default="sedov")
+    parser.add_argument("--scene", choices=("sedov", "impact", "strength_impact"), default="sedov")
     parser.add_argument("--cells", type=int, default=256, help="Sedov's finest cells per axis")
     parser.add_argument("--end", type=float, default=0.05)
     parser.add_argument("--warm-up", type=float, default=0.002)
     args = parser.parse_args()
-    build = (lambda mode: sedov(args.cells, mode)) if args.scene == "sedov" else impact
+    builders = {"sedov": lambda mode: sedov(args.cells, mode), "impact": impact,
+                "strength_impact": lambda mode: impact(mode, strength=True)}
+    build = builders[args.scene]
     for mode in ("global", "per_level"):
         build(mode).run(args.warm_up)
     for mode in ("global", "per_level"):
@@ -83,7 +92,7 @@ def main() -> None:
               + (f"density L1 {density_l1(sim):.4e}  " if args.scene == "sedov" else "")
               + f"floor mass {sim.floor_amounts['mass_added_by_floors']:.2e} kg  retaken {sim.level_step_retakes}  "
               f"unaccounted mass {budget['mass_unaccounted']:.1e} energy {budget['energy_unaccounted']:.1e}"
-              + (f"  z-momentum change {momentum_change(budget):.4e}" if args.scene == "impact" else ""),
+              + (f"  z-momentum change {momentum_change(budget):.4e}" if args.scene != "sedov" else ""),
               flush=True)
 
 

@@ -122,8 +122,8 @@ class Simulation:
             default :class:`~impactpipe.hydro.amr.regrid.RefinementRule` if None.
         time_stepping: ``"global"`` (one step, the finest cells' CFL step, for every level) or
             ``"per_level"`` (level l steps dt_0 / 2^l, :mod:`impactpipe.hydro.amr.subcycle`; one
-            process, without strength, gravity or porosity; tracers move once per root step and
-            record peaks after each substep of the level holding them).
+            process, without gravity or porosity; tracers move once per root step and record peaks
+            after each substep of the level holding them; :meth:`check_time_stepping`).
         gravity: gravity, applied in two half kicks around the stress update, or None: an object
             with ``prepare(state, mesh, partition)`` (once per step, before the kicks),
             ``advance(state, dt, block_lo, block_dx, partition)``, ``spec()`` (what a checkpoint
@@ -293,16 +293,23 @@ class Simulation:
 
     def check_time_stepping(self) -> None:
         """Raise ValueError for an unknown ``time_stepping``, or naming what ``"per_level"`` does not
-        support yet in this Simulation (strength, gravity, porosity, several MPI ranks)."""
+        support yet in this Simulation (gravity, porosity, several MPI ranks; of material strength:
+        Grady-Kipp fracture, the hourglass viscosity, rough walls, the surface-layer pressure and
+        the step-end tensile limit)."""
         if self.time_stepping not in TIME_STEPPING:
             raise ValueError(f"time_stepping must be one of {', '.join(TIME_STEPPING)} (got {self.time_stepping!r})")
         if self.time_stepping != PER_LEVEL:
             return
-        missing = [what for what, present in (("material strength", self.strength is not None),
-                                              ("gravity", self.gravity is not None),
-                                              ("porosity", self.porosity is not None),
-                                              ("more than one MPI rank", not isinstance(self.partition, WholeMesh)))
-                   if present]
+        strength = self.strength
+        missing = [what for what, present in (
+            ("gravity", self.gravity is not None),
+            ("porosity", self.porosity is not None),
+            ("more than one MPI rank", not isinstance(self.partition, WholeMesh)),
+            ("grady_kipp fracture", self.grady_kipp is not None),
+            ("the hourglass viscosity", strength is not None and strength.hourglass[0] > 0.0),
+            ("rough walls", strength is not None and bool(strength.rough_walls)),
+            ("the surface-layer pressure", strength is not None and strength.surface_gravity is not None),
+            ("the step-end tensile limit (step_tensile_limit)", self.step_tensile_limit)) if present]
         if missing:
             raise ValueError(f"time_stepping per_level does not support {', '.join(missing)} yet; use global")
 
@@ -464,7 +471,12 @@ class Simulation:
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
         if self.gravity is not None:
             self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
-        if part.any(not np.isfinite(st.momentum[part.blocks]).all()):
+        self._check_momentum(part.blocks)
+
+    def _check_momentum(self, blocks) -> None:
+        """Raise HydroFailure where the momentum of ``blocks`` (a slice or int64 indices) is not finite
+        after the strength and gravity step (on any process)."""
+        if self.partition.any(not np.isfinite(self.state.momentum[blocks]).all()):
             raise HydroFailure("NaN in the momentum after the strength and gravity step", self._good_clock[0], -1,
                                None, {})
 

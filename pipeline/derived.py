@@ -284,8 +284,8 @@ def resolution_warnings(config) -> list[str]:
 
 
 def time_stepping_warnings(config) -> list[str]:
-    """``hydro.time_stepping: per_level`` on an impact, which validates (without strength,
-    gravity or porosity) but is not yet sound there at every resolution: one line."""
+    """``hydro.time_stepping: per_level`` on an impact, which validates (without Grady-Kipp
+    fracture, gravity or porosity) but is not yet sound there at every resolution: one line."""
     if config.hydro.time_stepping != "per_level" or config.scene.problem != "impact":
         return []
     return ["hydro.time_stepping: per_level on an impact is not yet sound at every resolution: at 10 cells per "
@@ -416,11 +416,12 @@ SCENE_GRAVITY = {"column_collapse": "external gravity (the column_collapse scene
 
 def _time_stepping_errors(config: Config, values: dict[str, Any]) -> list[str]:
     """``hydro.time_stepping: per_level`` with physics its level recursion does not carry yet
-    (impactpipe.hydro.amr.subcycle): material strength, gravity, porosity."""
+    (impactpipe.hydro.amr.subcycle): Grady-Kipp fracture, gravity, porosity."""
     if config.hydro.time_stepping != "per_level":
         return []
-    missing = [f"material strength ({name})" for name, choice in values.get("strength", {}).items()
-               if choice["enabled"]]
+    missing = [f"grady_kipp fracture ({name})" for name, mat in config.resolved_materials().items()
+               if values.get("strength", {}).get(name, {}).get("enabled")
+               and ((mat["strength"] or {}).get("damage") or {}).get("model") == "grady_kipp"]
     if config.scene.problem in SCENE_GRAVITY:
         missing.append(SCENE_GRAVITY[config.scene.problem])
     if values.get("self_gravity"):

@@ -69,8 +69,8 @@ def test_time_stepping_is_global_or_per_level_and_per_level_refuses_what_it_does
              "11: hydro.time_stepping: must be one of 'global' or 'per_level' (got 'sometimes')")
     case8c = (HERE.parent / "configs" / "reference" / "case8c.yaml").read_text()
     rejected(tmp_path, case8c.replace("  self_gravity: false\n", "  self_gravity: true\n  time_stepping: per_level\n"),
-             "19: hydro.time_stepping: per_level does not support material strength (basalt), self-gravity "
-             "(hydro.self_gravity) yet; use global")
+             "19: hydro.time_stepping: per_level does not support self-gravity (hydro.self_gravity) yet; "
+             "use global")
     path = tmp_path / "per_level.yaml"
     path.write_text(sedov + "  time_stepping: per_level\n")
     result = CliRunner().invoke(main, ["validate", str(path)])

@@ -10,7 +10,8 @@ CFL condition and a coarse cell is updated once where the global step updates it
 The levels advance recursively, coarse first (refinement ratio 2):
 
     advance(l, dt, theta):  sweep level l's blocks by dt (ghosts filled for level l, the coarser
-                            level l - 1 at the fraction theta of its own step);
+                            level l - 1 at the fraction theta of its own step), then their
+                            strength step by dt when the scene has strength;
                             advance(l + 1, dt / 2, 0); advance(l + 1, dt / 2, 1/2);
                             reflux the level-l cells beside level l + 1 (flux registers).
 
@@ -38,6 +39,13 @@ interpolated (:func:`level_plans`, ``interpolated``): the coarse cells holding a
 and their face neighbours inside the same block.  A convex combination of two states keeps the
 densities, volume fractions and internal energy (concave in the conserved amounts) positive.
 
+With material strength each substep of level l is followed by the strength step of level l's
+blocks (:meth:`LevelStepper._strength_step`): kick dt_l / 2, stress update dt_l, kick dt_l / 2
+(:mod:`impactpipe.hydro.strength.model`), the work arrays' ghosts filled from the same level,
+from level l + 1 (its state at the substep's start) and from level l - 1 (its interpolated cells
+at theta); the kicks' momentum and energy amounts through coarse/fine faces enter the same flux
+registers as the sweeps', so the stress impulse through a level face is kept exactly too.
+
 The split sweeps alternate their order per substep: the n-th substep of level l (n counted from
 the start of the run, 2^l per root step) sweeps x y z for even n and z y x for odd n, so a
 level's pair of substeps is Strang-symmetric and the order follows from the step count alone
@@ -64,6 +72,7 @@ from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_COA
 from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
 from impactpipe.hydro.mesh.boundary import every_layer, fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
+from impactpipe.hydro.strength.model import LevelBlocks
 
 #: Half width (cells) of the box around a register row's coarse cell whose cells take what
 #: neither side of the face holds of its correction (:func:`_near_cells`).
@@ -182,6 +191,35 @@ def _stencil_cells(mesh: BlockMesh, cells: np.ndarray) -> np.ndarray:
     for axis in range(mesh.ndim):
         inside &= (every[:, 1 + axis] >= GHOST) & (every[:, 1 + axis] < GHOST + mesh.block_cells)
     return np.unique(every[inside], axis=0).astype(np.int64)
+
+
+def strength_levels(mesh: BlockMesh) -> list[tuple[LevelBlocks, np.ndarray, np.ndarray]]:
+    """Per level l, cached on the mesh: (its :class:`~impactpipe.hydro.strength.model.LevelBlocks`,
+    the level-(l + 1) blocks its work ghosts restrict from, the level-(l - 1) blocks they copy
+    from; int64): what a strength step of level l alone reads (:meth:`LevelStepper._strength_step`)."""
+    key = "strength_levels"
+    if key in mesh.cache:
+        return mesh.cache[key]
+    plans = level_plans(mesh)
+    level = mesh.block_level
+    out = []
+    for lv, blocks in enumerate(plans["blocks"]):
+        mask = np.zeros(mesh.nblocks, dtype=np.uint8)
+        mask[blocks] = 1
+        restrict, prolong = {}, {}
+        finer, coarser = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        for axis in range(mesh.ndim if mesh.adaptive else 0):
+            rows = plans["restrict"][axis, lv]
+            into = level[rows[:, P_DST]] == lv
+            restrict[axis] = (np.ascontiguousarray(rows[into]),
+                              np.ascontiguousarray(plans["restrict_weight"][axis, lv][into]))
+            prolong[axis] = plans["prolong"][axis, lv]
+            finer.append(rows[into, P_SRC])
+            coarser.append(prolong[axis][:, P_SRC])
+        out.append((LevelBlocks(blocks, mask, restrict, prolong), np.unique(np.concatenate(finer)).astype(np.int64),
+                    np.unique(np.concatenate(coarser)).astype(np.int64)))
+    mesh.cache[key] = out
+    return out
 
 
 def level_time_step(mesh: BlockMesh, rates: np.ndarray, cfl: float) -> float:
@@ -305,6 +343,8 @@ class LevelStepper:
                 if mesh.adaptive:
                     register_fluxes(axis, axis_plans(mesh, axis)["reflux"], sim._face_flux, self._registers[axis],
                                     mesh.block_level, level)
+            if sim.strength is not None:
+                self._strength_step(sim, plans, level, dt, theta)
             updates += blocks.size * int(np.prod(mesh.interior_shape))
         if level < finest:
             for k in range(2):
@@ -318,6 +358,46 @@ class LevelStepper:
         if level > 0 and sim.tracers is not None:
             sim.tracers.level_substep(sim, level, (substep - sim.step_count * 2 ** level + 1) * dt)
         return updates
+
+    def _strength_step(self, sim, plans: dict, level: int, dt: float, theta: float) -> None:
+        """The strength step of level ``level``'s blocks over its substep ``dt`` (s), after its
+        sweeps (module docstring): kick dt / 2, stress update dt, kick dt / 2
+        (:class:`~impactpipe.hydro.strength.model.MaterialStrength`), each kick's amounts through
+        the level's coarse/fine faces added to the flux registers.
+
+        The work ghosts at coarse/fine faces come from the neighbouring levels' cells, computed
+        first: level + 1's from its state now (the start of this substep, where that level
+        stands), level - 1's from the cells its prolongation reads taken at the fraction
+        ``theta`` of its step, U_old + theta (U_new - U_old), as for the sweeps' ghosts.  They are
+        not recomputed within the substep: the update's velocity ghosts and the second kick's
+        stress ghosts from those levels keep these values (first order in time at the level
+        faces; the registers keep the amounts exact whatever the ghosts hold)."""
+        mesh, st, strength = sim.mesh, sim.state, sim.strength
+        view, finer, coarser = strength_levels(mesh)[level]
+        strength.load_work(st, sim.eos, finer)
+        if coarser.size:
+            fields = _fields(st)
+            cells = plans["interpolated"][level]
+            after = _gathered(st, cells)
+            blend_cells(fields, cells, self._before[level], after, theta)
+            strength.load_work(st, sim.eos, coarser)
+            put_cells(fields, cells, after)
+        strength.load_stress(st, sim.eos, sim.partition, view)
+        self._strength_kick(sim, 0.5 * dt, view, level)
+        strength.update(st, dt, sim.eos, sim.partition, view)
+        self._strength_kick(sim, 0.5 * dt, view, level)
+        sim._check_momentum(view.blocks)
+        sim._observe("sources", -1)
+
+    def _strength_kick(self, sim, dt: float, view: LevelBlocks, level: int) -> None:
+        """Half kick ``dt`` (s) of the stress divergence on the ``view``'s blocks, its coarse/fine
+        face amounts (momentum and total energy columns) into the flux registers."""
+        mesh, strength = sim.mesh, sim.strength
+        strength.kick(sim.state, dt, sim.boundary, sim.floors, sim.amounts, sim.partition, view)
+        if mesh.adaptive:
+            for axis in range(mesh.ndim):
+                register_fluxes(axis, axis_plans(mesh, axis)["reflux"], strength.face_flux[axis],
+                                self._registers[axis], mesh.block_level, level)
 
     def fill_level_ghosts(self, sim, plans: dict, axis: int, level: int, theta: float) -> None:
         """Fill the ghosts of level ``level``'s blocks along ``axis`` (module docstring): same-level

@@ -150,17 +150,24 @@ def _add_face(dt, b, ix, iy, iz, d, side, face, geo, edge, neighbor, neighbor_le
 
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
-                            boundary, face_flux, col0, lo, hi):
+                            boundary, face_flux, col0, lo, hi, blocks=None):
     """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the
-    blocks ``lo .. hi - 1``; see the module docstring.  A cell sums its faces low then high
-    along axis 0, then along 1 and 2, one call of :func:`_face_stress` and :func:`_add_face`
-    per face with the axis and side as constants."""
+    blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64, when given: one refinement
+    level's); see the module docstring.  A cell sums its faces low then high along axis 0,
+    then along 1 and 2, one call of :func:`_face_stress` and :func:`_add_face` per face with
+    the axis and side as constants."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    for b in prange(lo, hi):
+    count = hi - lo
+    if blocks is not None:
+        count = blocks.shape[0]
+    for i in prange(count):
+        b = lo + i
+        if blocks is not None:
+            b = blocks[i]
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0

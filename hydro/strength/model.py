@@ -62,13 +62,16 @@ with void at no less than the pressure at mid-depth of the layer it forms under 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from impactpipe.hydro.eos import reference_densities
 from impactpipe.hydro.eos.porosity import ALPHA0
 from impactpipe.hydro.amr.regrid import summed_rows
-from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
+from impactpipe.hydro.amr.transfer import allocate_face_flux, prolong_field_ghosts, reflux, restrict_ghosts
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
+from impactpipe.hydro.mesh.boundary import fill_ghosts_where
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
@@ -85,6 +88,20 @@ from impactpipe.hydro.strength.update import (
 _REFLECT_FLIP = {0: (WK_V, WK_S + 3, WK_S + 4), 1: (WK_V + 1, WK_S + 3, WK_S + 5), 2: (WK_V + 2, WK_S + 4, WK_S + 5)}
 #: Work slots whose sign flips in a rough (no-slip) wall's ghost: every velocity component, no stress.
 _ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
+
+
+class LevelBlocks(NamedTuple):
+    """One refinement level's share of a strength step per level (``time_stepping = "per_level"``,
+    :mod:`impactpipe.hydro.amr.subcycle`): the kernels run on ``blocks`` (int64, the level's
+    blocks) only, and the work arrays' ghosts of those blocks are filled from same-level copies
+    (``mask[NB]`` uint8, 1 on the level's blocks), from the finer level by the ``restrict[axis]``
+    rows and weights of the axis's restrict plan whose destination is on the level, and from the
+    coarser level by the ``prolong[axis]`` rows into the level (copies of the coarse cell)."""
+
+    blocks: np.ndarray
+    mask: np.ndarray
+    restrict: dict
+    prolong: dict
 
 
 class MaterialStrength:
@@ -223,54 +240,77 @@ class MaterialStrength:
             amount[cells] = law[:, j] * mass.ravel()[cells]
             mesh.interior(state.arhoq)[:, first + j] = amount.reshape(fill.shape)
 
-    def load_stress(self, state: HydroState, eos, partition) -> None:
+    def load_stress(self, state: HydroState, eos, partition, level: LevelBlocks | None = None) -> None:
         """Cell velocities, fills and the transported mixture stress S^n (from ``arhoq``) of the
-        blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`) into the
-        work arrays, then their ghosts: what the first half kick (:meth:`kick`) uses."""
+        blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`; or one
+        refinement ``level``'s blocks, :class:`LevelBlocks`) into the work arrays, then their
+        ghosts: what the first half kick (:meth:`kick`) uses."""
         lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
-                                 self.arrays.model, self.ns, self.work, lo, hi, self.holds, self.has_mass)
+                                 self.arrays.model, self.ns, self.work, lo, hi, self.holds, self.has_mass,
+                                 None if level is None else level.blocks)
         for axis in range(self.mesh.ndim):
-            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns))
+            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns), level)
 
-    def update(self, state: HydroState, dt: float, eos, partition) -> None:
-        """Advance the stress of the ``partition``'s blocks over ``dt`` (s) with the current velocities (the
-        half-step ones after the first kick, into the work arrays with their ghosts first):
-        Jaumann update, failure, yield, damage and stress power; the new mixture stress
-        S^(n+1) goes to the work arrays, ghosts included."""
+    def load_work(self, state: HydroState, eos, blocks: np.ndarray) -> None:
+        """Velocities, fills and mixture stresses of the interior cells of ``blocks`` (int64) into
+        the work arrays, without ghosts: the cells of the levels beside a level that steps alone
+        (:mod:`impactpipe.hydro.amr.subcycle`), which its ghosts are filled from."""
+        if blocks.size:
+            cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
+                                     self.arrays.model, self.ns, self.work, 0, 0, self.holds, self.has_mass, blocks)
+
+    def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None) -> None:
+        """Advance the stress of the ``partition``'s blocks (or of the ``level``'s) over ``dt`` (s)
+        with the current velocities (the half-step ones after the first kick, into the work
+        arrays with their ghosts first): Jaumann update, failure, yield, damage and stress
+        power; the new mixture stress S^(n+1) goes to the work arrays, ghosts included."""
         a = self.arrays
         mesh = self.mesh
         lo, hi = self._range(partition)
-        cell_velocities(state.arho, state.momentum, self.work, lo, hi)
+        blocks = None if level is None else level.blocks
+        cell_velocities(state.arho, state.momentum, self.work, lo, hi, blocks)
         for axis in range(mesh.ndim):
-            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_V + 3))
+            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_V + 3), level)
         if self.fracture:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
-                          self.surface_gravity, has_mass=self.has_mass)
+                          self.surface_gravity, has_mass=self.has_mass, blocks=blocks)
         else:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
-                          porosity=self.porosity, has_mass=self.has_mass)
+                          porosity=self.porosity, has_mass=self.has_mass, blocks=blocks)
         for axis in range(mesh.ndim):
-            self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns))
+            self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns), level)
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
-             amounts: np.ndarray, partition) -> None:
+             amounts: np.ndarray, partition, level: LevelBlocks | None = None) -> None:
         """Add the divergence of the work arrays' stress over ``dt`` (s) to the momentum and
         energy of the ``partition``'s blocks.
 
         Domain-face fluxes go to ``boundary``.  On an adaptive mesh the coarse cells beside
         finer blocks are refluxed with the fine blocks' stress fluxes (momentum and energy only;
         ``floors``, ``amounts``: the hydro counters the reflux kernel reports to, untouched here
-        since no mass moves).
+        since no mass moves).  With a ``level`` (:class:`LevelBlocks`) only its blocks are
+        kicked and nothing is refluxed: the amounts through the level's coarse/fine faces stay in
+        :attr:`face_flux` (zeroed on the level's blocks first) for the flux registers of
+        :mod:`impactpipe.hydro.amr.subcycle`.  The hourglass viscosity is not split by levels.
         """
         mesh = self.mesh
         lo, hi = self._range(partition)
+        if level is not None:
+            if self.hourglass[0] > 0.0:
+                raise ValueError("the hourglass viscosity does not step per refinement level")
+            if mesh.adaptive:
+                self.face_flux[:, level.blocks] = 0.0
+            apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
+                                    mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
+                                    self.face_flux, 3 * self.nmat, lo, hi, level.blocks)
+            return
         self.face_flux[...] = 0.0
         apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                 mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
@@ -322,7 +362,7 @@ class MaterialStrength:
             skipped.add(WK_V + 2)
         return 1, frozenset(skipped)
 
-    def _fill_work_ghosts(self, partition, axis: int, slots: slice) -> None:
+    def _fill_work_ghosts(self, partition, axis: int, slots: slice, level: LevelBlocks | None = None) -> None:
         """Ghosts of the work arrays' ``slots`` along ``axis`` that some kernel reads
         (:meth:`_ghost_reads`): copies of the neighbours' cells (coarse/fine faces: restriction
         and copies; neighbours of another MPI rank: received strips;
@@ -333,24 +373,35 @@ class MaterialStrength:
         none of a void block's (every kernel skips its void cells), and half of an impact's
         blocks are void.  The ghosts left stale may be flipped at a wall; nothing reads them.
         An adaptive mesh fills every layer of every block (its prolongation reads the coarse
-        blocks' ghosts)."""
+        blocks' ghosts); with a ``level`` (:class:`LevelBlocks`) on an adaptive mesh, every
+        layer of the level's blocks only: same-level copies, restriction from the finer level,
+        copies of the coarser level's cells (:func:`_fill_level_work_ghosts`), and the wall
+        sign flips of the level's blocks."""
         layers, skipped = self._ghost_reads()
+        by_level = level is not None and self.mesh.adaptive
         if self.mesh.adaptive:
             layers = GHOST
         start = slots.start
         for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
             if stop > start:
-                partition.fill_field_ghosts(self.work, self.mesh, axis, slice(start, stop), self.holds, layers)
+                if by_level:
+                    _fill_level_work_ghosts(self.work[:, start:stop], self.mesh, axis, level)
+                else:
+                    partition.fill_field_ghosts(self.work, self.mesh, axis, slice(start, stop), self.holds, layers)
                 for side in (0, 1):
                     flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-                    self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if start <= c < stop], layers)
+                    self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if start <= c < stop], layers,
+                                           level.mask if by_level else None)
             start = stop + 1
 
-    def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int) -> None:
+    def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
+                          mask: np.ndarray | None = None) -> None:
         """Negate ``components`` of ``array`` in the ``layers`` ghost layers next to the interior
-        of the reflecting faces on ``side`` of ``axis``."""
+        of the reflecting faces on ``side`` of ``axis`` (of the blocks where ``mask`` is not 0,
+        when given)."""
         mesh = self.mesh
-        blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
+        wall = mesh.neighbor[:, axis, side] == REFLECTING
+        blocks = np.nonzero(wall if mask is None else wall & (mask != 0))[0]
         if blocks.size == 0 or not components:
             return
         n = mesh.interior_shape[axis]
@@ -410,3 +461,16 @@ class MaterialStrength:
             whole[name] = np.zeros((mesh.nblocks,) + values.shape[1:])
             whole[name][blocks] = values
         return whole
+
+
+def _fill_level_work_ghosts(field: np.ndarray, mesh: BlockMesh, axis: int, level: LevelBlocks) -> None:
+    """Every ghost layer along ``axis`` of the ``level``'s blocks of ``field`` (a view of some work
+    slots, (NB, C, ...)): copies of the same level's neighbours and domain faces (no sign flips),
+    the volume-weighted means of the finer level's cells, copies of the coarser level's cells
+    (:func:`impactpipe.hydro.mesh.boundary.fill_field_ghosts` restricted to one level)."""
+    g = int(mesh.ghost[axis])
+    if g == 0:
+        return
+    fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, level.mask, g)
+    restrict_ghosts(field, *level.restrict[axis])
+    prolong_field_ghosts(field, level.prolong[axis])

@@ -131,11 +131,12 @@ def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
 
 
 @njit(cache=True, parallel=True)
-def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass):
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass, blocks=None):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
-    blocks ``lo .. hi - 1`` into ``work`` (ghosts are filled from them afterwards), into
-    ``holds[b]`` whether block b has a cell that holds material (1) or not (0): the kernels
-    of the stress step read no ghost of a block without one, so its ghosts need no filling;
+    blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64, when given) into ``work``
+    (ghosts are filled from them afterwards), into ``holds[b]`` whether block b has a cell
+    that holds material (1) or not (0): the kernels of the stress step read no ghost of a
+    block without one, so its ghosts need no filling;
     and into ``has_mass[b]`` whether some cell of block b has mass, rho > 0 (1) or not (0):
     a cell without mass holds no transported scalars (every kernel that removes a material's
     last mass zeroes them), so :func:`update_stress` has nothing to do in a block without.
@@ -165,7 +166,13 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
-    for b in prange(lo, hi):
+    count = hi - lo
+    if blocks is not None:
+        count = blocks.shape[0]
+    for i in prange(count):
+        b = lo + i
+        if blocks is not None:
+            b = blocks[i]
         held = 0
         massive = 0
         for ix in range(gx, nx - gx):
@@ -253,15 +260,22 @@ def _clear_strength_scalars(arhoq, b, first, nq, porous, ix, iy, iz):
 
 
 @njit(cache=True, parallel=True)
-def cell_velocities(arho, mom, work, lo, hi):
+def cell_velocities(arho, mom, work, lo, hi, blocks=None):
     """New velocities v = (rho v) / rho (m/s), rho = sum_k alpha_k rho_k, of the interior cells
-    of the blocks ``lo .. hi - 1`` that hold material (``work`` fill > 0, set by
-    :func:`cell_velocity_and_stress`; the momentum kicks move no mass, so the fills stay)."""
+    of the blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64) that hold material
+    (``work`` fill > 0, set by :func:`cell_velocity_and_stress`; the momentum kicks move no
+    mass, so the fills stay)."""
     nb, nmat, nx, ny, nz = arho.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
-    for b in prange(lo, hi):
+    count = hi - lo
+    if blocks is not None:
+        count = blocks.shape[0]
+    for i in prange(count):
+        b = lo + i
+        if blocks is not None:
+            b = blocks[i]
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -342,9 +356,10 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
-                  damage_model=None, damage_params=None, surface_gravity=None, porosity=None, has_mass=None):
-    """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``;
-    see the module docstring.
+                  damage_model=None, damage_params=None, surface_gravity=None, porosity=None, has_mass=None,
+                  blocks=None):
+    """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``
+    (or the ``blocks`` listed, int64, when given: one refinement level's); see the module docstring.
     ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
     or None.  A porous material k (alpha_0 > 1, distension alpha from the second-to-last of its
     scalars) is its matrix's strength carried by the bulk: its EOS pressure p_k = P_s / alpha
@@ -375,7 +390,13 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    for b in prange(lo, hi):
+    count = hi - lo
+    if blocks is not None:
+        count = blocks.shape[0]
+    for i in prange(count):
+        b = lo + i
+        if blocks is not None:
+            b = blocks[i]
         if has_mass is not None:
             if has_mass[b] == 0:
                 continue
