@@ -69,7 +69,7 @@ LOG_INTERVAL = 100
 #: during the root step (up to 2.7x in the first 0.25 s of the hydro-only impact,
 #: docs/hydro.md), which the global step follows every finest step.
 LEVEL_STEP_GROWTH = 1.25
-#: At most this many retakes of one root step; the last one stands.
+#: At most this many retakes of one root step; the last one stands, or its failure is raised.
 LEVEL_STEP_RETAKES = 3
 
 
@@ -145,7 +145,8 @@ class Simulation:
         self.refinement = refinement or RefinementRule()
         #: Regrids that changed the mesh, blocks split into children and sibling groups merged.
         self.regrids = 0
-        #: Per level, root steps taken again at a shorter step (:data:`LEVEL_STEP_GROWTH`).
+        #: Per level, root steps taken again at a shorter step (:meth:`_level_step`: the signal speed
+        #: grew past :data:`LEVEL_STEP_GROWTH`, or a substep failed).
         self.level_step_retakes = 0
         self.blocks_refined = 0
         self.blocks_coarsened = 0
@@ -426,23 +427,38 @@ class Simulation:
 
         The level-l substeps keep the CFL condition of the state at the root step's start, while
         the global step takes its finest step anew from the state every finest step.  So on a
-        mesh of several levels, where the signal speed grew during the root step so much that
-        the state at its end allows only dt' < dt / :data:`LEVEL_STEP_GROWTH` (level_time_step of
-        the rates at the end), the root step is taken again from the last good copy at dt'
-        (counted in ``level_step_retakes``, at most :data:`LEVEL_STEP_RETAKES` times); the tracers'
-        records are put back with the state (:meth:`restore_last_good`), so the peaks that the
-        discarded root step's substeps recorded are dropped and the retaken one records its own.
+        mesh of several levels the root step is taken again from the last good copy, at most
+        :data:`LEVEL_STEP_RETAKES` times (counted in ``level_step_retakes``), where
+
+        - the signal speed grew during the root step so much that the state at its end allows
+          only dt' < dt / :data:`LEVEL_STEP_GROWTH` (level_time_step of the rates at the end):
+          again at dt';
+        - a substep failed (a sweep's negative density or NaN, :class:`HydroFailure`): again at
+          dt / 2, the failure raised only when the last retake fails too.
+
+        The tracers' records are put back with the state (:meth:`restore_last_good`), so the
+        peaks that the discarded root step's substeps recorded are dropped and the retaken one
+        records its own.
         """
-        updates = self._level_stepper.advance(self, dt)
+        updates = 0
         retakes = 0
-        while self.mesh.block_level.max() > 0 and retakes < LEVEL_STEP_RETAKES:
-            self.stable_dt()
-            allowed = level_time_step(self.mesh, self._rate, self.cfl)
-            if dt <= LEVEL_STEP_GROWTH * allowed:
-                break
-            self.restore_last_good()
-            dt = allowed
-            updates += self._level_stepper.advance(self, dt)
+        while True:
+            try:
+                updates += self._level_stepper.advance(self, dt)
+            except HydroFailure:
+                if self.mesh.block_level.max() == 0 or retakes >= LEVEL_STEP_RETAKES:
+                    raise
+                self.restore_last_good()
+                dt *= 0.5
+            else:
+                if self.mesh.block_level.max() == 0 or retakes >= LEVEL_STEP_RETAKES:
+                    break
+                self.stable_dt()
+                allowed = level_time_step(self.mesh, self._rate, self.cfl)
+                if dt <= LEVEL_STEP_GROWTH * allowed:
+                    break
+                self.restore_last_good()
+                dt = allowed
             retakes += 1
             self.level_step_retakes += 1
         self.cell_updates += updates

@@ -339,6 +339,52 @@ def test_retaken_and_failed_root_steps_leave_the_tracer_records_untouched(monkey
     assert direct.tracers.history_count == count
 
 
+
+def test_a_failed_root_step_is_taken_again_at_half_the_step(monkeypatch):
+    """A root step whose substep fails (here its first attempt raises the sweeps' HydroFailure
+    after advancing) is taken again from the last good copy at half the step: the state, the
+    counters and the tracers equal those of a root step taken directly at that length, bit for
+    bit; a step that keeps failing raises the failure after LEVEL_STEP_RETAKES retakes."""
+    from impactpipe.hydro.amr.subcycle import LevelStepper
+    from impactpipe.hydro.solver import LEVEL_STEP_RETAKES, HydroFailure
+
+    runs = []
+    for _ in range(2):
+        sim = _box(3, cells=32)
+        sim.tracers = _box_tracers(history=0.004)
+        sim.run(100.0, max_steps=5)
+        runs.append(sim)
+    failed, direct = runs
+    advance = LevelStepper.advance
+    calls = []
+
+    def fail_once(self, sim, dt):
+        updates = advance(self, sim, dt)
+        calls.append(dt)
+        if len(calls) == 1:
+            raise HydroFailure("negative density", sim.time, 0, None, {})
+        return updates
+
+    monkeypatch.setattr(LevelStepper, "advance", fail_once)
+    failed.step()
+    monkeypatch.undo()
+    assert len(calls) >= 2 and calls[1] == 0.5 * calls[0] and failed.level_step_retakes == len(calls) - 1
+    direct.step(dt_max=calls[1])
+    assert direct.time == failed.time and direct.step_count == failed.step_count
+    for name, array in failed.state.arrays().items():
+        np.testing.assert_array_equal(array, direct.state.arrays()[name], err_msg=name)
+    np.testing.assert_array_equal(failed.floors, direct.floors)
+    _assert_same_tracers(failed.tracers, direct.tracers)
+
+    def always_fail(self, sim, dt):
+        raise HydroFailure("negative density", sim.time, 0, None, {})
+
+    monkeypatch.setattr(LevelStepper, "advance", always_fail)
+    retakes = direct.level_step_retakes
+    with pytest.raises(HydroFailure, match="negative density"):
+        direct.step()
+    assert direct.level_step_retakes - retakes == LEVEL_STEP_RETAKES
+
 def _impact_tracers(mode, substep_peaks=True):
     """The hydro-only impact (8 cells per R_P, 4 levels) with the scene's 900 tracers, to t = 0.3 s."""
     sim = PROBLEMS["impact"].setup({"cells_per_projectile_radius": 8, "levels": 4, "end_time": 0.3},
