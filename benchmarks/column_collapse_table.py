@@ -13,6 +13,11 @@ has been still, the run-out (L_f - L0) / L0 and height H_f / L0 against the laws
 ``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them;
 ``--room R`` lengthens the mesh to R run-outs of the law beyond the column (a deposit that
 reaches the far edge stops the run with an error).
+``--dilation`` adds two columns at the end: the share of the mass in partly filled cells (fill
+below DILATED_FILL) and the share at a pressure below rho0 |g| dx / 2 (the surface-layer pressure
+of a full surface cell, Pa): material that holds void or next to no pressure, which a
+cohesionless material's strength does not hold beyond its surface-layer pressure
+(docs/validation.md, "Why the run-out grows with resolution").
 ``--plot DIR`` writes, per run, DIR/profile_a<a>_phi<phi>_cfl<cfl>_n<cells>.png: the deposit's
 thickness h(x) / L0 at t = tau and at the end against x / L0, with the laws' run-out L_f and
 height H_f marked.
@@ -34,6 +39,9 @@ from impactpipe.hydro.problems import column_collapse  # noqa: E402
 from impactpipe.pipeline.config import load_config  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "column_collapse.yaml"
+
+#: A cell filled less than this counts as partly filled in the ``--dilation`` columns.
+DILATED_FILL = 0.99
 
 
 def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
@@ -68,7 +76,13 @@ def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion:
     if plot is not None:
         profiles[f"t = {sim.time / tau:g} tau"] = deposit
         _plot_profiles(plot / f"profile_a{aspect:g}_phi{phi:g}_cfl{cfl:g}_n{cells}.png", profiles, width, aspect)
+    mass = snap.partial_density.sum(axis=1)
+    fill = snap.volume_fraction.sum(axis=1)
+    rho0 = float(mass.max())  # the densest cell, within 1e-3 of the reference density (kg/m^3)
+    unloaded = snap.pressure < 0.5 * rho0 * scene["gravity"] * height / cells
     return {"a": aspect, "phi": phi, "cfl": cfl, "cells": cells, "ke": energy / peak,
+            "partly_filled": float(mass[fill < DILATED_FILL].sum() / mass.sum()),
+            "unloaded": float(mass[unloaded & (mass > 0.0)].sum() / mass.sum()),
             "still": sim.time / tau - still_since, "runout": (deposit["runout"] - width) / width,
             "height": deposit["height"] / width, "centroid": deposit["centroid"] / width,
             "law_runout": column_collapse.scaling_runout(aspect), "law_height": column_collapse.scaling_height(aspect),
@@ -106,9 +120,12 @@ def main() -> None:
     parser.add_argument("--plot", type=Path, default=None, help="folder for the thickness profile plots")
     parser.add_argument("--room", type=float, default=None,
                         help="scene.room: mesh length beyond the column in run-outs of the law (the config's if omitted)")
+    parser.add_argument("--dilation", action="store_true",
+                        help="add the mass shares in partly filled cells and at a pressure below rho0 |g| dx / 2")
     args = parser.parse_args()
-    print("| a | phi | cfl | cells/H0 | KE/peak at end | front still for | run-out (law) | height (law) | centroid |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    extra = " partly filled | p < rho0 g dx / 2 |" if args.dilation else ""
+    print("| a | phi | cfl | cells/H0 | KE/peak at end | front still for | run-out (law) | height (law) | centroid |" + extra)
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|" if args.dilation else ""))
     for aspect in args.aspect:
         for phi in args.phi:
             for cfl in args.cfl:
@@ -118,7 +135,8 @@ def main() -> None:
                     print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
                           f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
                           f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "
-                          f"{r['height'] / r['law_height'] - 1:+.0%}) | {r['centroid']:.4f} |", flush=True)
+                          f"{r['height'] / r['law_height'] - 1:+.0%}) | {r['centroid']:.4f} |"
+                          + (f" {r['partly_filled']:.3f} | {r['unloaded']:.3f} |" if args.dilation else ""), flush=True)
 
 
 if __name__ == "__main__":
