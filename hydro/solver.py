@@ -56,6 +56,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     transport_ghost_layers,
 )
 from impactpipe.hydro.scheme.timestep import allocate_rate_work, cell_thermodynamics, max_signal_rate
+from impactpipe.hydro.scheme.settling import settle_void
 from impactpipe.hydro.scheme.step_tension import UNLIMITED_TENSION, open_void_in_tension
 from impactpipe.storage import atomic_path, compression
 
@@ -197,6 +198,12 @@ class Simulation:
         #: limit between the split sweeps made the deposit depend on the time step.  Not with porous or
         #: Grady-Kipp materials.
         self.step_tensile_limit = False
+        #: Void under material resting on it settles out at the end of each step's sweeps
+        #: (:mod:`impactpipe.hydro.scheme.settling`): set by the granular column collapse, whose flow rode on
+        #: cells held open at zero pressure and ran out further the finer the mesh.  2d-planar, one level,
+        #: uniform gravity along -axis 1; :attr:`settled_cells` counts the transfers.
+        self.void_settling = False
+        self.settled_cells = 0
         self._unlimited_tension: np.ndarray | None = None
         self.dt_first: float | None = None
         self.last_dt = 0.0
@@ -310,7 +317,8 @@ class Simulation:
             ("the hourglass viscosity", strength is not None and strength.hourglass[0] > 0.0),
             ("rough walls", strength is not None and bool(strength.rough_walls)),
             ("the surface-layer pressure", strength is not None and strength.surface_gravity is not None),
-            ("the step-end tensile limit (step_tensile_limit)", self.step_tensile_limit)) if present]
+            ("the step-end tensile limit (step_tensile_limit)", self.step_tensile_limit),
+            ("void settling (void_settling)", self.void_settling)) if present]
         if missing:
             raise ValueError(f"time_stepping per_level does not support {', '.join(missing)} yet; use global")
 
@@ -377,6 +385,8 @@ class Simulation:
             lo, hi, _ = own.indices(self.mesh.nblocks)
             open_void_in_tension(st.alpha, st.arho, st.arhoe, st.arhoq, self.eos.kind, self.eos.params, self.eos.table,
                                  self.tensile_strength, self.floors, lo, hi)
+        if self.void_settling:
+            self._settle_void()
         if self.porosity is not None:
             lo, hi, _ = own.indices(self.mesh.nblocks)
             compact(st.alpha, st.arho, st.arhoq, self.porosity, self.porosity_counts, lo, hi)
@@ -405,6 +415,25 @@ class Simulation:
               self.eos.table, self.shear_modulus, self._sweep_tensile_strength(), self._scratch, self.boundary[own],
               self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
               blocks, self.grady_kipp, self.porosity, self.bulk_pressure_predictor)
+
+    def _settle_void(self) -> None:
+        """Settle the void under resting material out of every column (:attr:`void_settling`,
+        :func:`~impactpipe.hydro.scheme.settling.settle_void`); the potential energy it releases is
+        added to the work of gravity."""
+        mesh = self.mesh
+        g = None if self.gravity is None else getattr(self.gravity, "acceleration", None)
+        if (mesh.geometry != "2d-planar" or g is None or g[0] != 0.0 or not g[1] < 0.0
+                or int(mesh.block_level.max()) != int(mesh.block_level.min())
+                or not isinstance(self.partition, WholeMesh)):
+            raise ValueError("void_settling needs a 2d-planar mesh on one level, one process and a uniform "
+                             "gravity along -axis 1")
+        st = self.state
+        work = np.zeros(mesh.nblocks)
+        counts = np.zeros(mesh.nblocks, np.int64)
+        settle_void(st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy, mesh.neighbor, mesh.block_dx,
+                    -float(g[1]), work, counts)
+        self.gravity.work += float(work.sum())
+        self.settled_cells += int(counts.sum())
 
     def _sweep_tensile_strength(self) -> np.ndarray:
         """The tensile strengths Y_T (Pa) the sweeps hold: the materials', or UNLIMITED_TENSION for every

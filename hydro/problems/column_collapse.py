@@ -35,7 +35,9 @@ predictor takes the bulk modulus (``Simulation.bulk_pressure_predictor``): with 
 left a viscosity G dt / 3 on the flow, and the run-out depended on the time step; and its
 tensile limit acts on the state at the end of each step, not between the sweeps
 (``Simulation.step_tensile_limit``, :mod:`impactpipe.hydro.scheme.step_tension`): between the
-sweeps it held the flowing column at zero pressure in more cells the larger the step.  The mesh spans L0 plus
+sweeps it held the flowing column at zero pressure in more cells the larger the step.  With ``settling``
+(off by default) void under resting material settles out at the end of each step
+(``Simulation.void_settling``, :mod:`impactpipe.hydro.scheme.settling`).  The mesh spans L0 plus
 ``room`` run-outs of the law; :class:`ColumnCollapseSimulation` stops the run with an error
 when the deposit reaches the mesh's far edge.  A strengthless material collapses as a fluid
 (dam break) on a free-slip floor.
@@ -96,6 +98,8 @@ PARAMETERS = {
     "end_time": Parameter(120.0, gt=0, units="s", description="end of the run"),
     "hourglass": Parameter(HOURGLASS_COEFFICIENT, ge=0, description="hourglass viscosity coefficient C "
                            "(impactpipe.hydro.strength.hourglass); 0 for none"),
+    "settling": Parameter(False, kind=bool, description="void under resting material settles out at the end of "
+                          "each step (Simulation.void_settling; docs/validation.md, 'Void settling')"),
     "room": Parameter(2.0, gt=0, description="mesh length beyond the column, in run-outs L_f - L0 of the scaling law"),
 }
 
@@ -191,6 +195,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
                          gravity=ExternalGravity([0.0, -p["gravity"], 0.0], m), refinement=rule)
         sim.bulk_pressure_predictor = True
         sim.step_tensile_limit = True
+        sim.void_settling = p["settling"]
         if sim.strength is not None:
             sim.strength.set_rough_wall(VERTICAL_AXIS, 0)
             sim.strength.set_surface_layer_pressure([0.0, -p["gravity"], 0.0])
