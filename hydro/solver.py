@@ -113,8 +113,9 @@ class Simulation:
             tension borne (:attr:`grady_kipp`); its ``flaw_strains`` are recorded here when drawn.
             A porous material (an EOS spec with a ``porosity`` block of alpha0 > 1,
             :mod:`impactpipe.hydro.eos.porosity`) carries its distension in the transported
-            scalars, compacted after each step's sweeps; it may not have a yield model (not
-            supported yet).
+            scalars, compacted after each step's sweeps; it may have a yield model and
+            Grady-Kipp damage (its flaws counted per unit volume of matrix,
+            :meth:`impactpipe.hydro.strength.model.MaterialStrength.prepare_state`).
         time: initial time (s).
         tracers: Lagrangian tracers carried with the flow, or None.  Any object with
             ``before_step(sim)``, ``after_step(sim, dt)``, ``restore_good()``,
@@ -233,10 +234,6 @@ class Simulation:
         #: fracture, :func:`impactpipe.hydro.scheme.mixture.tension_factor`); None when there are none.
         self.grady_kipp = gradual if gradual.any() else None
         porous = self.porosity is not None
-        if porous and (gradual & (self.porosity[:, ALPHA0] > 1.0)).any():
-            k = int(np.flatnonzero(gradual & (self.porosity[:, ALPHA0] > 1.0))[0])
-            raise ValueError(f"material {k} ({material_names[k]}): porosity with the grady_kipp damage model is not "
-                             f"supported (give the porous material the instant tensile failure)")
         #: Counters of the compaction step (:data:`impactpipe.hydro.eos.porosity.COUNT_NAMES`), per block.
         self.porosity_counts = np.zeros((nb, len(POROSITY_COUNT_NAMES)), dtype=np.int64)
         fresh = porous and state.arhoq.shape[1] == 0
@@ -250,15 +247,14 @@ class Simulation:
             raise ValueError("damage model grady_kipp needs a strength model with a yield strength")
         elif porous and fresh:
             state.arhoq = np.zeros((mesh.nblocks, 2 * state.nmat) + mesh.padded_shape)
+            for k in range(state.nmat):
+                state.arhoq[:, 2 * k] = self.porosity[k, ALPHA0] * state.arho[:, k]
         elif state.arhoq.shape[1] and not porous:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
         #: Ghost layers of each column of ``state.arhoq`` that a step fills for the sweeps
         #: (:func:`~impactpipe.hydro.scheme.pencil_layout.transport_ghost_layers`; every layer on an adaptive mesh).
         self._q_layers = transport_ghost_layers(state.nmat, nq, porous)
-        if fresh:
-            for k in range(state.nmat):
-                state.arhoq[:, nq * k + nq - 2] = self.porosity[k, ALPHA0] * state.arho[:, k]
         self._scratch = allocate_scratch(numba.config.NUMBA_NUM_THREADS, state.nmat, max(mesh.padded_shape), nq)
         self._rate_work = allocate_rate_work(numba.config.NUMBA_NUM_THREADS, mesh.padded_shape)
         self._face_flux = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim,

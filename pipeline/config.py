@@ -749,16 +749,13 @@ def _material_errors(name: str, mat: dict[str, Any], source_dir: Path) -> list[t
         errors.extend(_damage_errors(name, strength))
     porosity = mat.get("porosity")
     if isinstance(porosity, (dict, str)):
-        damage = strength.get("damage") if isinstance(strength, dict) else None
-        damage_model = _damage_block(damage).get("model", "instant") if isinstance(damage, (str, dict)) else None
-        errors.extend(_porosity_errors(name, {"preset": porosity} if isinstance(porosity, str) else porosity,
-                                       damage_model))
+        errors.extend(_porosity_errors(name, {"preset": porosity} if isinstance(porosity, str) else porosity))
     return errors
 
 
-def _porosity_errors(name: str, porosity: dict[str, Any], damage_model: Any) -> list[tuple[tuple, str]]:
+def _porosity_errors(name: str, porosity: dict[str, Any]) -> list[tuple[tuple, str]]:
     """Errors of a material's ``porosity`` block: unknown preset, missing parameters, alpha_x above
-    alpha0, porosity on a material with Grady-Kipp damage (``damage_model``; not supported)."""
+    alpha0."""
     loc = ("materials", name, "porosity")
     preset = porosity.get("preset")
     choices = presets.porosity_presets()
@@ -776,9 +773,6 @@ def _porosity_errors(name: str, porosity: dict[str, Any], damage_model: Any) -> 
     if resolved["alpha_x"] > resolved["alpha0"]:
         return [(loc + ("alpha_x",), f"must be <= alpha0 = {resolved['alpha0']:g} (got {resolved['alpha_x']:g}): "
                                      f"compaction runs from alpha0 down through alpha_x to 1")]
-    if damage_model == "grady_kipp" and resolved["alpha0"] > 1.0:
-        return [(loc, "porosity with the grady_kipp damage model is not supported yet: give the porous material "
-                      "the instant tensile failure (no damage block)")]
     return []
 
 

@@ -162,19 +162,6 @@ def test_planar_compaction_wave_behind_elastic_precursor():
     assert np.median(p[behind]) == pytest.approx(p_final, rel=0.02)
 
 
-def test_a_porous_material_with_grady_kipp_damage_is_refused():
-    from impactpipe.pipeline.presets import resolve_strength
-
-    spec = porous_basalt(1.5)
-    mesh = BlockMesh.uniform("1d-planar", [0.0], [1.0], [16], [("outflow", "outflow")])
-    state = HydroState.empty(mesh, 1)
-    state.set_material(mesh, 1.0, 0, pack_eos([spec]), 1800.0, np.zeros(3), specific_energy=0.0)
-    strength = {**resolve_strength("geo", "weak", {}), "damage": {"model": "grady_kipp", "weibull_m": 8.5,
-                                                                  "weibull_k": 3.0e39}}
-    with pytest.raises(ValueError, match=r"material 0 \(rubble\): porosity with the grady_kipp damage model"):
-        Simulation(mesh, ["rubble"], [spec], state, strength=[strength])
-
-
 def elastic_basalt(chi, eps_e=-2.0e-3, alpha0=1.5):
     return {**BASALT, "porosity": {"alpha0": alpha0, "eps_e": eps_e, "kappa": 0.98, "alpha_x": 1.0, "chi": chi}}
 

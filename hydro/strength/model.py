@@ -33,7 +33,9 @@ scalars per material, the cells' local Weibull laws per unit mass
 (:mod:`impactpipe.hydro.strength.update`), drawn by :meth:`MaterialStrength.prepare_state`
 when the state is new (not from a checkpoint): per Grady-Kipp material k, its flaws are
 assigned over the cells it fills (:func:`impactpipe.hydro.strength.flaws.assign_flaws`, body
-volume V = sum v_i alpha_k, weight v_i alpha_k, n_tot = N ln N or the block's ``flaw_count``,
+volume V = sum v_i alpha_k, weight v_i alpha_k; for a porous material the matrix volume,
+V = sum v_i alpha_k / alpha_dist, weight v_i alpha_k / alpha_dist, since the Weibull k counts
+flaws per unit volume of intact rock; n_tot = N ln N or the block's ``flaw_count``,
 counted below the law's node strains, :func:`impactpipe.hydro.strength.flaws.flaw_nodes` of the
 draw unless the block gives ``flaw_strains``) with the generator
 ``numpy.random.default_rng([flaw_seed, k])``.  On a 1-D mesh a cell of width dx holds the flaws
@@ -197,15 +199,18 @@ class MaterialStrength:
 
     def prepare_state(self, state: HydroState) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
-        initial damage from the parameters) and, with Grady-Kipp fracture, the flaws of each
-        Grady-Kipp material drawn over its cells (module docstring), unless it already has them
-        (a checkpoint)."""
+        initial damage from the parameters), in a porous scene each material's distension column
+        (its initial distension alpha_0, 1 for a compact material, :mod:`impactpipe.hydro.eos.porosity`)
+        and, with Grady-Kipp fracture, the flaws of each Grady-Kipp material drawn over its cells
+        (module docstring), unless it already has them (a checkpoint)."""
         want = self.nmat * self.nq
         if state.arhoq.shape[1] == want:
             return
         state.arhoq = np.zeros((self.mesh.nblocks, want) + self.mesh.padded_shape)
         for k in range(self.nmat):
             state.arhoq[:, k * self.nq + self.nq - 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
+            if self.porosity is not None:
+                state.arhoq[:, k * self.nq + self.nq - 2] = self.porosity[k, ALPHA0] * state.arho[:, k]
         for k in np.flatnonzero(self.damage.model == GRADY_KIPP):
             self._draw_flaws(state, int(k))
 
@@ -213,7 +218,9 @@ class MaterialStrength:
         """Flaws of material k over the cells it fills, as mass-weighted cumulative flaw laws in
         ``state.arhoq``; the node strains are the block's ``flaw_strains`` or, without them,
         :func:`impactpipe.hydro.strength.flaws.flaw_nodes` of this draw (then recorded in
-        :attr:`flaw_strains` and the damage parameters)."""
+        :attr:`flaw_strains` and the damage parameters).  The Weibull law counts flaws per unit
+        volume of matrix (m^-3): a porous material's cell i holds the matrix volume
+        v_i alpha_k / alpha_dist (m^3), its distension alpha_dist from ``state.arhoq``."""
         mesh = self.mesh
         fill = mesh.interior(state.alpha)[:, k]
         mass = mesh.interior(state.arho)[:, k]
@@ -223,6 +230,9 @@ class MaterialStrength:
             return
         m, kw = self.damage.params[k, WEIBULL_M], self.damage.params[k, WEIBULL_K]
         material_volume = volume.ravel()[cells] * fill.ravel()[cells]
+        if self.porosity is not None and self.porosity[k, ALPHA0] > 1.0:
+            distension = mesh.interior(state.arhoq)[:, k * self.nq + self.nq - 2].ravel()[cells] / mass.ravel()[cells]
+            material_volume = material_volume / distension
         body_volume = float(material_volume.sum())
         n_tot = int(self.damage.flaw_count[k]) or default_flaw_count(cells.size)
         if (self.damage.params[k, NODE0:] > 0.0).all():
@@ -277,7 +287,7 @@ class MaterialStrength:
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
-                          self.surface_gravity, has_mass=self.has_mass, blocks=blocks)
+                          self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks)
         else:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,

@@ -40,13 +40,21 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    (the one the material bears) is scaled by (1 - D_new) / (1 - D_old) and the Jaumann update
    uses the shear modulus (1 - D) G, so S stays (1 - D) times the intact matrix's
    (von Mises, GEO; ROCK carries its damage in its yield curve instead, Y = (1 - D) Y_i + D Y_d,
-   and keeps S and G).  ``grady_kipp_fractured`` counts the steps where D reached 1;
+   and keeps S and G).  ``grady_kipp_fractured`` counts the steps where D reached 1.
+   A porous Grady-Kipp material (distension alpha, :func:`update_stress`) takes the bulk
+   quantities: p_m = max(p_k, -Y_T / alpha) (the matrix's P_s >= -Y_T spread over the bulk),
+   the strain sigma_max / ((1 - D) E) with E the porous Young modulus 9 K G / (3 K + G) of the
+   porous bulk modulus K = rho_k c_s^2(alpha rho_k) h(alpha)^2 and the porous G of step 1 (a
+   given E is scaled by h^2 / alpha, the ratio of the porous bulk modulus to the matrix's), and
+   the crack speed 0.4 sqrt(K / rho_k + 4 G / (3 rho_k)) of the porous longitudinal wave; its
+   flaws per kg are those of its matrix volume (:mod:`impactpipe.hydro.strength.model`);
 3. S <- Jaumann update (:func:`impactpipe.hydro.strength.elastic.jaumann_update`);
 4. Y = yield_strength(p_held, T_k, D) at the pressure the material bears,
    p_held = max(p_k, -Y_T (1 - D)) (the sweeps hold it there by opening void: failed
    material at p_k < 0 bears p = 0, where GEO keeps its cohesion Y0; Grady-Kipp:
    von Mises and GEO yield at (1 - D) Y(p_m, T_k, 0), the damaged share of the intact
-   matrix's strength, ROCK at Y(p_b, T_k, D)), T_k from the EOS (T_k and Y are evaluated only
+   matrix's strength, ROCK at Y(p_b, T_k, D); a porous material at the matrix pressure,
+   Y_s(alpha p, ...) / alpha as without Grady-Kipp), T_k from the EOS (T_k and Y are evaluated only
    where the updated S is not zero: with S = 0 there is nothing to return, as Y >= 0), and
    Y = 0 for material expanded below STRENGTH_MIN_DENSITY_FRACTION of its reference density
    (fragmented or vapour: a deviatoric stress held by it would put S:D / rho_k of work into
@@ -327,8 +335,8 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
     """Damage after one Grady-Kipp step of ``dt`` (s) (module docstring, step 2).
 
     ``pressure`` the borne pressure p_b and S the borne deviator (Pa), rho the material density
-    (kg/m^3), c2_bulk its EOS sound speed squared (m^2/s^2), ``shear_modulus`` the intact G
-    (Pa); the flaw law per kg is read from ``arhoq[b, first .. first + NFLAW - 1]`` times
+    (kg/m^3), c2_bulk its bulk modulus over rho (m^2/s^2: the EOS sound speed squared, a porous
+    material's c_s^2 h^2), ``shear_modulus`` the intact G (Pa); the flaw law per kg is read from ``arhoq[b, first .. first + NFLAW - 1]`` times
     ``inv_mass`` = 1 / (alpha_k rho_k), at the nodes eps_j^m = ``node_x``.  E = ``young`` (Pa), or 9 K G / (3 K + G) when 0;
     the crack speed is 0.4 of the intact longitudinal speed sqrt(c_K^2 + 4 G / (3 rho)).  With
     ``limited`` (> 0) D grows to at most n_act,m / n_tot,m, the active share of the cell's flaws
@@ -369,6 +377,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     -Y_T (1 - D) / alpha (the matrix's P_s >= -Y_T (1 - D)) and its yield strength
     Y = Y_s(alpha p_held, T, D) / alpha (the matrix's yield curve at the matrix pressure, spread
     over the bulk); the low-density cut compares the matrix density alpha rho_k with rho0_k.
+    A porous Grady-Kipp material grows its damage with the porous moduli and the bulk stress
+    (module docstring, step 2) and yields at (1 - D) Y_s(alpha p_m, T, 0) / alpha (von Mises,
+    GEO) or Y_s(alpha p_b, T, D) / alpha (ROCK).
     ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
     reference_densities`).  ``damage_model[M]``, ``damage_params[M, NDAMAGE]``: the tensile
     damage models and their Weibull parameters (:func:`impactpipe.hydro.strength.parameters.
@@ -473,13 +484,16 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             gradual = damage_model[k] == GRADY_KIPP
                         p_matrix = pk
                         if gradual:
-                            # Grady-Kipp: damage grows from the active flaws; S and G soften with it
+                            # Grady-Kipp: damage grows from the active flaws; S and G soften with it.
+                            # A porous material: the matrix's tension cap spread over the bulk, and the
+                            # porous moduli (bulk rho c_s^2 h^2, the porous G, a given E times h^2 / alpha)
                             if tensile_strength[k] > 0.0:
-                                p_matrix = max(pk, -tensile_strength[k])
+                                p_matrix = max(pk, -y_t)
                             d_new, flaw_limited = _grady_kipp_damage(
-                                dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy, sxz, syz, rk, c2b, g, arhoq,
-                                b, base + ns + 1, ix, iy, iz, inv, damage_params[k, WEIBULL_M],
-                                damage_params[k, YOUNG], damage_params[k, ACTIVE_LIMIT], damage_params[k, NODE0:], dt)
+                                dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy, sxz, syz, rk,
+                                c2b * stiffness, g, arhoq, b, base + ns + 1, ix, iy, iz, inv,
+                                damage_params[k, WEIBULL_M], damage_params[k, YOUNG] * stiffness / dist,
+                                damage_params[k, ACTIVE_LIMIT], damage_params[k, NODE0:], dt)
                             if flaw_limited:
                                 counts[b, CNT_FLAW_LIMITED] += 1
                             if d_new > dmg:
@@ -516,7 +530,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             if stressed:
                                 tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
                                 y = (1.0 - dmg) * equivalent_yield_stress(
-                                    model[k], yield_strength(model[k], params[k], p_matrix, tk, 0.0))
+                                    model[k], yield_strength(model[k], params[k], dist * p_matrix, tk, 0.0)) / dist
                         else:
                             p_held = damaged_pressure(p_matrix, dmg) if gradual else max(pk, -y_t * (1.0 - dmg))
                             if surface_gravity is not None and work[b, WK_PHI, ix, iy, iz] < 1.0:
