@@ -8,13 +8,15 @@ import pytest
 
 from impactpipe.hydro import PROBLEMS, BlockMesh, HydroState, Simulation
 from impactpipe.hydro.amr.regrid import RefinementRule, refine_to
-from impactpipe.hydro.amr.transfer import _offset
+from impactpipe.hydro.amr.transfer import _offset, _reflux_cell
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.exact.noh import noh_solution
 from impactpipe.hydro.exact.riemann import exact_riemann
 from impactpipe.hydro.exact.sedov import sedov_solution
 from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.scheme.pencil_layout import (AMOUNT_MASS_FLOOR, AMOUNT_MASS_VOID, FLOOR_PARTIAL_DENSITY,
+                                                   FLOOR_VOID_CLEANUP, NAMOUNT, NFLOOR)
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
@@ -340,3 +342,52 @@ def test_refinement_pressure_is_limited_by_the_damaged_tensile_strength():
     p, c, e, t = (np.zeros((3, 1, 1, 1)) for _ in range(4))
     cell_thermodynamics(alpha, arho, arhoe, arhoq, eos.kind, eos.params, eos.table, shear, np.array([y_t]), p, c, e, t)
     np.testing.assert_array_equal(p[:, 0, 0, 0], out[:, 2, 0, 0])
+
+
+def _one_cell_correction(arho_before, mass_change, energy_change, stress_change):
+    """A cell (volume 1 m^3) with void holding two materials (2 scalars each) corrected through its
+    low face by the given amounts of material 0 (``_reflux_cell``); returns the arrays."""
+    nmat, nq = 2, 2
+    alpha = np.zeros((1, nmat, 1, 1, 1))
+    alpha[0, :, 0, 0, 0] = (0.3, 0.2)
+    arho = np.zeros_like(alpha)
+    arho[0, :, 0, 0, 0] = (arho_before, 500.0)
+    arhoe = arho * 1.0e5
+    arhoq = np.zeros((1, nmat * nq, 1, 1, 1))
+    arhoq[0, :, 0, 0, 0] = (arho_before * 2.0e6, arho_before * 0.1, 500.0 * 1.0e6, 500.0 * 0.2)
+    mom = np.zeros((1, 3, 1, 1, 1))
+    mom[0, 0, 0, 0, 0] = 1.0e3
+    energy = np.full((1, 1, 1, 1, 1), 5.0e7)
+    delta = np.zeros(3 * nmat + 4 + nmat * nq)
+    delta[nmat] = mass_change
+    delta[2 * nmat] = energy_change
+    delta[3 * nmat + 4] = stress_change
+    floors = np.zeros((1, NFLOOR), dtype=np.int64)
+    amounts = np.zeros((1, NAMOUNT))
+    _reflux_cell(0, 0, 0, 0, 0, 1.0, delta, alpha, arho, arhoe, arhoq, mom, energy, floors, amounts)
+    return alpha, arho, arhoe, arhoq, mom, energy, floors, amounts
+
+
+def test_a_reflux_that_empties_a_material_leaves_no_energy_or_scalars_on_its_residue():
+    """A correction that takes nearly all of a material (its residue below EMPTIED_FRACTION of what
+    it had: round-off of two nearly equal amounts) or more than all of it removes the material
+    with its internal energy and transported scalars, counts the residue, and leaves the cell's
+    momentum and total energy as they were; a correction that leaves a real amount keeps the
+    amounts it carried.  Before, the residue kept whatever energy and scalar amounts the
+    correction left: 2.8e17 J/kg on 2.2e-16 kg/m^3 of basalt in case 8c per level, which the
+    next sweep turned into a negative density."""
+    arho_before = 2.0
+    residue = 2.2e-16
+    for change, counted in ((residue - arho_before, FLOOR_VOID_CLEANUP), (-2.5, FLOOR_PARTIAL_DENSITY)):
+        alpha, arho, arhoe, arhoq, mom, energy, floors, amounts = _one_cell_correction(arho_before, change, -1.0e5, 1.0)
+        assert alpha[0, 0, 0, 0, 0] == 0.0 and arho[0, 0, 0, 0, 0] == 0.0 and arhoe[0, 0, 0, 0, 0] == 0.0
+        assert (arhoq[0, :2, 0, 0, 0] == 0.0).all()
+        assert (arhoq[0, 2:, 0, 0, 0] == (5.0e8, 100.0)).all() and arho[0, 1, 0, 0, 0] == 500.0
+        assert floors[0, counted] == 1 and floors.sum() == 1
+        assert mom[0, 0, 0, 0, 0] == 1.0e3 and energy[0, 0, 0, 0, 0] == 5.0e7
+    assert amounts[0, AMOUNT_MASS_FLOOR] == pytest.approx(0.5)
+    _, _, _, _, _, _, _, amounts = _one_cell_correction(arho_before, residue - arho_before, -1.0e5, 1.0)
+    assert amounts[0, AMOUNT_MASS_VOID] == pytest.approx(residue, rel=0.5)
+    alpha, arho, arhoe, arhoq, _, _, floors, _ = _one_cell_correction(arho_before, -1.0, -1.0e5, 1.0)
+    assert arho[0, 0, 0, 0, 0] == 1.0 and arhoe[0, 0, 0, 0, 0] == 1.0e5 and arhoq[0, 0, 0, 0, 0] == 4.0e6 + 1.0
+    assert floors.sum() == 0
