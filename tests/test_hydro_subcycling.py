@@ -305,6 +305,17 @@ def test_tracers_follow_uniform_flow_per_level_on_three_levels():
           f"error {error:.2e} m")
 
 
+def _two_boxes_with_tracers():
+    """Two identical 3-level boxes with tracers and their history, 5 root steps in."""
+    runs = []
+    for _ in range(2):
+        sim = _box(3, cells=32)
+        sim.tracers = _box_tracers(history=0.004)
+        sim.run(100.0, max_steps=5)
+        runs.append(sim)
+    return runs
+
+
 def test_retaken_and_failed_root_steps_leave_the_tracer_records_untouched(monkeypatch):
     """A root step taken again (here forced: the root step is half the CFL one and retaken 3 times,
     each at half the step its end state allows) gives the tracers the records of one root step
@@ -313,13 +324,7 @@ def test_retaken_and_failed_root_steps_leave_the_tracer_records_untouched(monkey
     puts the records back as they were."""
     import impactpipe.hydro.solver as solver
 
-    runs = []
-    for _ in range(2):
-        sim = _box(3, cells=32)
-        sim.tracers = _box_tracers(history=0.004)
-        sim.run(100.0, max_steps=5)
-        runs.append(sim)
-    retaken, direct = runs
+    retaken, direct = _two_boxes_with_tracers()
     monkeypatch.setattr(solver, "LEVEL_STEP_GROWTH", 1e-6)
     monkeypatch.setattr(solver, "level_time_step", lambda *args: 0.5 * level_time_step(*args))
     retaken.step()
@@ -348,13 +353,7 @@ def test_a_failed_root_step_is_taken_again_at_half_the_step(monkeypatch):
     from impactpipe.hydro.amr.subcycle import LevelStepper
     from impactpipe.hydro.solver import LEVEL_STEP_RETAKES, HydroFailure
 
-    runs = []
-    for _ in range(2):
-        sim = _box(3, cells=32)
-        sim.tracers = _box_tracers(history=0.004)
-        sim.run(100.0, max_steps=5)
-        runs.append(sim)
-    failed, direct = runs
+    failed, direct = _two_boxes_with_tracers()
     advance = LevelStepper.advance
     calls = []
 

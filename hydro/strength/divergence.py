@@ -38,7 +38,7 @@ from __future__ import annotations
 from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
-from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
+from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V, block_at, block_count
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 
 
@@ -161,13 +161,8 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    count = hi - lo
-    if blocks is not None:
-        count = blocks.shape[0]
-    for i in prange(count):
-        b = lo + i
-        if blocks is not None:
-            b = blocks[i]
+    for i in prange(block_count(lo, hi, blocks)):
+        b = block_at(i, lo, blocks)
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0

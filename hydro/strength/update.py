@@ -138,6 +138,23 @@ def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
     return stress_slots(ndim) + 2 + (NFLAW if fracture else 0) + (1 if porous else 0)
 
 
+@njit(inline="always")
+def block_count(lo, hi, blocks):
+    """How many blocks a strength kernel visits: the range ``lo .. hi - 1``, or the ``blocks``
+    listed (int64, one refinement level's) when not None (numba compiles each case apart)."""
+    if blocks is None:
+        return hi - lo
+    return blocks.shape[0]
+
+
+@njit(inline="always")
+def block_at(i, lo, blocks):
+    """The ``i``-th block a strength kernel visits (:func:`block_count`): lo + i or blocks[i]."""
+    if blocks is None:
+        return lo + i
+    return blocks[i]
+
+
 @njit(cache=True, parallel=True)
 def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass, blocks=None):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
@@ -174,13 +191,8 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
-    count = hi - lo
-    if blocks is not None:
-        count = blocks.shape[0]
-    for i in prange(count):
-        b = lo + i
-        if blocks is not None:
-            b = blocks[i]
+    for i in prange(block_count(lo, hi, blocks)):
+        b = block_at(i, lo, blocks)
         held = 0
         massive = 0
         for ix in range(gx, nx - gx):
@@ -277,13 +289,8 @@ def cell_velocities(arho, mom, work, lo, hi, blocks=None):
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
-    count = hi - lo
-    if blocks is not None:
-        count = blocks.shape[0]
-    for i in prange(count):
-        b = lo + i
-        if blocks is not None:
-            b = blocks[i]
+    for i in prange(block_count(lo, hi, blocks)):
+        b = block_at(i, lo, blocks)
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -401,13 +408,8 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    count = hi - lo
-    if blocks is not None:
-        count = blocks.shape[0]
-    for i in prange(count):
-        b = lo + i
-        if blocks is not None:
-            b = blocks[i]
+    for i in prange(block_count(lo, hi, blocks)):
+        b = block_at(i, lo, blocks)
         if has_mass is not None:
             if has_mass[b] == 0:
                 continue
