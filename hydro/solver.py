@@ -685,13 +685,16 @@ class Simulation:
 
     @property
     def floor_counts(self) -> dict[str, int]:
-        """How often each floor / fallback was applied since the start (cells x sweeps)."""
+        """How often each floor / fallback was applied since the start (cells x sweeps; with
+        :attr:`void_settling`, ``void_settling``: the cells that took settled material)."""
         totals = self.floors.sum(axis=0)
         counts = {name: int(v) for name, v in zip(FLOOR_NAMES, totals)}
         if self.strength is not None:
             counts.update(self.strength.count_totals)
         if self.porosity is not None:
             counts.update({name: int(v) for name, v in zip(POROSITY_COUNT_NAMES, self.porosity_counts.sum(axis=0))})
+        if self.void_settling:
+            counts["void_settling"] = self.settled_cells
         return counts
 
     @property
@@ -813,6 +816,7 @@ class Simulation:
                 fh.attrs["refinement"] = json.dumps(dataclasses.asdict(self.refinement))
                 fh.attrs["regrids"] = self.regrids
                 fh.attrs["level_step_retakes"] = self.level_step_retakes
+                fh.attrs["settled_cells"] = self.settled_cells
                 fh.attrs["blocks_refined"] = self.blocks_refined
                 fh.attrs["blocks_coarsened"] = self.blocks_coarsened
                 fh.attrs["peak_pressure"] = self.peak_pressure
@@ -867,6 +871,7 @@ class Simulation:
                 sim._keep_good()
             sim.regrids = int(fh.attrs.get("regrids", 0))
             sim.level_step_retakes = int(fh.attrs.get("level_step_retakes", 0))
+            sim.settled_cells = int(fh.attrs.get("settled_cells", 0))
             sim.blocks_refined = int(fh.attrs.get("blocks_refined", 0))
             sim.blocks_coarsened = int(fh.attrs.get("blocks_coarsened", 0))
             sim.peak_pressure = float(fh.attrs.get("peak_pressure", 0.0))
