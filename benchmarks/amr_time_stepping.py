@@ -9,8 +9,8 @@ against the exact solution (docs/hydro.md, "Time step"), the mass the floors add
 steps taken again (``level_step_retakes``), the budget's unaccounted mass and energy (relative,
 the floors counted) and, for the impact, the relative change of the momentum along z.
 ``--scene impact`` runs instead the hydro-only impact of docs/hydro.md (basalt Tillotson
-without strength, R_T = 1 km, R_P = 100 m, 8 cells per projectile radius, 4 levels,
-2d-cylindrical) to ``--end`` 1 s and prints no L1 error; ``--scene strength_impact`` the
+without strength, R_T = 1 km, R_P = 100 m, 8 cells per projectile radius or
+``--cells-per-projectile-radius``, 4 levels, 2d-cylindrical) to ``--end`` 1 s and prints no L1 error; ``--scene strength_impact`` the
 same impact with GEO ``weak`` strength (docs/hydro.md, "Time step"):
 
     NUMBA_NUM_THREADS=1 python benchmarks/amr_time_stepping.py
@@ -40,13 +40,13 @@ def sedov(cells: int, mode: str):
     return sim
 
 
-def impact(mode: str, strength: bool = False):
-    """The hydro-only impact (module docstring) on 4 levels, stepped by ``mode``; with GEO
-    ``weak`` strength when ``strength``."""
+def impact(mode: str, strength: bool = False, cells: int = 8):
+    """The hydro-only impact (module docstring) on 4 levels at ``cells`` per projectile radius,
+    stepped by ``mode``; with GEO ``weak`` strength when ``strength``."""
     basalt = preset_material("basalt")
     if strength:
         basalt["strength"] = resolve_strength("geo", "weak", {})
-    sim = PROBLEMS["impact"].setup({"cells_per_projectile_radius": 8, "levels": 4, "end_time": 1.0},
+    sim = PROBLEMS["impact"].setup({"cells_per_projectile_radius": cells, "levels": 4, "end_time": 1.0},
                                    {"basalt": basalt}, geometry="2d-cylindrical")
     sim.time_stepping = mode
     return sim
@@ -72,10 +72,12 @@ def main() -> None:
     parser.add_argument("--scene", choices=("sedov", "impact", "strength_impact"), default="sedov")
     parser.add_argument("--cells", type=int, default=256, help="Sedov's finest cells per axis")
     parser.add_argument("--end", type=float, default=0.05)
+    parser.add_argument("--cells-per-projectile-radius", type=int, default=8, help="the impacts' resolution")
     parser.add_argument("--warm-up", type=float, default=0.002)
     args = parser.parse_args()
-    builders = {"sedov": lambda mode: sedov(args.cells, mode), "impact": impact,
-                "strength_impact": lambda mode: impact(mode, strength=True)}
+    radius_cells = args.cells_per_projectile_radius
+    builders = {"sedov": lambda mode: sedov(args.cells, mode), "impact": lambda mode: impact(mode, cells=radius_cells),
+                "strength_impact": lambda mode: impact(mode, strength=True, cells=radius_cells)}
     build = builders[args.scene]
     for mode in ("global", "per_level"):
         build(mode).run(args.warm_up)

@@ -289,8 +289,8 @@ def time_stepping_warnings(config) -> list[str]:
     if config.hydro.time_stepping != "per_level" or config.scene.problem != "impact":
         return []
     return ["hydro.time_stepping: per_level on an impact is not yet sound at every resolution: at 10 cells per "
-            "projectile radius one reflux in the ejecta spray adds 2e5 kg through the floors, and its energy "
-            "budget closes to 1e-13-1e-11 against 1e-16 (docs/hydro.md, \"Adaptive mesh\"); use global for results"]
+            "projectile radius one reflux in the ejecta spray adds 2e5 kg through the floors, against 5e-7 kg "
+            "with the global step (docs/hydro.md, \"Adaptive mesh\"); use global for results"]
 
 
 def physics_warnings(values: dict[str, Any]) -> list[str]:
