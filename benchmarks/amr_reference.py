@@ -7,7 +7,10 @@ radius, 2d-cylindrical) to its end time with the adaptive mesh of ``hydro.max_le
 steps, and reports
 
 - the adaptive run: steps, total cell-updates, wall seconds, seconds spent regridding (and
-  the share of the wall time), blocks per level at the end, mass and energy budgets;
+  the share of the wall time), blocks per level at the end, the mass and energy errors
+  (mesh + outflow against the start, the floors' amounts not counted), the budget of
+  :func:`~impactpipe.hydro.budget.conservation_budget` (the same with the floors' amounts
+  counted: what stays unaccounted) and the floors' amounts themselves;
 - the uniform run extrapolated to the same number of steps: its cells x the adaptive run's
   steps (both meshes share the finest cell, so the CFL step is set by the same cells), and
   its wall time per step x those steps.  With ``--time-stepping per_level`` (the adaptive run's
@@ -28,23 +31,27 @@ import time
 import numba
 import numpy as np
 
+from impactpipe.hydro.budget import conservation_budget
 from impactpipe.pipeline.adapters.hydro import build_simulation
 from impactpipe.pipeline.config import load_config
 from impactpipe.pipeline.derived import derive
 
 
-def _simulation(config_path: str, levels, time_stepping: str = "global"):
+def _simulation(config_path: str, levels, time_stepping: str = "global", cells: int | None = None):
     config = load_config(config_path)
     config.hydro.time_stepping = time_stepping
+    if cells is not None:
+        config.hydro.cells_per_projectile_radius = cells
     if levels is not None:
         config.hydro.max_levels = levels
     values = derive(config)
     return build_simulation(config, values), values
 
 
-def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepping: str = "global") -> dict:
-    """The measurements of the module docstring, as a dict."""
-    sim, values = _simulation(config_path, None, time_stepping)
+def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepping: str = "global",
+        cells: int | None = None) -> dict:
+    """The measurements of the module docstring, as a dict (no uniform run when ``uniform_steps`` is 0)."""
+    sim, values = _simulation(config_path, None, time_stepping, cells)
     end = float(end_time or values["end_time"])
     start = sim.totals()
     started = time.perf_counter()
@@ -69,8 +76,13 @@ def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepp
         "cells_at_end": sim.mesh.ncells,
         "mass_error": (done["mass_with_outflow"] - start["mass"]) / start["mass"],
         "energy_error": (done["energy_with_outflow"] - start["energy"]) / start["energy"],
+        "budget": conservation_budget(start, done, sim.floor_amounts),
+        "floor_amounts": sim.floor_amounts,
     }
-    uniform_sim, _ = _simulation(config_path, 1)
+    if uniform_steps == 0:
+        return {"config": config_path, "end_time": end, "threads": numba.config.NUMBA_NUM_THREADS,
+                "adaptive": adaptive}
+    uniform_sim, _ = _simulation(config_path, 1, "global", cells)
     uniform_sim.step()
     started = time.perf_counter()
     for _ in range(uniform_steps):
@@ -98,21 +110,26 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="configs/reference/case8c.yaml")
     parser.add_argument("--end-time", type=float, default=None, help="s (default: the config's hydro end time)")
-    parser.add_argument("--uniform-steps", type=int, default=50)
+    parser.add_argument("--uniform-steps", type=int, default=50, help="0: no uniform run")
+    parser.add_argument("--cells-per-projectile-radius", type=int, default=None,
+                        help="override the config's hydro.cells_per_projectile_radius")
     parser.add_argument("--time-stepping", choices=["global", "per_level"], default="global",
                         help="the adaptive run's hydro.time_stepping (the uniform run has one level either way)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
-    result = run(args.config, args.end_time, args.uniform_steps, args.time_stepping)
+    result = run(args.config, args.end_time, args.uniform_steps, args.time_stepping, args.cells_per_projectile_radius)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        a, u = result["adaptive"], result["uniform"]
+        a, u = result["adaptive"], result.get("uniform")
         print(f"adaptive ({a['levels']} levels, {a['time_stepping']}): {a['steps']} steps ({a['finest_steps']} finest), {a['cell_updates']:.3e} cell-updates, "
               f"{a['wall_seconds']:.0f} s ({a['regrid_share']:.1%} regridding)")
-        print(f"uniform (extrapolated): {u['cell_updates_extrapolated']:.3e} cell-updates, "
-              f"{u['wall_seconds_extrapolated']:.0f} s")
-        print(f"ratios: cell-updates {result['cell_update_ratio']:.1f}x, wall {result['wall_time_ratio']:.1f}x")
+        print(f"energy error {a['energy_error']:+.3%} (what the floors' amounts leave unaccounted: "
+              f"{a['budget']['energy_unaccounted']:.1e})")
+        if u is not None:
+            print(f"uniform (extrapolated): {u['cell_updates_extrapolated']:.3e} cell-updates, "
+                  f"{u['wall_seconds_extrapolated']:.0f} s")
+            print(f"ratios: cell-updates {result['cell_update_ratio']:.1f}x, wall {result['wall_time_ratio']:.1f}x")
 
 
 if __name__ == "__main__":

@@ -67,6 +67,12 @@ def momentum_change(budget: dict) -> float:
     return change / abs(budget["momentum_y_initial"])
 
 
+def removed(sim, budget: dict, by: str) -> float:
+    """The momentum magnitude (kg m/s) that the floor ``by`` (``void_cleanup`` or ``velocity_limit``)
+    removed, over |initial z momentum|: a magnitude, not a component, so the budget cannot take it back."""
+    return sim.floor_amounts[f"momentum_removed_by_{by}"] / abs(budget["momentum_y_initial"])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", choices=("sedov", "impact", "strength_impact"), default="sedov")
@@ -94,7 +100,9 @@ def main() -> None:
               + (f"density L1 {density_l1(sim):.4e}  " if args.scene == "sedov" else "")
               + f"floor mass {sim.floor_amounts['mass_added_by_floors']:.2e} kg  retaken {sim.level_step_retakes}  "
               f"unaccounted mass {budget['mass_unaccounted']:.1e} energy {budget['energy_unaccounted']:.1e}"
-              + (f"  z-momentum change {momentum_change(budget):.4e}" if args.scene != "sedov" else ""),
+              + (f"  z-momentum change {momentum_change(budget):.4e} (magnitudes removed by the void cleanup "
+                 f"{removed(sim, budget, 'void_cleanup'):.3e}, by the velocity limit "
+                 f"{removed(sim, budget, 'velocity_limit'):.3e})" if args.scene != "sedov" else ""),
               flush=True)
 
 
