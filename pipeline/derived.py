@@ -398,6 +398,9 @@ def capability_errors(config: Config, values: dict[str, Any]) -> list[str]:
             errors.append(f"hydro.block_cells: {block} cells per block edge on an adaptive mesh ({levels} levels); "
                           f"refinement splits blocks in halves and tracers need quarters: use a multiple of 4")
     errors.extend(_time_stepping_errors(config, values))
+    if getattr(config.scene, "settling", False) and levels > 1:
+        errors.append(f"scene.settling: void settling runs on a mesh of one level; hydro.max_levels resolves "
+                      f"to {levels}: set hydro.max_levels: 1 or scene.settling: false")
     ndim = GEOMETRY_DIMENSIONS.get(values["geometry"], 0)
     for i, box in enumerate(config.hydro.refinement.boxes):
         if ndim and len(box.lo) != ndim:

@@ -188,3 +188,25 @@ def test_read_only_finished_run_is_analysed_and_plotted_elsewhere(tmp_path):
     assert summary["M_lr_over_M_T"] == before["M_lr_over_M_T"] and summary["Q"] == before["Q"]
     assert (other / "analysis.h5").is_file()
     assert [p.suffix for p in (other / "figures").iterdir()] == [".png"]
+
+
+def test_void_settling_on_several_levels_or_ranks_is_refused_before_any_work(tmp_path):
+    """``scene.settling`` settles void column by column on a mesh of one level in one process:
+    with two levels validate names the key (where the Simulation used to raise at its first step),
+    and ``--ranks 2`` is refused; with one level it validates."""
+    from impactpipe.pipeline.adapters.hydro import too_many_ranks
+    from impactpipe.pipeline.checks import check
+
+    collapse = (HERE.parent / "configs" / "column_collapse.yaml").read_text()
+    settled = collapse.replace("  cells_per_height: 16\n", "  cells_per_height: 16\n  settling: true\n")
+    rejected(tmp_path, settled.replace("  block_cells: 8\n", "  block_cells: 8\n  max_levels: 2\n"),
+             "15: scene.settling: void settling runs on a mesh of one level; hydro.max_levels resolves to 2: "
+             "set hydro.max_levels: 1 or scene.settling: false")
+    path = tmp_path / "settled.yaml"
+    path.write_text(settled)
+    result = CliRunner().invoke(main, ["validate", str(path)])
+    assert result.exit_code == 0, result.output
+    config = load_config(path)
+    assert too_many_ranks(config, check(config), 2) == (
+        "--ranks 2: scene.settling (void settling) runs the hydro stage on one process in this version; use "
+        "--ranks 1 or scene.settling: false")

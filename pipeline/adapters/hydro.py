@@ -93,7 +93,7 @@ def build_simulation(config, values: dict[str, Any]) -> Simulation:
 
 def too_many_ranks(config, values: dict[str, Any], nranks: int) -> str | None:
     """Why ``nranks`` ranks cannot share the hydro stage's mesh at t = 0 (more ranks than
-    blocks, or ``hydro.time_stepping: per_level``, which runs on one process), or None.  The
+    blocks, or ``hydro.time_stepping: per_level`` or ``scene.settling``, which run on one process), or None.  The
     root blocks are counted from the derived domain; the initial mesh (whose refinement adds
     blocks) is built only when they are fewer than the ranks."""
     if nranks <= 1:
@@ -101,6 +101,9 @@ def too_many_ranks(config, values: dict[str, Any], nranks: int) -> str | None:
     if config.hydro.time_stepping == "per_level":
         return (f"--ranks {nranks}: hydro.time_stepping per_level runs the hydro stage on one process in this "
                 f"version; use --ranks 1 or hydro.time_stepping global")
+    if getattr(config.scene, "settling", False):
+        return (f"--ranks {nranks}: scene.settling (void settling) runs the hydro stage on one process in this "
+                f"version; use --ranks 1 or scene.settling: false")
     domain = values.get("domain")
     if domain:
         per_root = domain["block_cells"] * 2 ** (int(values["levels"]) - 1)
