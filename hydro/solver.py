@@ -205,6 +205,8 @@ class Simulation:
         #: uniform gravity along -axis 1; :attr:`settled_cells` counts the transfers.
         self.void_settling = False
         self.settled_cells = 0
+        #: (work, counts) per block that :meth:`_settle_void` reuses every step.
+        self._settling_buffers: tuple[np.ndarray, np.ndarray] | None = None
         self._unlimited_tension: np.ndarray | None = None
         self.dt_first: float | None = None
         self.last_dt = 0.0
@@ -424,8 +426,11 @@ class Simulation:
             raise ValueError("void_settling needs a 2d-planar mesh on one level, one process and a uniform "
                              "gravity along -axis 1")
         st = self.state
-        work = np.zeros(mesh.nblocks)
-        counts = np.zeros(mesh.nblocks, np.int64)
+        if self._settling_buffers is None or self._settling_buffers[0].shape[0] != mesh.nblocks:
+            self._settling_buffers = (np.zeros(mesh.nblocks), np.zeros(mesh.nblocks, np.int64))
+        work, counts = self._settling_buffers
+        work[:] = 0.0
+        counts[:] = 0
         settle_void(st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy, mesh.neighbor, mesh.block_dx,
                     -float(g[1]), work, counts)
         self.gravity.work += float(work.sum())
