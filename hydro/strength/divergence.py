@@ -148,21 +148,64 @@ def _add_face(dt, b, ix, iy, iz, d, side, face, geo, edge, neighbor, neighbor_le
     return d_mom0, d_mom1, d_mom2, d_e
 
 
+@njit(cache=True, inline="always")
+def _ghosts_carry_stress(work, b, ns, nx, ny, nz):
+    """Whether a stress slot of ``work`` (the first ``ns``) is not 0 in a cell of the first
+    ghost layer of block b beside its interior faces (the ghosts the face stresses of
+    :func:`_face_stress` read; a ghost left unfilled holds a stale value, which at worst makes
+    the block be kicked)."""
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for c in range(WK_S, WK_S + ns):
+        if nx > 1:
+            for ix in (gx - 1, nx - gx):
+                for iy in range(gy, ny - gy):
+                    for iz in range(gz, nz - gz):
+                        if work[b, c, ix, iy, iz] != 0.0:
+                            return True
+        if ny > 1:
+            for ix in range(gx, nx - gx):
+                for iy in (gy - 1, ny - gy):
+                    for iz in range(gz, nz - gz):
+                        if work[b, c, ix, iy, iz] != 0.0:
+                            return True
+        if nz > 1:
+            for ix in range(gx, nx - gx):
+                for iy in range(gy, ny - gy):
+                    for iz in (gz - 1, nz - gz):
+                        if work[b, c, ix, iy, iz] != 0.0:
+                            return True
+    return False
+
+
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
-                            boundary, face_flux, col0, lo, hi, blocks=None):
+                            boundary, face_flux, col0, lo, hi, blocks=None, stressed_blocks=None):
     """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the
     blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64, when given: one refinement
     level's); see the module docstring.  A cell sums its faces low then high along axis 0,
     then along 1 and 2, one call of :func:`_face_stress` and :func:`_add_face` per face with
-    the axis and side as constants."""
+    the axis and side as constants.
+
+    ``stressed_blocks[NB]`` (uint8, from :func:`impactpipe.hydro.strength.update.cell_velocity_and_stress`
+    or :func:`impactpipe.hydro.strength.update.update_stress`) or None: a block whose interior
+    cells carry no stress (``stressed_blocks[b] == 0``) and whose first ghost layer carries none
+    either (:func:`_ghosts_carry_stress`) is skipped.  Every face stress of its cells is then
+    +-0, so the kick would add dt A S = +0.0 to their momentum and energy: skipping it leaves
+    them as they are, bit for bit (but for a momentum of -0.0, which the addition would
+    turn into +0.0).  None: every block is kicked."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
+    ns = 3 if ndim == 1 else (4 if ndim == 2 else 6)
     cylindrical = geometry == CYLINDRICAL
     for i in prange(block_count(lo, hi, blocks)):
         b = block_at(i, lo, blocks)
+        if stressed_blocks is not None:
+            if stressed_blocks[b] == 0 and not _ghosts_carry_stress(work, b, ns, nx, ny, nz):
+                continue
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0

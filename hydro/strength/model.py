@@ -144,6 +144,10 @@ class MaterialStrength:
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         #: per block, whether some cell has mass at the last :meth:`load_stress` (1) or not (0)
         self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
+        #: per block, whether an interior cell carries a mixture stress in the work arrays (1) or
+        #: not (0), from the last kernel that wrote them: :meth:`kick` skips a block without
+        #: one whose ghosts carry none either
+        self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
         self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
         self.face_flux = self._face_flux_arrays(mesh)
@@ -193,6 +197,7 @@ class MaterialStrength:
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
+        self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.face_flux = self._face_flux_arrays(mesh)
         self.counts = summed_rows(self.counts, mesh.nblocks)
         self.amounts = summed_rows(self.amounts, mesh.nblocks)
@@ -258,7 +263,7 @@ class MaterialStrength:
         lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
                                  self.arrays.model, self.ns, self.work, lo, hi, self.holds, self.has_mass,
-                                 None if level is None else level.blocks)
+                                 None if level is None else level.blocks, self.stressed)
         for axis in range(self.mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns), level)
 
@@ -268,7 +273,8 @@ class MaterialStrength:
         (:mod:`impactpipe.hydro.amr.subcycle`), which its ghosts are filled from."""
         if blocks.size:
             cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
-                                     self.arrays.model, self.ns, self.work, 0, 0, self.holds, self.has_mass, blocks)
+                                     self.arrays.model, self.ns, self.work, 0, 0, self.holds, self.has_mass, blocks,
+                                     self.stressed)
 
     def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None) -> None:
         """Advance the stress of the ``partition``'s blocks (or of the ``level``'s) over ``dt`` (s)
@@ -287,13 +293,14 @@ class MaterialStrength:
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
-                          self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks)
+                          self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
+                          stressed_blocks=self.stressed)
         else:
             update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                           mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                           self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
                           self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
-                          porosity=self.porosity, has_mass=self.has_mass, blocks=blocks)
+                          porosity=self.porosity, has_mass=self.has_mass, blocks=blocks, stressed_blocks=self.stressed)
         for axis in range(mesh.ndim):
             self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns), level)
 
@@ -319,12 +326,12 @@ class MaterialStrength:
                 self.face_flux[:, level.blocks] = 0.0
             apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                    self.face_flux, 3 * self.nmat, lo, hi, level.blocks)
+                                    self.face_flux, 3 * self.nmat, lo, hi, level.blocks, self.stressed)
             return
         self.face_flux[...] = 0.0
         apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                 mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                self.face_flux, 3 * self.nmat, lo, hi)
+                                self.face_flux, 3 * self.nmat, lo, hi, None, self.stressed)
         if self.hourglass[0] > 0.0:
             apply_hourglass_viscosity(dt, mesh.ndim, self.hourglass[0], self.hourglass[1], state.momentum,
                                       state.energy, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work,

@@ -156,7 +156,8 @@ def block_at(i, lo, blocks):
 
 
 @njit(cache=True, parallel=True)
-def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass, blocks=None):
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass, blocks=None,
+                             stressed_blocks=None):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
     blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64, when given) into ``work``
     (ghosts are filled from them afterwards), into ``holds[b]`` whether block b has a cell
@@ -164,7 +165,11 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     block without one, so its ghosts need no filling;
     and into ``has_mass[b]`` whether some cell of block b has mass, rho > 0 (1) or not (0):
     a cell without mass holds no transported scalars (every kernel that removes a material's
-    last mass zeroes them), so :func:`update_stress` has nothing to do in a block without.
+    last mass zeroes them), so :func:`update_stress` has nothing to do in a block without;
+    and, when ``stressed_blocks`` (uint8, NB) is given, into ``stressed_blocks[b]`` whether some interior
+    cell of block b has a mixture stress component other than 0 (1) or not (0): the stress
+    divergence skips a block without one when its ghosts carry none either
+    (:func:`impactpipe.hydro.strength.divergence.apply_stress_divergence`).
 
     A cell's fill is min(phi, sum_k alpha_k rho_k / rho0_k), phi = sum_k alpha_k
     (``rho0[M]`` the materials' reference densities, kg/m^3; materials without one, rho0 = 0,
@@ -195,6 +200,7 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
         b = block_at(i, lo, blocks)
         held = 0
         massive = 0
+        carries = False
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -239,8 +245,17 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
                             s4 += scale * arhoq[b, q + 4, ix, iy, iz]
                             s5 += scale * arhoq[b, q + 5, ix, iy, iz]
                     _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5)
+                    carries = carries or _nonzero(s0, s1, s2, s3, s4, s5)
         holds[b] = held
         has_mass[b] = massive
+        if stressed_blocks is not None:
+            stressed_blocks[b] = 1 if carries else 0
+
+
+@njit(cache=True, inline="always")
+def _nonzero(s0, s1, s2, s3, s4, s5):
+    """Whether some of the stress components (xx, yy, zz, xy, xz, yz) (Pa) is not 0."""
+    return s0 != 0.0 or s1 != 0.0 or s2 != 0.0 or s3 != 0.0 or s4 != 0.0 or s5 != 0.0
 
 
 @njit(cache=True, inline="always")
@@ -372,7 +387,7 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
                   damage_model=None, damage_params=None, surface_gravity=None, porosity=None, has_mass=None,
-                  blocks=None):
+                  blocks=None, stressed_blocks=None):
     """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``
     (or the ``blocks`` listed, int64, when given: one refinement level's); see the module docstring.
     ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
@@ -394,6 +409,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     ``surface_gravity[3]``: the gravity g (m/s^2) of the surface-layer pressure (step 4); None: none.
     ``has_mass[NB]``: the blocks with mass (:func:`cell_velocity_and_stress`); the others are
     skipped (their cells hold no scalars to clear).  None: every block is visited.
+    ``stressed_blocks[NB]`` (uint8) or None: when given, whether block b's new mixture stress has a
+    component other than 0 in some interior cell (1) or not (0), as
+    :func:`cell_velocity_and_stress` records it for the first half kick.
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
@@ -412,7 +430,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
         b = block_at(i, lo, blocks)
         if has_mass is not None:
             if has_mass[b] == 0:
+                if stressed_blocks is not None:
+                    stressed_blocks[b] = 0
                 continue
+        carries = False
         dxs = (block_dx[b, 0], block_dx[b, 1], block_dx[b, 2])
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
@@ -577,3 +598,6 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         s4 += a * sxz
                         s5 += a * syz
                     _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5)
+                    carries = carries or _nonzero(s0, s1, s2, s3, s4, s5)
+        if stressed_blocks is not None:
+            stressed_blocks[b] = 1 if carries else 0
