@@ -160,6 +160,7 @@ from impactpipe.hydro.scheme.plain_pencils import (
     EMPTY_PENCIL,
     face_flux_plain,
     plain_material,
+    scalars_carried,
     reconstruct_plain,
     update_plain,
 )
@@ -283,11 +284,14 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                 im2 = (b * ncomp + t2) * cs + offset
                 ie = b * cs + offset
                 iq = (b * nmat + max(m, 0)) * nq * cs + offset
+                carried = False
                 if m == EMPTY_PENCIL:
                     for f in (g, g + n):
                         for r in range(f_row, fq_row + nmat * nq):
                             sc[f, r] = 0.0
                 elif m >= 0:
+                    # material m's scalars move only where some donor cell holds one
+                    carried = nq > 0 and scalars_carried(arhoq_f, iq, stride, cs, nq, g - 1, g + n + 1)
                     # a strengthless material's signal speed is its bulk sound speed: its gather skips
                     # the shear term (which the compiler would evaluate, division included, either way)
                     shear_m = shear_modulus[m]
@@ -297,18 +301,19 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
                                           shear_m, True, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                                          porosity, bulk_predictor)
+                                          porosity, bulk_predictor, carried)
                     else:
                         for i in range(ncell):
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
                                           shear_m, False, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                                          porosity, False)
+                                          porosity, False, carried)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
-                        face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
+                        face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row,
+                                        carried)
                 else:
                     # 1. gather cell values
                     for i in range(ncell):
@@ -355,7 +360,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     if m >= 0 and update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f, arhoe_f,
                                                mom_f, energy_f, arhoq_f, ia + i * stride, imn + i * stride,
                                                im1 + i * stride, im2 + i * stride, ie + i * stride, iq + i * stride,
-                                               cs, floors, amounts, rho0_m, nq, fq_row):
+                                               cs, floors, amounts, rho0_m, nq, fq_row, carried):
                         continue
                     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
@@ -390,7 +395,7 @@ def _holds_sheared(sc, i, shear_modulus):
 @njit(cache=True, inline="always")
 def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
                   kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                  porosity, bulk_predictor):
+                  porosity, bulk_predictor, carried):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
     (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
@@ -408,7 +413,10 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     material (``grady_kipp[m]``) bears (1 - D) of its EOS tension, as in
     :func:`impactpipe.hydro.scheme.mixture.material_state`; a porous material (``porosity[m]``
     alpha0 > 1, its distension the second-to-last transported scalar) has the porous pressure,
-    sound speed and tension limit Y_T (1 - D) / alpha of that function too.
+    sound speed and tension limit Y_T (1 - D) / alpha of that function too.  Without ``carried``
+    (material m's scalars +0.0 in the pencil's donor cells,
+    :func:`impactpipe.hydro.scheme.plain_pencils.scalars_carried`) no face reads its specific
+    scalars, and they are not gathered (the damage and distension still set the pressure).
     """
     a = alpha_f[ia]
     ar = arho_f[ia]
@@ -446,7 +454,7 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     sc[i, r + 3] = pk
     sc[i, r + 4] = rk * c2b
     sc[i, r + 5] = ytk
-    if nq > 0:
+    if carried:
         inv_ar = 1.0 / ar if ar > 0.0 else 0.0
         for j in range(nq):
             sc[i, wq_row + nq * m + j] = arhoq_f[iq + j * cs] * inv_ar

@@ -30,6 +30,8 @@ path's order of operations.  A step costs 1.3-1.8x less with the plain path
 
 from __future__ import annotations
 
+import math
+
 from numba import njit
 
 from impactpipe.hydro.scheme.pencil_layout import (
@@ -141,12 +143,15 @@ def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
 
 
 @njit(cache=True, inline="always")
-def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row):
+def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, carried):
     """Step 3 for face f (between cells f-1 and f) of a plain pencil: HLLC fluxes into column f.
 
     No void on either side; material m's volume flux is alpha_face s with the ultrabee face
     value and its mass flux alpha_face rho_m,K chi s, capped as in the general path
     (:func:`impactpipe.hydro.scheme.directional._face_flux`); absent materials carry zero fluxes.
+    Material m's scalar fluxes are its mass flux times the donor's specific values, or +0.0
+    when not ``carried`` (its scalars are +0.0 in every donor cell of the pencil,
+    :func:`scalars_carried`; the product would be +-0.0, which no update can tell apart).
     """
     row = W_MAT + W_STRIDE * m
     qrow = Q_MAT + 3 * m
@@ -165,14 +170,18 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
                 sc[f, f_row + F_MAT + 3 * k + c] = 0.0
             for j in range(nq):
                 sc[f, fq_row + nq * k + j] = 0.0
-    for j in range(nq):
-        sc[f, fq_row + nq * m + j] = mass * sc[donor, wq_row + nq * m + j]
+    if carried:
+        for j in range(nq):
+            sc[f, fq_row + nq * m + j] = mass * sc[donor, wq_row + nq * m + j]
+    else:
+        for j in range(nq):
+            sc[f, fq_row + nq * m + j] = 0.0
     flow_fluxes(sc, f, f_row, krow, donor, mass, mass * ek, s, p_star, de)
 
 
 @njit(cache=True, inline="always")
 def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f, arhoe_f, mom_f, energy_f, arhoq_f,
-                 ia, imn, im1, im2, ie, iq, cs, floors, amounts, rho0, nq, fq_row):
+                 ia, imn, im1, im2, ie, iq, cs, floors, amounts, rho0, nq, fq_row, carried):
     """Step 4 for interior cell i of a plain pencil; False (cell untouched) if it needs the general update.
 
     U_new = U - dt (A_+ F_+ - A_- F_-) / V for alpha_m rho_m, momentum, E and the transported
@@ -186,6 +195,8 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f
     the cell's flat indices: ``ia`` in material m's column of alpha, arho and arhoe, ``imn``,
     ``im1``, ``im2`` of the normal and transverse momentum, ``ie`` of E, ``iq`` of material m's
     first transported scalar (scalar j at ``iq + j cs``, ``cs`` the length of a column).
+    Without ``carried`` (:func:`scalars_carried`) the scalars are +0.0 and their fluxes +0.0,
+    and +0.0 - (+-0.0) is +0.0: they are left as they are.
     """
     row = W_MAT + W_STRIDE * m
     frow = f_row + F_MAT + 3 * m
@@ -229,11 +240,34 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f
     alpha_f[ia] = min(a_new, 1.0)
     arho_f[ia] = ar
     arhoe_f[ia] = ae
-    for j in range(nq):
-        c = nq * m + j
-        arhoq_f[iq + j * cs] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
+    if carried:
+        for j in range(nq):
+            c = nq * m + j
+            arhoq_f[iq + j * cs] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
     mom_f[imn] = mn
     mom_f[im1] = m1
     mom_f[im2] = m2
     energy_f[ie] = e_tot
     return True
+
+
+@njit(cache=True, inline="always")
+def scalars_carried(arhoq_f, iq, stride, cs, nq, first, stop):
+    """Whether some of the ``nq`` transported scalars of a plain pencil's material is not +0.0
+    (its bits not all zero, so -0.0 counts) in the pencil's cells ``first .. stop - 1``, the
+    donor cells of its faces.  ``arhoq_f`` is ``arhoq`` flattened, ``iq`` the flat index of
+    the material's first scalar in cell 0 of the pencil, ``stride`` the pencil's stride and
+    ``cs`` the length of a column (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`).
+
+    Where none is, the pencil's scalar fluxes are +-0.0 and leave the scalars at +0.0
+    (:func:`face_flux_plain`, :func:`update_plain`): the sweep neither gathers, fluxes nor
+    stores them.  Right after an impact's contact most of the target is at rest without
+    stress, plastic strain or damage.
+    """
+    for j in range(nq):
+        column = iq + j * cs
+        for i in range(first, stop):
+            v = arhoq_f[column + i * stride]
+            if v != 0.0 or math.copysign(1.0, v) < 0.0:
+                return True
+    return False
