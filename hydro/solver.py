@@ -28,7 +28,8 @@ import numba
 import numpy as np
 
 from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
-from impactpipe.hydro.amr.subcycle import GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, level_time_step
+from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, finite_blocks,
+                                           level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.mesh.last_good import block_runs, void_blocks
@@ -522,7 +523,10 @@ class Simulation:
     def _check_momentum(self, blocks) -> None:
         """Raise HydroFailure where the momentum of ``blocks`` (a slice or int64 indices) is not finite
         after the strength and gravity step (on any process)."""
-        if self.partition.any(not np.isfinite(self.state.momentum[blocks]).all()):
+        momentum = self.state.momentum
+        finite = (finite_blocks(momentum, blocks) if isinstance(blocks, np.ndarray)
+                  else np.isfinite(momentum[blocks]).all())
+        if self.partition.any(not finite):
             raise HydroFailure("NaN in the momentum after the strength and gravity step", self._good_clock[0], -1,
                                None, {})
 

@@ -69,7 +69,7 @@ from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_COARSE, R_CX, R_CY, R_CZ, R_FINE, R_F1,
                                            R_F2, R_SIDE, prolong_state_ghosts, register_fluxes, reflux_register,
                                            restrict_ghosts)
-from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
+from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import every_layer, fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
 from impactpipe.hydro.strength.model import LevelBlocks
@@ -216,7 +216,10 @@ def strength_levels(mesh: BlockMesh) -> list[tuple[LevelBlocks, np.ndarray, np.n
             prolong[axis] = plans["prolong"][axis, lv]
             finer.append(rows[into, P_SRC])
             coarser.append(prolong[axis][:, P_SRC])
-        out.append((LevelBlocks(blocks, mask, restrict, prolong), np.unique(np.concatenate(finer)).astype(np.int64),
+        walls = {(axis, side): blocks[mesh.neighbor[blocks, axis, side] == REFLECTING]
+                 for axis in range(mesh.ndim) for side in (0, 1)}
+        out.append((LevelBlocks(blocks, mask, restrict, prolong, walls),
+                    np.unique(np.concatenate(finer)).astype(np.int64),
                     np.unique(np.concatenate(coarser)).astype(np.int64)))
     mesh.cache[key] = out
     return out
@@ -274,6 +277,18 @@ def put_cells(fields, cells, values):
                 field[cells[i, 0], c, cells[i, 1], cells[i, 2], cells[i, 3]] = value[i, c]
 
 
+@njit(cache=True)
+def finite_blocks(field, blocks):
+    """Whether every cell of ``field[b]`` (ghosts included) is finite for every b of ``blocks``
+    (int64): ``np.isfinite(field[blocks]).all()`` without the copy of the blocks."""
+    for e in range(blocks.shape[0]):
+        run = field[blocks[e]].reshape(field[blocks[e]].size)
+        for i in range(run.size):
+            if not np.isfinite(run[i]):
+                return False
+    return True
+
+
 def _gathered(state, cells: np.ndarray) -> tuple:
     """Copies (N, C) of every conserved field at ``cells`` (rows block, padded cell)."""
     fields = _fields(state)
@@ -285,12 +300,16 @@ def _gathered(state, cells: np.ndarray) -> tuple:
 class LevelStepper:
     """The root step of ``time_stepping = "per_level"`` (module docstring): per mesh, the flux
     registers (one (E, NQ) array per sweep axis, E the reflux plan's rows) and, while a level
-    steps, the copies of the coarser cells its finer level's ghosts interpolate from."""
+    steps, the copies of the coarser cells its finer level's ghosts interpolate from, before
+    (U_old) and after (U_new) the coarser level's step.  U_new is gathered once per coarser step:
+    the coarser level's cells stay as they are while its finer level takes its two substeps
+    (only the finer levels sweep, and the reflux into the coarser cells follows them)."""
 
     def __init__(self):
         self._mesh: BlockMesh | None = None
         self._registers: list[np.ndarray] = []
         self._before: dict[int, tuple] = {}
+        self._after: dict[int, tuple] = {}
 
     def _prepare(self, sim) -> None:
         """Registers sized for the current mesh, all zero (a failed step may have left some)."""
@@ -303,6 +322,7 @@ class LevelStepper:
         for register in self._registers:
             register[:] = 0.0
         self._before.clear()
+        self._after.clear()
 
     def advance(self, sim, dt: float) -> int:
         """Advance every level of ``sim`` by the root step ``dt`` (s); returns the cell-updates
@@ -347,6 +367,7 @@ class LevelStepper:
                 self._strength_step(sim, plans, level, dt, theta)
             updates += blocks.size * int(np.prod(mesh.interior_shape))
         if level < finest:
+            self._after[level + 1] = _gathered(st, plans["interpolated"][level + 1])
             for k in range(2):
                 updates += self._advance_level(sim, plans, level + 1, 0.5 * dt, 2 * substep + k, 0.5 * k, finest)
             for axis in range(mesh.ndim):
@@ -378,7 +399,7 @@ class LevelStepper:
         if coarser.size:
             fields = _fields(st)
             cells = plans["interpolated"][level]
-            after = _gathered(st, cells)
+            after = self._after[level]
             blend_cells(fields, cells, self._before[level], after, theta)
             strength.load_work(st, sim.eos, coarser)
             put_cells(fields, cells, after)
@@ -417,7 +438,7 @@ class LevelStepper:
         if prolong.shape[0] == 0:
             return
         cells = plans["interpolated"][level]
-        after = _gathered(st, cells)
+        after = self._after[level]
         blend_cells(fields, cells, self._before[level], after, theta)
         prolong_state_ghosts(fields, prolong, mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
         put_cells(fields, cells, after)

@@ -98,12 +98,15 @@ class LevelBlocks(NamedTuple):
     blocks) only, and the work arrays' ghosts of those blocks are filled from same-level copies
     (``mask[NB]`` uint8, 1 on the level's blocks), from the finer level by the ``restrict[axis]``
     rows and weights of the axis's restrict plan whose destination is on the level, and from the
-    coarser level by the ``prolong[axis]`` rows into the level (copies of the coarse cell)."""
+    coarser level by the ``prolong[axis]`` rows into the level (copies of the coarse cell);
+    ``walls[axis, side]``: the level's blocks with a reflecting face on that side (int64), whose
+    ghosts' normal components are negated."""
 
     blocks: np.ndarray
     mask: np.ndarray
     restrict: dict
     prolong: dict
+    walls: dict
 
 
 class MaterialStrength:
@@ -314,8 +317,10 @@ class MaterialStrength:
         ``floors``, ``amounts``: the hydro counters the reflux kernel reports to, untouched here
         since no mass moves).  With a ``level`` (:class:`LevelBlocks`) only its blocks are
         kicked and nothing is refluxed: the amounts through the level's coarse/fine faces stay in
-        :attr:`face_flux` (zeroed on the level's blocks first) for the flux registers of
-        :mod:`impactpipe.hydro.amr.subcycle`.  The hourglass viscosity is not split by levels.
+        :attr:`face_flux` for the flux registers of :mod:`impactpipe.hydro.amr.subcycle`: the
+        momentum and energy columns of the used axes, the only ones the kernel writes, are zeroed
+        on the level's blocks first (the other columns and the unused axes stay zero from the
+        allocation).  The hourglass viscosity is not split by levels.
         """
         mesh = self.mesh
         lo, hi = self._range(partition)
@@ -323,7 +328,8 @@ class MaterialStrength:
             if self.hourglass[0] > 0.0:
                 raise ValueError("the hourglass viscosity does not step per refinement level")
             if mesh.adaptive:
-                self.face_flux[:, level.blocks] = 0.0
+                col0 = 3 * self.nmat
+                self.face_flux[:mesh.ndim, level.blocks, :, col0:col0 + 4] = 0.0
             apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
                                     self.face_flux, 3 * self.nmat, lo, hi, level.blocks, self.stressed)
@@ -390,35 +396,38 @@ class MaterialStrength:
         none of a void block's (every kernel skips its void cells), and half of an impact's
         blocks are void.  The ghosts left stale may be flipped at a wall; nothing reads them.
         An adaptive mesh fills every layer of every block (its prolongation reads the coarse
-        blocks' ghosts); with a ``level`` (:class:`LevelBlocks`) on an adaptive mesh, every
-        layer of the level's blocks only: same-level copies, restriction from the finer level,
-        copies of the coarser level's cells (:func:`_fill_level_work_ghosts`), and the wall
-        sign flips of the level's blocks."""
+        blocks' ghosts); with a ``level`` (:class:`LevelBlocks`) on an adaptive mesh, the level's
+        blocks only: the same-level copies of the layers the kernels read into the blocks
+        holding material, as on a uniform mesh, then every layer at the level's coarse/fine faces
+        (restriction from the finer level, copies of the coarser level's interior cells:
+        :func:`_fill_level_work_ghosts`, which read no ghost), and the wall sign flips of the
+        level's blocks."""
         layers, skipped = self._ghost_reads()
         by_level = level is not None and self.mesh.adaptive
-        if self.mesh.adaptive:
+        if self.mesh.adaptive and not by_level:
             layers = GHOST
+        wanted = level.mask & self.holds if by_level else None
         start = slots.start
         for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
             if stop > start:
                 if by_level:
-                    _fill_level_work_ghosts(self.work[:, start:stop], self.mesh, axis, level)
+                    _fill_level_work_ghosts(self.work[:, start:stop], self.mesh, axis, level, wanted, layers)
                 else:
                     partition.fill_field_ghosts(self.work, self.mesh, axis, slice(start, stop), self.holds, layers)
                 for side in (0, 1):
                     flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
                     self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if start <= c < stop], layers,
-                                           level.mask if by_level else None)
+                                           level.walls[axis, side] if by_level else None)
             start = stop + 1
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
-                          mask: np.ndarray | None = None) -> None:
+                          blocks: np.ndarray | None = None) -> None:
         """Negate ``components`` of ``array`` in the ``layers`` ghost layers next to the interior
-        of the reflecting faces on ``side`` of ``axis`` (of the blocks where ``mask`` is not 0,
-        when given)."""
+        of the reflecting faces on ``side`` of ``axis``: of the ``blocks`` (int64) when given, which
+        must all have a reflecting face there, else of every block that has one."""
         mesh = self.mesh
-        wall = mesh.neighbor[:, axis, side] == REFLECTING
-        blocks = np.nonzero(wall if mask is None else wall & (mask != 0))[0]
+        if blocks is None:
+            blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
         if blocks.size == 0 or not components:
             return
         n = mesh.interior_shape[axis]
@@ -480,14 +489,17 @@ class MaterialStrength:
         return whole
 
 
-def _fill_level_work_ghosts(field: np.ndarray, mesh: BlockMesh, axis: int, level: LevelBlocks) -> None:
-    """Every ghost layer along ``axis`` of the ``level``'s blocks of ``field`` (a view of some work
-    slots, (NB, C, ...)): copies of the same level's neighbours and domain faces (no sign flips),
-    the volume-weighted means of the finer level's cells, copies of the coarser level's cells
-    (:func:`impactpipe.hydro.mesh.boundary.fill_field_ghosts` restricted to one level)."""
+def _fill_level_work_ghosts(field: np.ndarray, mesh: BlockMesh, axis: int, level: LevelBlocks, wanted: np.ndarray,
+                            layers: int) -> None:
+    """Ghosts along ``axis`` of the ``level``'s blocks of ``field`` (a view of some work slots,
+    (NB, C, ...)): copies of the same level's neighbours and domain faces (no sign flips) into
+    the ``layers`` layers next to the interior of the blocks where ``wanted[NB]`` (uint8) is not 0,
+    then every layer at the coarse/fine faces: the volume-weighted means of the finer level's
+    cells, copies of the coarser level's cells (:func:`impactpipe.hydro.mesh.boundary.fill_field_ghosts`
+    restricted to one level)."""
     g = int(mesh.ghost[axis])
     if g == 0:
         return
-    fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, level.mask, g)
+    fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, wanted, layers)
     restrict_ghosts(field, *level.restrict[axis])
     prolong_field_ghosts(field, level.prolong[axis])
