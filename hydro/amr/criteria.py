@@ -48,15 +48,20 @@ NINDICATOR = 5
 
 @njit(cache=True, parallel=True)
 def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                     out, grady_kipp=None, porosity=None):
+                     out, grady_kipp=None, porosity=None, void=None):
     """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``.
 
     The mixture pressure of :func:`impactpipe.hydro.scheme.mixture.mixture_state`: p_k is limited by
     the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps (and scaled by 1 - D_k for
     the Grady-Kipp materials of ``grady_kipp``), porous materials (``porosity``) at their distension.
+    Blocks b with ``void[b]`` != 0 (uint8, when given; void ghosts included,
+    :func:`impactpipe.hydro.mesh.last_good.void_blocks`) are skipped: their pressure is 0.0, as
+    ``out`` must hold there already.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     for b in prange(nb):
+        if void is not None and void[b] != 0:
+            continue
         for ix in range(nx):
             for iy in range(ny):
                 for iz in range(nz):
@@ -76,13 +81,17 @@ def _neighbours(ix, iy, iz, d, step):
 
 
 @njit(cache=True, parallel=True)
-def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out):
-    """Per block the largest interface, pressure-jump and density-jump indicators, |p| and speed into ``out[NB, 5]``."""
+def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out, void=None):
+    """Per block the largest interface, pressure-jump and density-jump indicators, |p| and speed into
+    ``out[NB, 5]``; blocks b with ``void[b]`` != 0 (uint8, when given: void ghosts included, pressure
+    0.0) are skipped, their indicators all 0.0, as ``out`` must hold there already."""
     nb, nmat, nx, ny, nz = alpha.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     for b in prange(nb):
+        if void is not None and void[b] != 0:
+            continue
         face = 0.0
         pjump = 0.0
         rjump = 0.0

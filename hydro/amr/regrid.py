@@ -38,6 +38,7 @@ from impactpipe.hydro.amr.criteria import (
 from impactpipe.hydro.amr.plans import axis0_weights
 from impactpipe.hydro.amr.transfer import prolong_blocks, restrict_blocks
 from impactpipe.hydro.mesh.blocks import BlockMesh, morton_keys
+from impactpipe.hydro.mesh.last_good import void_blocks
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 
 
@@ -94,14 +95,19 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     noise on the scale of the event) do not keep the whole body refined.  ``grady_kipp``: the
     materials bearing (1 - D) of their tension (:func:`impactpipe.hydro.scheme.mixture.tension_factor`);
     ``porosity``: the porous materials' rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`) or None.
+    The pressure and indicators of the void blocks (ghosts included,
+    :func:`~impactpipe.hydro.mesh.last_good.void_blocks`) are not computed: they are 0.
     """
+    void = np.zeros(mesh.nblocks, dtype=np.uint8)
+    void_blocks(*(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
+                                                     state.energy)), 0, mesh.nblocks, void)
     pressure = np.zeros((mesh.nblocks,) + mesh.padded_shape)
     mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,
-                     shear_modulus, tensile_strength, pressure, grady_kipp, porosity)
+                     shear_modulus, tensile_strength, pressure, grady_kipp, porosity, void)
     peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)).max(initial=0.0)))
     floor = rule.pressure_floor * max(peak_pressure, 1e-300)
     ind = np.zeros((mesh.nblocks, NINDICATOR))
-    block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, ind)
+    block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, ind, void)
     thresholds = np.full(IND_MAX_PRESSURE, np.inf)
     if rule.interfaces != "off":
         thresholds[IND_INTERFACE] = INTERFACE_JUMP
