@@ -16,7 +16,10 @@ the ns per cell-update of both runs:
   ghosts counted apart as strength ghosts;
 - tracers, regrid, time step (signal speeds), last-good copy;
 - Python: what is left of the run's CPU time (the interpreter between the kernels, numba's
-  dispatch, the numpy glue).
+  dispatch, the numpy glue);
+
+and the CPU-time ratio of the uniform run extrapolated to the adaptive run's finest steps (as
+:mod:`benchmarks.amr_reference` extrapolates its wall time) to the adaptive run.
 
 Times are exclusive: a phase nested in another (a ghost fill inside the strength step) counts
 for itself only.  The timers cost about a microsecond per call.
@@ -144,6 +147,8 @@ def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepp
             result["uniform"] = {"cpu_seconds": total, "cell_updates": uniform_steps * uniform_sim.mesh.ncells,
                                  "steps": uniform_steps, "seconds": dict(timers.seconds),
                                  "calls": dict(timers.calls)}
+            finest_steps = sim.step_count * (2 ** (int(values["levels"]) - 1) if time_stepping == "per_level" else 1)
+            result["cpu_time_ratio"] = total / uniform_steps * finest_steps / adaptive["cpu_seconds"]
     finally:
         for owner, name, original in saved:
             setattr(owner, name, original)
@@ -175,6 +180,9 @@ def main() -> None:
     for name in runs:
         r = result[name]
         print(f"{name}: {r['steps']} steps, {r['cell_updates']:.3e} cell-updates, {r['cpu_seconds']:.1f} s CPU")
+    if "cpu_time_ratio" in result:
+        print(f"uniform extrapolated to the adaptive run's finest steps / adaptive, CPU time: "
+              f"{result['cpu_time_ratio']:.2f}x")
 
 
 if __name__ == "__main__":
