@@ -9,8 +9,9 @@ the ns per cell-update of both runs:
 - sweeps: the directional sweeps (:func:`~impactpipe.hydro.scheme.directional.sweep`);
 - same-level ghosts: the state's ghosts copied from same-level neighbours and domain faces
   (on the uniform mesh every ghost fill);
-- coarse/fine ghosts: the restriction and prolongation of the state's ghosts at level faces,
-  with the gather and blend of the coarse cells the prolongation reads at the substep's time;
+- coarse/fine ghosts: the restriction and the prolongation of the state's ghosts at level
+  faces, and the time blend (the gather, blend and put back of the coarse cells the
+  prolongation reads at the substep's time);
 - registers and reflux: the flux registers and the coarse cells' corrections;
 - strength: the strength step's kernels (velocities, stress update, kicks), its work-array
   ghosts counted apart as strength ghosts;
@@ -50,11 +51,12 @@ TIMED = (
     (subcycle, "fill_state_ghost_slabs_of", "same-level ghosts"),
     (distributed.WholeMesh, "start_ghosts", "same-level ghosts"),
     (solver.Simulation, "restore_last_good", "retakes"),
-    (subcycle, "restrict_ghosts", "coarse/fine ghosts"),
-    (subcycle, "prolong_state_ghosts", "coarse/fine ghosts"),
-    (subcycle, "gather_cells", "coarse/fine ghosts"),
-    (subcycle, "blend_cells", "coarse/fine ghosts"),
-    (subcycle, "put_cells", "coarse/fine ghosts"),
+    (subcycle, "restrict_ghosts", "coarse/fine restriction"),
+    (subcycle, "restrict_state_ghosts", "coarse/fine restriction"),
+    (subcycle, "prolong_state_ghosts", "coarse/fine prolongation"),
+    (subcycle, "gather_cells", "coarse/fine time blend"),
+    (subcycle, "blend_cells", "coarse/fine time blend"),
+    (subcycle, "put_cells", "coarse/fine time blend"),
     (subcycle, "register_fluxes", "registers and reflux"),
     (subcycle, "reflux_register", "registers and reflux"),
     (solver, "reflux", "registers and reflux"),
@@ -72,7 +74,8 @@ TIMED = (
     (solver.Simulation, "_save_good", "last-good copy"),
 )
 
-PHASES = ("sweeps", "same-level ghosts", "coarse/fine ghosts", "registers and reflux", "strength", "strength ghosts",
+PHASES = ("sweeps", "same-level ghosts", "coarse/fine restriction", "coarse/fine prolongation",
+          "coarse/fine time blend", "registers and reflux", "strength", "strength ghosts",
           "tracers", "regrid", "time step", "last-good copy", "retakes", "Python")
 
 
@@ -99,9 +102,12 @@ class PhaseTimers:
         return timed
 
     def install(self) -> list:
-        """Replace every :data:`TIMED` attribute by its timed wrapper; returns what to put back."""
+        """Replace every :data:`TIMED` attribute by its timed wrapper (those the code has: the
+        list names the kernels of earlier versions too); returns what to put back."""
         saved = []
         for owner, name, phase in TIMED:
+            if name not in owner.__dict__:
+                continue
             original = owner.__dict__[name]
             saved.append((owner, name, original))
             setattr(owner, name, self.wrap(original, phase))

@@ -68,7 +68,7 @@ from numba import njit
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_COARSE, R_CX, R_CY, R_CZ, R_FINE, R_F1,
                                            R_F2, R_SIDE, prolong_state_ghosts, register_fluxes, reflux_register,
-                                           restrict_ghosts)
+                                           restrict_state_ghosts)
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import every_layer, fill_state_ghost_slabs_of
 from impactpipe.hydro.scheme.directional import sweep
@@ -348,23 +348,31 @@ class LevelStepper:
             axes = list(range(mesh.ndim))
             if substep % 2:
                 axes.reverse()
-            for axis in axes:
-                self.fill_level_ghosts(sim, plans, axis, level, theta)
-                sim._observe("ghosts", axis)
-                sweep(axis, dt, mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum, st.energy,
-                      mesh.block_lo, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, sim.eos.kind, sim.eos.params,
-                      sim.eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch, sim.boundary, sim.floors,
-                      sim.amounts, sim._failure, sim._face_flux, sim.plain_pencils, blocks, sim.grady_kipp,
-                      sim.porosity)
-                failed = sim.partition.first_failure(sim._failure)
-                if failed >= 0:
-                    sim._raise_sweep_failure(failed)
-                sim._observe("sweep", axis)
-                if mesh.adaptive:
-                    register_fluxes(axis, axis_plans(mesh, axis)["reflux"], sim._face_flux, self._registers[axis],
-                                    mesh.block_level, level)
-            if sim.strength is not None:
-                self._strength_step(sim, plans, level, dt, theta)
+            fields = _fields(st)
+            cells = plans["interpolated"][level]
+            if cells.shape[0]:
+                blend_cells(fields, cells, self._before[level], self._after[level], theta)
+            try:
+                for axis in axes:
+                    self.fill_level_ghosts(sim, plans, axis, level)
+                    sim._observe("ghosts", axis)
+                    sweep(axis, dt, mesh.geometry_code, st.alpha, st.arho, st.arhoe, st.arhoq, st.momentum,
+                          st.energy, mesh.block_lo, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, sim.eos.kind,
+                          sim.eos.params, sim.eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch,
+                          sim.boundary, sim.floors, sim.amounts, sim._failure, sim._face_flux, sim.plain_pencils,
+                          blocks, sim.grady_kipp, sim.porosity)
+                    failed = sim.partition.first_failure(sim._failure)
+                    if failed >= 0:
+                        sim._raise_sweep_failure(failed)
+                    sim._observe("sweep", axis)
+                    if mesh.adaptive:
+                        register_fluxes(axis, axis_plans(mesh, axis)["reflux"], sim._face_flux,
+                                        self._registers[axis], mesh.block_level, level)
+                if sim.strength is not None:
+                    self._strength_step(sim, plans, level, dt)
+            finally:
+                if cells.shape[0]:
+                    put_cells(fields, cells, self._after[level])
             updates += blocks.size * int(np.prod(mesh.interior_shape))
         if level < finest:
             self._after[level + 1] = _gathered(st, plans["interpolated"][level + 1])
@@ -380,7 +388,7 @@ class LevelStepper:
             sim.tracers.level_substep(sim, level, (substep - sim.step_count * 2 ** level + 1) * dt)
         return updates
 
-    def _strength_step(self, sim, plans: dict, level: int, dt: float, theta: float) -> None:
+    def _strength_step(self, sim, plans: dict, level: int, dt: float) -> None:
         """The strength step of level ``level``'s blocks over its substep ``dt`` (s), after its
         sweeps (module docstring): kick dt / 2, stress update dt, kick dt / 2
         (:class:`~impactpipe.hydro.strength.model.MaterialStrength`), each kick's amounts through
@@ -388,21 +396,16 @@ class LevelStepper:
 
         The work ghosts at coarse/fine faces come from the neighbouring levels' cells, computed
         first: level + 1's from its state now (the start of this substep, where that level
-        stands), level - 1's from the cells its prolongation reads taken at the fraction
-        ``theta`` of its step, U_old + theta (U_new - U_old), as for the sweeps' ghosts.  They are
+        stands), level - 1's from the cells its prolongation reads, which hold their values at
+        the fraction theta of its step during the substep (:meth:`_advance_level`), as for the
+        sweeps' ghosts.  They are
         not recomputed within the substep: the update's velocity ghosts and the second kick's
         stress ghosts from those levels keep these values (first order in time at the level
         faces; the registers keep the amounts exact whatever the ghosts hold)."""
         mesh, st, strength = sim.mesh, sim.state, sim.strength
         view, finer, coarser = strength_levels(mesh)[level]
         strength.load_work(st, sim.eos, finer)
-        if coarser.size:
-            fields = _fields(st)
-            cells = plans["interpolated"][level]
-            after = self._after[level]
-            blend_cells(fields, cells, self._before[level], after, theta)
-            strength.load_work(st, sim.eos, coarser)
-            put_cells(fields, cells, after)
+        strength.load_work(st, sim.eos, coarser)
         strength.load_stress(st, sim.eos, sim.partition, view)
         self._strength_kick(sim, 0.5 * dt, view, level)
         strength.update(st, dt, sim.eos, sim.partition, view)
@@ -420,10 +423,11 @@ class LevelStepper:
                 register_fluxes(axis, axis_plans(mesh, axis)["reflux"], strength.face_flux[axis],
                                 self._registers[axis], mesh.block_level, level)
 
-    def fill_level_ghosts(self, sim, plans: dict, axis: int, level: int, theta: float) -> None:
+    def fill_level_ghosts(self, sim, plans: dict, axis: int, level: int) -> None:
         """Fill the ghosts of level ``level``'s blocks along ``axis`` (module docstring): same-level
         copies and domain faces, restriction from level + 1 (and of level - 1's ghosts from this
-        level), prolongation from level - 1 at the fraction ``theta`` of its step."""
+        level), prolongation from level - 1, whose cells it reads hold their values at the
+        substep's time (:meth:`_advance_level`)."""
         mesh, st = sim.mesh, sim.state
         fields = _fields(st)
         g = int(mesh.ghost[axis])
@@ -431,14 +435,7 @@ class LevelStepper:
                                   every_layer(st.arhoq, g))
         if not mesh.adaptive:
             return
-        restrict, weight = plans["restrict"][axis, level], plans["restrict_weight"][axis, level]
-        for field in fields:
-            restrict_ghosts(field, restrict, weight)
+        restrict_state_ghosts(fields, plans["restrict"][axis, level], plans["restrict_weight"][axis, level])
         prolong = plans["prolong"][axis, level]
-        if prolong.shape[0] == 0:
-            return
-        cells = plans["interpolated"][level]
-        after = self._after[level]
-        blend_cells(fields, cells, self._before[level], after, theta)
-        prolong_state_ghosts(fields, prolong, mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
-        put_cells(fields, cells, after)
+        if prolong.shape[0]:
+            prolong_state_ghosts(fields, prolong, mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)

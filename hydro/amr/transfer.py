@@ -305,6 +305,31 @@ def restrict_ghosts(field, plan, weight0):
 
 
 @njit(cache=True)
+def restrict_state_ghosts(state, plan, weight0):
+    """:func:`restrict_ghosts` of every field of ``state`` (the tuple (alpha, arho, arhoe, mom,
+    energy, arhoq)) in one pass over the plan: the same sums in the same order for each field."""
+    nx, ny, nz = state[0].shape[2], state[0].shape[3], state[0].shape[4]
+    ay = 2 if ny > 1 else 1
+    az = 2 if nz > 1 else 1
+    ax = 2 if nx > 1 else 1
+    wy = 1.0 / ay
+    wz = 1.0 / az
+    for e in range(plan.shape[0]):
+        sb = plan[e, P_SRC]
+        sx, sy, sz = plan[e, P_SX], plan[e, P_SY], plan[e, P_SZ]
+        db, dx_, dy, dz = plan[e, P_DST], plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]
+        for f in range(len(state)):
+            field = state[f]
+            for c in range(field.shape[1]):
+                acc = 0.0
+                for a in range(ax):
+                    for j in range(ay):
+                        for k in range(az):
+                            acc += weight0[e, a] * wy * wz * field[sb, c, sx + a, sy + j, sz + k]
+                field[db, c, dx_, dy, dz] = acc
+
+
+@njit(cache=True)
 def prolong_field_ghosts(field, plan):
     """Fill fine cells of ``field`` with copies of the coarse cells that contain them (plan as above)."""
     for e in range(plan.shape[0]):
