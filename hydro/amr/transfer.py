@@ -284,30 +284,22 @@ def restrict_ghosts(field, plan, weight0):
 
     The fine cells are the 2^ndim cells from ``plan[:, P_SRC..P_SZ]`` (their lowest corner)
     in block ``plan[:, P_SRC]``; ``weight0[e, a]`` is the share of the axis-0 child ``a``
-    (1/2, or its annulus volume fraction in 2d-cylindrical).
+    (1/2, or its annulus volume fraction in 2d-cylindrical): :func:`restrict_state_ghosts` of
+    the one field.
     """
-    nx, ny, nz = field.shape[2], field.shape[3], field.shape[4]
-    ay = 2 if ny > 1 else 1
-    az = 2 if nz > 1 else 1
-    ax = 2 if nx > 1 else 1
-    wy = 1.0 / ay
-    wz = 1.0 / az
-    for e in range(plan.shape[0]):
-        sb = plan[e, P_SRC]
-        for c in range(field.shape[1]):
-            acc = 0.0
-            for a in range(ax):
-                for j in range(ay):
-                    for k in range(az):
-                        acc += weight0[e, a] * wy * wz * field[sb, c, plan[e, P_SX] + a, plan[e, P_SY] + j,
-                                                              plan[e, P_SZ] + k]
-            field[plan[e, P_DST], c, plan[e, P_DX], plan[e, P_DY], plan[e, P_DZ]] = acc
+    restrict_state_ghosts((field,), plan, weight0)
 
 
 @njit(cache=True)
 def restrict_state_ghosts(state, plan, weight0):
-    """:func:`restrict_ghosts` of every field of ``state`` (the tuple (alpha, arho, arhoe, mom,
-    energy, arhoq)) in one pass over the plan: the same sums in the same order for each field."""
+    """Fill coarse cells ``plan[:, P_DST..P_DZ]`` of every field of ``state`` (a tuple of
+    ``[NB, C, NX, NY, NZ]`` arrays, e.g. (alpha, arho, arhoe, mom, energy, arhoq)) with the
+    volume-weighted means of their fine cells, in one pass over the plan.
+
+    The fine cells are the 2^ndim cells from ``plan[:, P_SRC..P_SZ]`` (their lowest corner)
+    in block ``plan[:, P_SRC]``; ``weight0[e, a]`` is the share of the axis-0 child ``a``
+    (1/2, or its annulus volume fraction in 2d-cylindrical), the other axes' children 1/2 each.
+    """
     nx, ny, nz = state[0].shape[2], state[0].shape[3], state[0].shape[4]
     ay = 2 if ny > 1 else 1
     az = 2 if nz > 1 else 1
