@@ -19,7 +19,7 @@ steps, and reports
 - the ratio of cell-updates (the issue's goal: at least 10) and of wall time.
 
     python benchmarks/amr_reference.py --json [--config PATH] [--end-time T] [--uniform-steps N]
-                                       [--time-stepping global|per_level]
+                                       [--time-stepping global|per_level] [--interfaces all|active|off]
 """
 
 from __future__ import annotations
@@ -37,9 +37,12 @@ from impactpipe.pipeline.config import load_config
 from impactpipe.pipeline.derived import derive
 
 
-def _simulation(config_path: str, levels, time_stepping: str = "global", cells: int | None = None):
+def _simulation(config_path: str, levels, time_stepping: str = "global", cells: int | None = None,
+                interfaces: str | None = None):
     config = load_config(config_path)
     config.hydro.time_stepping = time_stepping
+    if interfaces is not None:
+        config.hydro.refinement.interfaces = interfaces
     if cells is not None:
         config.hydro.cells_per_projectile_radius = cells
     if levels is not None:
@@ -49,9 +52,9 @@ def _simulation(config_path: str, levels, time_stepping: str = "global", cells: 
 
 
 def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepping: str = "global",
-        cells: int | None = None) -> dict:
+        cells: int | None = None, interfaces: str | None = None) -> dict:
     """The measurements of the module docstring, as a dict (no uniform run when ``uniform_steps`` is 0)."""
-    sim, values = _simulation(config_path, None, time_stepping, cells)
+    sim, values = _simulation(config_path, None, time_stepping, cells, interfaces)
     end = float(end_time or values["end_time"])
     start = sim.totals()
     started = time.perf_counter()
@@ -62,6 +65,7 @@ def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepp
     adaptive = {
         "levels": int(values["levels"]),
         "time_stepping": time_stepping,
+        "interfaces": sim.refinement.interfaces,
         "steps": sim.step_count,
         "finest_steps": finest_steps,
         "level_step_retakes": int(sim.level_step_retakes),
@@ -106,18 +110,26 @@ def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepp
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def mesh_arguments(description: str, uniform_steps: int, time_stepping: str) -> argparse.ArgumentParser:
+    """The command line of this benchmark and of amr_profile.py (their defaults differ)."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--config", default="configs/reference/case8c.yaml")
     parser.add_argument("--end-time", type=float, default=None, help="s (default: the config's hydro end time)")
-    parser.add_argument("--uniform-steps", type=int, default=50, help="0: no uniform run")
+    parser.add_argument("--uniform-steps", type=int, default=uniform_steps, help="0: no uniform run")
     parser.add_argument("--cells-per-projectile-radius", type=int, default=None,
                         help="override the config's hydro.cells_per_projectile_radius")
-    parser.add_argument("--time-stepping", choices=["global", "per_level"], default="global",
+    parser.add_argument("--time-stepping", choices=["global", "per_level"], default=time_stepping,
                         help="the adaptive run's hydro.time_stepping (the uniform run has one level either way)")
+    parser.add_argument("--interfaces", choices=["all", "active", "off"], default=None,
+                        help="override the adaptive run's hydro.refinement.interfaces")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
-    args = parser.parse_args()
-    result = run(args.config, args.end_time, args.uniform_steps, args.time_stepping, args.cells_per_projectile_radius)
+    return parser
+
+
+def main() -> None:
+    args = mesh_arguments(__doc__.splitlines()[0], 50, "global").parse_args()
+    result = run(args.config, args.end_time, args.uniform_steps, args.time_stepping, args.cells_per_projectile_radius,
+                 args.interfaces)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
