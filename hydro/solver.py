@@ -708,7 +708,8 @@ class Simulation:
 
     @property
     def floor_amounts(self) -> dict[str, float]:
-        """Mass (kg) and energy (J) added, reconciled or removed by the floors, since the start."""
+        """Mass (kg), energy (J) and signed momentum components (kg m/s) added, reconciled or removed
+        by the floors, since the start (names: :data:`~impactpipe.hydro.scheme.pencil_layout.AMOUNT_NAMES`)."""
         totals = self.amounts.sum(axis=0)
         amounts = {name: float(v) for name, v in zip(AMOUNT_NAMES, totals)}
         if self.strength is not None:
@@ -721,21 +722,30 @@ class Simulation:
         ``mass`` (kg), ``material_mass`` (M,), ``momentum`` (3,) (kg m/s; in 2d-cylindrical
         only the z component is a conserved total), ``energy`` (J); ``outflow_*`` the
         amounts that left through domain faces (wall impulse included for momentum);
-        ``*_with_outflow`` the sums, constant in time up to the floor amounts.  Collective on
-        several ranks (every block is shared first).
+        ``*_with_outflow`` the sums, constant in time up to the floor amounts.
+        ``momentum_magnitude`` is sum |rho u| V over the cells (kg m/s), the scale of the
+        momentum budget; ``momentum_conserved`` (3 bools) the components that nothing but the
+        fluxes and the counted floors change: every one in 3d and 2d-planar, z alone in
+        2d-cylindrical, less those along an external g, none under self-gravity
+        (:func:`impactpipe.hydro.budget.conservation_budget`).  Collective on several ranks
+        (every block is shared first).
         """
         self.partition.share(self)
         mesh = self.mesh
         vol = mesh.cell_volumes()
         arho = mesh.interior(self.state.arho)
         material_mass = (arho * vol[:, None]).sum(axis=(0, 2, 3, 4))
-        momentum = (mesh.interior(self.state.momentum) * vol[:, None]).sum(axis=(0, 2, 3, 4))
+        mom = mesh.interior(self.state.momentum)
+        momentum = (mom * vol[:, None]).sum(axis=(0, 2, 3, 4))
+        magnitude = float((np.sqrt((mom * mom).sum(axis=1)) * vol).sum())
         energy = float((mesh.interior(self.state.energy)[:, 0] * vol).sum())
         bnd = self.boundary.sum(axis=0)
         out = {
             "mass": float(material_mass.sum()),
             "material_mass": material_mass,
             "momentum": momentum,
+            "momentum_magnitude": magnitude,
+            "momentum_conserved": self._momentum_conserved(),
             "energy": energy,
             "outflow_mass": float(bnd[BND_MASS]),
             "outflow_material_mass": bnd[BND_MATERIAL:].copy(),
@@ -746,6 +756,17 @@ class Simulation:
         out["momentum_with_outflow"] = out["momentum"] + out["outflow_momentum"]
         out["energy_with_outflow"] = out["energy"] + out["outflow_energy"]
         return out
+
+    def _momentum_conserved(self) -> tuple[bool, bool, bool]:
+        """The momentum components (x, y, z) only the fluxes and the counted floors change (:meth:`totals`)."""
+        if self.mesh.geometry == "2d-cylindrical":
+            conserved = [False, True, False]
+        else:
+            conserved = [True, True, True]
+        if self.gravity is not None:
+            g = getattr(self.gravity, "acceleration", None)
+            conserved = [c and g is not None and g[axis] == 0.0 for axis, c in enumerate(conserved)]
+        return tuple(conserved)
 
     def max_pressure(self) -> float:
         """The largest mixture pressure of any cell (Pa; the snapshots' ``pressure``), from the
@@ -893,7 +914,7 @@ class Simulation:
             sim.dt_first = None if dt_first < 0 else dt_first
             sim.boundary[:] = fh["counters/boundary"][()]
             _load_named_columns(fh["counters/floors"], FLOOR_NAMES, sim.floors)
-            _load_named_columns(fh["counters/amounts"], AMOUNT_NAMES, sim.amounts)
+            _load_named_columns(fh["counters/amounts"], AMOUNT_NAMES, sim.amounts, FIRST_AMOUNT_NAMES)
             if sim.porosity is not None:
                 sim.porosity_counts[:] = fh["counters/porosity_counts"][()]
             if sim.strength is not None:
@@ -915,15 +936,24 @@ def _rule_from_json(text) -> RefinementRule | None:
     return RefinementRule(**values)
 
 
-def _load_named_columns(dataset, names: tuple[str, ...], out: np.ndarray) -> None:
+#: The amount columns of the checkpoints that stored no names (the first format), in their order.
+FIRST_AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
+                      "energy_removed_by_void_cleanup", "mass_removed_by_void_cleanup",
+                      "momentum_removed_by_void_cleanup", "momentum_removed_by_velocity_limit",
+                      "energy_removed_by_velocity_limit")
+
+
+def _load_named_columns(dataset, names: tuple[str, ...], out: np.ndarray, first: tuple[str, ...] | None = None) -> None:
     """Copy the counter columns of ``dataset`` into ``out`` by name.
 
-    A checkpoint written before a counter existed leaves that counter at 0.  One without
-    column names (the first format) holds the leading columns of the current list, since
-    counters are only ever appended.
+    A checkpoint written before a counter existed leaves that counter at 0 (so do the
+    momentum magnitudes of the floors, which the signed components replaced).  One without
+    column names (the first format) holds the leading columns of ``first`` (by default of the
+    current list, for counters only ever appended).
     """
     values = dataset[()]
-    stored = json.loads(dataset.attrs["names"]) if "names" in dataset.attrs else list(names[:values.shape[1]])
+    stored = (json.loads(dataset.attrs["names"]) if "names" in dataset.attrs
+              else list((first or names)[:values.shape[1]]))
     if values.shape[1] != len(stored):
         raise ValueError(f"checkpoint counters {dataset.name}: {values.shape[1]} columns, expected {len(stored)}")
     for column, name in enumerate(stored):

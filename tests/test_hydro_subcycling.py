@@ -123,6 +123,7 @@ def test_impact_ejecta_cross_level_faces_without_floors():
     sim.run(1.0)
     budget = conservation_budget(initial, sim.totals(), sim.floor_amounts)
     assert abs(budget["mass_unaccounted"]) < 1e-14 and abs(budget["energy_unaccounted"]) < 1e-14, budget
+    assert abs(budget["momentum_y_unaccounted"]) < 1e-13 < abs(budget["momentum_y_error"]), budget
     assert sim.floor_amounts["mass_added_by_floors"] < 1e-5
     assert sim.floor_counts["register_redistribution"] > 0 and sim.level_step_retakes > 0
     assert set(np.unique(sim.mesh.block_level)) == {2, 3} and sim.step_count < 150
@@ -148,6 +149,7 @@ def _conserved(problem, params, geometry, mode, block_cells=None):
     sim.run(params["end_time"])
     budget = conservation_budget(initial, sim.totals(), sim.floor_amounts)
     assert abs(budget["mass_unaccounted"]) < 1e-13 and abs(budget["energy_unaccounted"]) < 1e-13, budget
+    assert all(abs(v) < 1e-13 for k, v in budget.items() if k.endswith("unaccounted")), budget
     return sim
 
 

@@ -15,6 +15,7 @@ from click.testing import CliRunner
 
 from impactpipe.handoff import blocks_to_spheres
 from impactpipe.handoff.mirror import mirror_across_y0
+from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.mesh.blocks import REFLECTING
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.common import preset_material
@@ -143,11 +144,10 @@ def test_grazing_run_conserves_mass_with_outflow_counted():
     assert sim.floor_amounts["mass_removed_by_void_cleanup"] < 1e-12 * start["mass"], "only round-off residue"
     # momentum: mesh + outflow (the y = 0 plane's wall impulse included) = initial, up to the
     # counted small-cell fixes
-    counted = (sim.floor_amounts["momentum_removed_by_velocity_limit"]
-               + sim.floor_amounts["momentum_removed_by_void_cleanup"])
-    p0 = np.linalg.norm(start["momentum"])
-    assert np.abs(end["momentum_with_outflow"] - start["momentum"]).max() <= 1e-9 * p0 + counted
-    assert counted < 0.01 * p0
+    budget = conservation_budget(start, end, sim.floor_amounts)
+    for c in "xyz":
+        assert abs(budget[f"momentum_{c}_unaccounted"]) < 1e-12
+        assert abs(budget[f"momentum_{c}_error"]) < 0.01
 
 
 @pytest.fixture(scope="module")

@@ -731,13 +731,18 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             share = ark / rho
             floors[b, FLOOR_VOID_CLEANUP] += 1
             amounts[b, AMOUNT_MASS_VOID] += ark * vol
-            amounts[b, AMOUNT_MOMENTUM_VOID] += share * np.sqrt(mn * mn + m1 * m1 + m2 * m2) * vol
             removed = arhoe[b, k, ix, iy, iz] + share * 0.5 * (mn * mn + m1 * m1 + m2 * m2) / rho
             amounts[b, AMOUNT_ENERGY_VOID] += removed * vol
             e_tot -= removed
-            mn -= share * mn
-            m1 -= share * m1
-            m2 -= share * m2
+            dn = share * mn
+            d1 = share * m1
+            d2 = share * m2
+            amounts[b, AMOUNT_MOMENTUM_VOID + axis] += dn * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID + t1] += d1 * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID + t2] += d2 * vol
+            mn -= dn
+            m1 -= d1
+            m2 -= d2
             rho -= ark
             alpha[b, k, ix, iy, iz] = 0.0
             arho[b, k, ix, iy, iz] = 0.0
@@ -752,7 +757,9 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             floors[b, FLOOR_VOID_CLEANUP] += 1
             amounts[b, AMOUNT_ENERGY_VOID] += e_tot * vol
             amounts[b, AMOUNT_MASS_VOID] += rho * vol
-            amounts[b, AMOUNT_MOMENTUM_VOID] += np.sqrt(mn * mn + m1 * m1 + m2 * m2) * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID + axis] += mn * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID + t1] += m1 * vol
+            amounts[b, AMOUNT_MOMENTUM_VOID + t2] += m2 * vol
         for k in range(nmat):
             alpha[b, k, ix, iy, iz] = 0.0
             arho[b, k, ix, iy, iz] = 0.0
@@ -784,6 +791,10 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             # the excess momentum is a flux residue, so is any kinetic energy it implies: keep
             # the materials' internal energies and rebuild the total energy around them
             scale = vmax * rho / m_abs
+            rest = (1.0 - scale) * vol
+            amounts[b, AMOUNT_MOMENTUM_LIMITER + axis] += mn * rest
+            amounts[b, AMOUNT_MOMENTUM_LIMITER + t1] += m1 * rest
+            amounts[b, AMOUNT_MOMENTUM_LIMITER + t2] += m2 * rest
             mn *= scale
             m1 *= scale
             m2 *= scale
@@ -792,7 +803,6 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                 esum += max(arhoe[b, k, ix, iy, iz], 0.0)
             e_new = esum + 0.5 * m_abs * m_abs * scale * scale / rho
             floors[b, FLOOR_VELOCITY_LIMIT] += 1
-            amounts[b, AMOUNT_MOMENTUM_LIMITER] += m_abs * (1.0 - scale) * vol
             amounts[b, AMOUNT_ENERGY_LIMITER] += (e_tot - e_new) * vol
             e_tot = e_new
         h_max = 0.0

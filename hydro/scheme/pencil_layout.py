@@ -71,20 +71,26 @@ NFLOOR = 10
 FLOOR_NAMES = ("negative_volume_fraction", "negative_partial_density", "negative_internal_energy",
                "void_cleanup", "first_order_fallback", "eos_clamp", "small_cell_velocity_limit",
                "tensile_limit", "small_cell_energy_limit", "register_redistribution")
-# Amount slots (``amounts[NB, NAMOUNT]``): kg and J, summed over the cells.
+# Amount slots (``amounts[NB, NAMOUNT]``): kg, J and kg m/s, summed over the cells.  The
+# momentum a floor removes is signed, per global component c (x, y, z; r, z, theta in
+# 2d-cylindrical): the slot AMOUNT_MOMENTUM_VOID + c (or AMOUNT_MOMENTUM_LIMITER + c) sums the
+# cells' m_c,before - m_c,after times V, which the budget takes back
+# (:func:`impactpipe.hydro.budget.conservation_budget`).
 AMOUNT_MASS_FLOOR = 0
 AMOUNT_ENERGY_FLOOR = 1
 AMOUNT_ENERGY_RECONCILED = 2
 AMOUNT_ENERGY_VOID = 3
 AMOUNT_MASS_VOID = 4
-AMOUNT_MOMENTUM_VOID = 5
-AMOUNT_MOMENTUM_LIMITER = 6
-AMOUNT_ENERGY_LIMITER = 7
-AMOUNT_ENERGY_CAP = 8
-NAMOUNT = 9
+AMOUNT_MOMENTUM_VOID = 5        # + c: slots 5, 6, 7
+AMOUNT_MOMENTUM_LIMITER = 8     # + c: slots 8, 9, 10
+AMOUNT_ENERGY_LIMITER = 11
+AMOUNT_ENERGY_CAP = 12
+NAMOUNT = 13
 AMOUNT_NAMES = ("mass_added_by_floors", "energy_added_by_floors", "energy_reconciled",
                 "energy_removed_by_void_cleanup", "mass_removed_by_void_cleanup",
-                "momentum_removed_by_void_cleanup", "momentum_removed_by_velocity_limit",
+                "momentum_x_removed_by_void_cleanup", "momentum_y_removed_by_void_cleanup",
+                "momentum_z_removed_by_void_cleanup", "momentum_x_removed_by_velocity_limit",
+                "momentum_y_removed_by_velocity_limit", "momentum_z_removed_by_velocity_limit",
                 "energy_removed_by_velocity_limit", "energy_removed_by_energy_limit")
 # Boundary counter slots (``boundary[NB, 5 + M]``): what left the domain (kg, kg m/s, J).
 BND_MASS = 0
