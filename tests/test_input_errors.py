@@ -42,6 +42,20 @@ def rejected(tmp_path, text: bytes | str, expected: str):
     assert not (tmp_path / "run").exists()
 
 
+def validates_on_one_rank_only(tmp_path, text: str, ranks_message: str):
+    """``validate`` accepts the config ``text`` (exit 0), and ``--ranks 2`` is refused with
+    ``ranks_message`` before any work."""
+    from impactpipe.pipeline.adapters.hydro import too_many_ranks
+    from impactpipe.pipeline.checks import check
+
+    path = tmp_path / "one_rank.yaml"
+    path.write_text(text)
+    result = CliRunner().invoke(main, ["validate", str(path)])
+    assert result.exit_code == 0, result.output
+    config = load_config(path)
+    assert too_many_ranks(config, check(config), 2) == ranks_message
+
+
 def test_non_utf8_bytes_name_the_line_and_key(tmp_path):
     text = SOD.replace("name: sod", "name: sod # caf\xe9").encode("latin-1")
     rejected(tmp_path, text, "2: name: not UTF-8 text: byte 0xe9 at column 16 (save the file as UTF-8)")
@@ -61,9 +75,6 @@ def test_hydro_end_time_of_a_verification_scene_is_an_error(tmp_path):
 def test_time_stepping_is_global_or_per_level_and_per_level_refuses_what_it_does_not_carry(tmp_path):
     """``hydro.time_stepping``: an unknown mode, and per_level with self-gravity or on several MPI ranks, are
     refused before any work; per_level alone validates."""
-    from impactpipe.pipeline.adapters.hydro import too_many_ranks
-    from impactpipe.pipeline.checks import check
-
     sedov = SEDOV.replace("cells: 96", "cells: 128")
     rejected(tmp_path, sedov + "  time_stepping: sometimes\n",
              "11: hydro.time_stepping: must be one of 'global' or 'per_level' (got 'sometimes')")
@@ -71,14 +82,9 @@ def test_time_stepping_is_global_or_per_level_and_per_level_refuses_what_it_does
     rejected(tmp_path, case8c.replace("  self_gravity: false\n", "  self_gravity: true\n  time_stepping: per_level\n"),
              "19: hydro.time_stepping: per_level does not support self-gravity (hydro.self_gravity) yet; "
              "use global")
-    path = tmp_path / "per_level.yaml"
-    path.write_text(sedov + "  time_stepping: per_level\n")
-    result = CliRunner().invoke(main, ["validate", str(path)])
-    assert result.exit_code == 0, result.output
-    config = load_config(path)
-    assert too_many_ranks(config, check(config), 2) == (
+    validates_on_one_rank_only(tmp_path, sedov + "  time_stepping: per_level\n", (
         "--ranks 2: hydro.time_stepping per_level runs the hydro stage on one process in this version; use "
-        "--ranks 1 or hydro.time_stepping global")
+        "--ranks 1 or hydro.time_stepping global"))
 
 
 def test_python_run_applies_the_checks_of_validate(tmp_path):
@@ -194,19 +200,11 @@ def test_void_settling_on_several_levels_or_ranks_is_refused_before_any_work(tmp
     """``scene.settling`` settles void column by column on a mesh of one level in one process:
     with two levels validate names the key (where the Simulation used to raise at its first step),
     and ``--ranks 2`` is refused; with one level it validates."""
-    from impactpipe.pipeline.adapters.hydro import too_many_ranks
-    from impactpipe.pipeline.checks import check
-
     collapse = (HERE.parent / "configs" / "column_collapse.yaml").read_text()
     settled = collapse.replace("  cells_per_height: 16\n", "  cells_per_height: 16\n  settling: true\n")
     rejected(tmp_path, settled.replace("  block_cells: 8\n", "  block_cells: 8\n  max_levels: 2\n"),
              "15: scene.settling: void settling runs on a mesh of one level; hydro.max_levels resolves to 2: "
              "set hydro.max_levels: 1 or scene.settling: false")
-    path = tmp_path / "settled.yaml"
-    path.write_text(settled)
-    result = CliRunner().invoke(main, ["validate", str(path)])
-    assert result.exit_code == 0, result.output
-    config = load_config(path)
-    assert too_many_ranks(config, check(config), 2) == (
+    validates_on_one_rank_only(tmp_path, settled, (
         "--ranks 2: scene.settling (void settling) runs the hydro stage on one process in this version; use "
-        "--ranks 1 or scene.settling: false")
+        "--ranks 1 or scene.settling: false"))
