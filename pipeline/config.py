@@ -627,7 +627,7 @@ def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
 
 
 #: Scenes whose setup starts a porous material at its bulk density rho_s0 / alpha0 (docs/eos.md, "Porosity").
-POROUS_PROBLEMS = ("impact", "planar_impact")
+POROUS_PROBLEMS = ("impact", "planar_impact", "hydrostatic_body")
 
 
 def semantic_errors(data: dict[str, Any], source_dir: Path) -> list[tuple[tuple, str]]:

@@ -40,8 +40,7 @@ def reference_state(material: dict[str, Any]) -> tuple[float, float]:
     arrays = pack_eos([material["eos"]])
     rho0 = reference_density(arrays.kind[0], arrays.params[0], arrays.table)
     _, c2, _ = pressure_sound_speed(arrays.kind[0], arrays.params[0], arrays.table, rho0, 0.0)
-    alpha0 = float((material.get("porosity") or {}).get("alpha0", 1.0))
-    return float(rho0) / alpha0, float(math.sqrt(c2))
+    return float(rho0) / distension(material), float(math.sqrt(c2))
 
 
 def porosity_choice(materials: dict[str, dict[str, Any]]) -> tuple[bool, str]:
@@ -84,6 +83,26 @@ def central_pressure(rho: float, radius: float) -> float:
     P_c = (2 pi / 3) G rho^2 R^2 (:func:`impactpipe.hydro.problems.impact.lithostatic_pressure` at r = 0).
     """
     return float(impact.lithostatic_pressure(rho, radius, 0.0))
+
+
+def distension(material: dict[str, Any]) -> float:
+    """Initial distension alpha0 (-) of a resolved material, 1 without a ``porosity`` block."""
+    return float((material.get("porosity") or {}).get("alpha0", 1.0))
+
+
+def hydrostatic_initial_state(rho: float, radius: float, alpha0: float) -> str:
+    """The sentence ``validate`` prints for a target that starts in hydrostatic equilibrium:
+    bulk density ``rho`` (kg/m^3), ``radius`` R (m), distension ``alpha0`` (-; 1 without pores)."""
+    pressure = (f"lithostatic pressure (2 pi / 3) G rho^2 (R^2 - r^2), {central_pressure(rho, radius):.3g} Pa at "
+                f"the centre")
+    if alpha0 == 1.0:
+        return f"target in hydrostatic equilibrium under its own gravity: {pressure} (self-gravity on)"
+    return (f"porous target in hydrostatic equilibrium under its own gravity: bulk density rho = rho_s0 / alpha0 = "
+            f"{rho:.6g} kg/m^3 and distension alpha0 = {alpha0:g} everywhere, unstrained (the epsilon-alpha model "
+            f"compacts with volumetric strain, and a body at rest has none), with the internal energy e that makes "
+            f"the porous pressure P_s(alpha0 rho, e) / alpha0 the {pressure}: the matrix carries alpha0 times the "
+            f"overburden through its thermal pressure (docs/eos.md, \"Self-gravity on a porous body\"; "
+            f"self-gravity on)")
 
 
 def derive(config: Config) -> dict[str, Any]:
@@ -130,13 +149,12 @@ def derive(config: Config) -> dict[str, Any]:
     else:
         out["end_time"] = config.hydro.end_time
         out["end_time_rule"] = "set in the config"
+    alpha_t = distension(materials[scene.target.material])
     out["self_gravity"], out["self_gravity_rule"] = self_gravity_choice(
         config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
-        c_t, out["end_time"])
-    out["initial_state"] = (
-        f"target in hydrostatic equilibrium under its own gravity: lithostatic pressure (2 pi / 3) G rho^2 "
-        f"(R^2 - r^2), {central_pressure(rho_t, scene.target.radius):.3g} Pa at the centre (self-gravity on)"
-        if out["self_gravity"] else "both bodies at their reference density and p = 0 (self-gravity off)")
+        c_t, out["end_time"], alpha_t)
+    out["initial_state"] = (hydrostatic_initial_state(rho_t, scene.target.radius, alpha_t) if out["self_gravity"]
+                            else "both bodies at their reference density and p = 0 (self-gravity off)")
     out["domain"] = impact_domain(config, geom, m_t + m_p, out["end_time"])
     if out["domain"] is not None:
         out["handoff_block_edge"], out["handoff_block_edge_rule"] = handoff_block_edge(
@@ -300,23 +318,26 @@ def physics_warnings(values: dict[str, Any]) -> list[str]:
 
 
 def self_gravity_choice(setting: bool | str, rho: float, radius: float, strength: dict[str, Any],
-                        sound_speed: float, end_time: float) -> tuple[bool, str]:
-    """(on, rule) for self-gravity in the hydro stage.
+                        sound_speed: float, end_time: float, alpha0: float = 1.0) -> tuple[bool, str]:
+    """(on, rule) for self-gravity in the hydro stage; ``rho`` the target's bulk density (kg/m^3),
+    ``alpha0`` its distension (-, 1 without pores).
 
     Auto turns it on only when both hold (method.md section 2: for 2-50 km bodies it is
     negligible in the shock phase):
     (a) the central pressure P_c = (2 pi / 3) G rho^2 R^2 exceeds SELF_GRAVITY_STRENGTH_FACTOR
-        times the tensile strength Y_T (0 without a strength model), so gravity, not
-        strength, holds the fractured body together;
+        times the bulk tensile strength Y_T / alpha0 (Y_T the matrix's, 0 without a strength
+        model; a porous material holds its matrix's tension spread over the bulk, docs/strength.md),
+        so gravity, not strength, holds the fractured body together;
     (b) the velocity surface gravity adds over the hydro stage, g t_end with
         g = (4 pi / 3) G rho R, exceeds SELF_GRAVITY_VELOCITY_FRACTION of the escape speed.
     """
     p_c = central_pressure(rho, radius)
-    y_t = float(strength.get("Y_T", 0.0))
+    y_t = float(strength.get("Y_T", 0.0)) / alpha0
     g = 4.0 * math.pi / 3.0 * G * rho * radius
     v_esc = math.sqrt(2.0 * g * radius)
     dv = g * end_time
-    numbers = (f"central pressure {p_c:.3g} Pa vs {SELF_GRAVITY_STRENGTH_FACTOR:g} Y_T = "
+    bulk = "" if alpha0 == 1.0 else f" / alpha0 (porous target, alpha0 = {alpha0:g}, bulk density {rho:.6g} kg/m^3)"
+    numbers = (f"central pressure {p_c:.3g} Pa vs {SELF_GRAVITY_STRENGTH_FACTOR:g} Y_T{bulk} = "
                f"{SELF_GRAVITY_STRENGTH_FACTOR * y_t:.3g} Pa; gravity adds g t_end = {dv:.3g} m/s vs "
                f"{SELF_GRAVITY_VELOCITY_FRACTION:g} v_esc = {SELF_GRAVITY_VELOCITY_FRACTION * v_esc:.3g} m/s")
     if setting != "auto":

@@ -58,6 +58,25 @@ def test_self_gravity_rule_is_stated_with_its_numbers():
     assert "Pa" in rule and "m/s" in rule, rule
 
 
+def test_a_porous_target_with_self_gravity_starts_unstrained_in_equilibrium_and_says_so():
+    """configs/large_body/porous.yaml with self_gravity auto: on, the rule compares the central
+    pressure with the porous target's bulk tensile strength Y_T / alpha0, the initial state names
+    the porous choice, and the setup builds it (no refusal): distension alpha0 in the target and
+    the lithostatic pressure at its centre."""
+    config = load_config(CONFIGS / "large_body" / "porous.yaml",
+                         overrides={"hydro.self_gravity": "auto", "hydro.cells_per_projectile_radius": 1})
+    values = derived.derive(config)
+    assert values["self_gravity"] is True
+    assert "auto: on" in values["self_gravity_rule"] and "Y_T / alpha0" in values["self_gravity_rule"]
+    assert "distension alpha0 = 1.5" in values["initial_state"] and "unstrained" in values["initial_state"]
+    sim = build_simulation(config, values)
+    snap = sim.snapshot()
+    target = snap.volume_fraction[:, 0] > 0.0
+    assert np.abs(snap.extra["distension"][target] / 1.5 - 1.0).max() < 1.0e-15
+    central = derived.central_pressure(values["target_reference_density"], config.scene.target.radius)
+    assert 0.9 * central < snap.pressure.max() < central
+
+
 def test_tracers_only_where_the_analysis_needs_them():
     impact = load_config(QUICKSTART)
     on, why = derived.derive(impact)["tracers"], derived.derive(impact)["tracers_rule"]

@@ -75,12 +75,17 @@ class HydroState:
         return HydroState(**{name: arr.copy() for name, arr in self.arrays().items()})
 
     def set_material(self, mesh: BlockMesh, fraction, material: int, eos, density, velocity,
-                     pressure=None, specific_energy=None) -> None:
+                     pressure=None, specific_energy=None, distension: float = 1.0) -> None:
         """Put material ``material`` into the interior cells where ``fraction`` > 0.
 
         ``fraction`` (volume fraction, -), ``density`` (kg/m^3), ``pressure`` (Pa) or
         ``specific_energy`` (J/kg) are scalars or arrays broadcastable to (NB, nx, ny, nz);
-        ``velocity`` (m/s) is a (3,) vector or an array broadcastable to (NB, 3, nx, ny, nz).
+        ``density`` is the bulk density rho and ``pressure`` the porous pressure
+        P = P_s(alpha rho, e) / alpha of a material at ``distension`` alpha (-, 1 without pores;
+        :mod:`impactpipe.hydro.eos.porosity`), so e solves P_s(alpha rho, e) = alpha P (the
+        distension itself is not stored here: the :class:`~impactpipe.hydro.solver.Simulation`
+        starts every porous material at its alpha_0); ``velocity`` (m/s) is a (3,) vector or an
+        array broadcastable to (NB, 3, nx, ny, nz).
         Those cells are rebuilt: the material fills ``fraction`` of them, other materials keep
         their partial amounts scaled by ``1 - fraction``, and the cell moves at ``velocity``.
         ``eos`` is the packed :class:`impactpipe.hydro.eos.EOSArrays`.
@@ -92,7 +97,8 @@ class HydroState:
             pres = np.broadcast_to(np.asarray(pressure, dtype=float), shape)
             kind, params, table = eos.kind[material], eos.params[material], eos.table
             specific_energy = np.array([
-                energy_from_pressure(kind, params, table, r, p) for r, p in zip(density.ravel(), pres.ravel())
+                energy_from_pressure(kind, params, table, distension * r, distension * p)
+                for r, p in zip(density.ravel(), pres.ravel())
             ]).reshape(shape)
         specific_energy = np.broadcast_to(np.asarray(specific_energy, dtype=float), shape)
         velocity = np.asarray(velocity, dtype=float)

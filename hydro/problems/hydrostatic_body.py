@@ -11,6 +11,11 @@ expansion ``order``).  The exact solution is the initial state: the body stays a
 surface speed bounded by its escape speed v_esc = R sqrt(8 pi G rho0 / 3) times the
 discretisation error (docs/hydro.md, "Self-gravity").
 
+A porous material (epsilon-alpha, :mod:`impactpipe.hydro.eos.porosity`) starts at its bulk
+density rho0 = rho_s0 / alpha_0 and distension alpha_0, unstrained, with the internal energy
+e that solves P_s(rho_s0, e) / alpha_0 = p(r) (:func:`~impactpipe.hydro.problems.impact.set_lithostatic_sphere`;
+docs/eos.md, "Self-gravity on a porous body"): its distension, too, stays alpha_0.
+
 2d-cylindrical: (r, z) on [0, L] x [-L, L]; 3d: the half y >= 0 of [-L, L]^3 with a reflecting
 plane at y = 0 (the gravity counts the mirror half).  L = R + ``margin_cells`` cells, rounded
 up to whole blocks; ``cells_per_radius`` cells of the finest level span R.
@@ -22,11 +27,12 @@ import numpy as np
 
 from impactpipe.hydro.eos import reference_density
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS, BlockMesh
+from impactpipe.hydro.eos.porosity import initial_distension
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, adaptive_simulation, check_geometry,
                                               material_list, merged, root_cell_multiple, strength_specs,
                                               tensile_strengths)
-from impactpipe.hydro.problems.impact import lithostatic_pressure, sphere_fraction
+from impactpipe.hydro.problems.impact import set_lithostatic_sphere, sphere_fraction
 from impactpipe.hydro.problems.parameters import Parameter, Record, setup_defaults
 from impactpipe.hydro.self_gravity import DEFAULT_ORDER, SelfGravity
 
@@ -69,18 +75,18 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         lo, hi, cells = [-side, 0.0, -side], [side, side, side], [2 * n, n, 2 * n]
         boundaries = [("outflow", "outflow"), ("reflecting", "outflow"), ("outflow", "outflow")]
     mesh = adaptive_mesh(geometry, lo, hi, cells, boundaries, block_cells, p["levels"])
-    rho0 = float(reference_density(eos.kind[0], eos.params[0], eos.table))
+    distension = initial_distension(specs[0])
+    rho0 = float(reference_density(eos.kind[0], eos.params[0], eos.table)) / distension
     gravity = SelfGravity(mesh, order=p["order"], mirror_y=geometry == "3d")
-    return adaptive_simulation(mesh, lambda m: initial_state(m, eos, rho0, body["radius"]), names, specs, cfl,
-                               p["refinement"], tensile_strength=tensile_strengths(materials, names),
+    return adaptive_simulation(mesh, lambda m: initial_state(m, eos, rho0, body["radius"], distension), names,
+                               specs, cfl, p["refinement"], tensile_strength=tensile_strengths(materials, names),
                                strength=strength_specs(materials, names), gravity=gravity)
 
 
-def initial_state(mesh: BlockMesh, eos, density: float, radius: float) -> HydroState:
-    """The sphere of ``radius`` (m) at ``density`` (kg/m^3) and the lithostatic pressure, at rest."""
+def initial_state(mesh: BlockMesh, eos, density: float, radius: float, distension: float = 1.0) -> HydroState:
+    """The sphere of ``radius`` (m) at bulk ``density`` (kg/m^3), ``distension`` (-) and the
+    lithostatic pressure, at rest."""
     state = HydroState.empty(mesh, 1)
     fill = sphere_fraction(mesh, (0.0, 0.0, 0.0), radius, 4)
-    distance = np.sqrt((mesh.cell_centers() ** 2).sum(axis=1))
-    pressure = np.where(fill > 0.0, lithostatic_pressure(density, radius, distance), 0.0)
-    state.set_material(mesh, fill, 0, eos, density, np.zeros(3), pressure=pressure)
+    set_lithostatic_sphere(state, mesh, fill, 0, eos, density, radius, distension)
     return state

@@ -33,8 +33,9 @@ decides where the mesh refines and coarsens as the impact proceeds.
 With ``self_gravity`` the bodies' own gravity acts in the hydro stage
 (:class:`~impactpipe.hydro.self_gravity.SelfGravity`, expansion order ``self_gravity_order``;
 a 3d half domain stands for the whole body) and the target starts in hydrostatic equilibrium,
-at its reference density with the internal energy that gives the EOS the lithostatic pressure
-(:func:`lithostatic_pressure`); the projectile starts at p = 0.
+at its reference (bulk) density with the internal energy that gives the EOS the lithostatic pressure
+(:func:`lithostatic_pressure`, :func:`set_lithostatic_sphere`; a porous target at its distension
+alpha_0, its matrix carrying alpha_0 times that pressure); the projectile starts at p = 0.
 Volume fractions are set by ``subsamples`` point samples per cell and axis in the cells that
 the sphere's surface may cut (cells wholly inside or outside are set directly), weighted by
 the annular volume in 2d-cylindrical.
@@ -233,12 +234,7 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table)) / initial_distension(specs[k])
         frac = sphere_fraction(mesh, body_centre, body["radius"], p["subsamples"])
         if k == 0 and p["self_gravity"]:
-            if initial_distension(specs[k]) > 1.0:
-                raise ValueError("self-gravity with a porous target is not supported yet (its lithostatic "
-                                 "initial state would need the porous EOS): set hydro.self_gravity false")
-            distance = np.sqrt((mesh.cell_centers() ** 2).sum(axis=1))
-            pressure = np.where(frac > 0.0, lithostatic_pressure(rho0, body["radius"], distance), 0.0)
-            state.set_material(mesh, frac, k, eos, rho0, body_velocity, pressure=pressure)
+            set_lithostatic_sphere(state, mesh, frac, k, eos, rho0, body["radius"], initial_distension(specs[k]))
         else:
             state.set_material(mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
     strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
@@ -256,6 +252,24 @@ def lithostatic_pressure(density: float, radius: float, distance):
     p = (2 pi / 3) G rho^2 (R^2 - r^2) inside, 0 outside."""
     r = np.asarray(distance, dtype=float)
     return 2.0 * np.pi / 3.0 * G * density ** 2 * np.clip(radius * radius - r * r, 0.0, None)
+
+
+def set_lithostatic_sphere(state: HydroState, mesh: BlockMesh, fraction, material: int, eos, density: float,
+                           radius: float, distension: float = 1.0) -> None:
+    """Put ``material`` at rest into the cells ``fraction`` of a uniform self-gravitating sphere of
+    ``radius`` R (m) centred at the origin, in hydrostatic equilibrium.
+
+    Every cell holds the bulk density ``density`` rho (kg/m^3) and the internal energy e (J/kg)
+    that gives the lithostatic pressure p(r) of :func:`lithostatic_pressure`.  A porous material
+    (``distension`` alpha_0 > 1) starts unstrained, at its alpha_0 (the epsilon-alpha model
+    compacts with strain, and a body at rest has none), and e solves P_s(alpha_0 rho, e) = alpha_0 p:
+    the matrix at its reference density alpha_0 rho = rho_s0 carries alpha_0 times the overburden
+    through its thermal pressure (docs/eos.md, "Self-gravity on a porous body").
+    """
+    distance = np.sqrt((mesh.cell_centers() ** 2).sum(axis=1))
+    pressure = np.where(fraction > 0.0, lithostatic_pressure(density, radius, distance), 0.0)
+    state.set_material(mesh, fraction, material, eos, density, np.zeros(3), pressure=pressure,
+                       distension=distension)
 
 
 def surface_crosses(mesh: BlockMesh, center, radius: float) -> np.ndarray:

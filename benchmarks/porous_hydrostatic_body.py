@@ -1,0 +1,110 @@
+"""A porous body in hydrostatic equilibrium under its own gravity stays at rest, unstrained.
+
+    python benchmarks/porous_hydrostatic_body.py --json
+
+The hydrostatic_body problem with a porous Tillotson-basalt sphere (R = 50 km, distension
+alpha_0 = 1.5, bulk density rho_s0 / alpha_0 = 1800 kg/m^3, self-gravity of order 4), r-z, over
+one sound-crossing time R / c_s0 (c_s0 = sqrt(A / rho_s0), the matrix's sound speed, 15.9 s).  Its
+exact solution is its initial state: bulk density rho_s0 / alpha_0, distension alpha_0 and the
+lithostatic pressure p(r) = (2 pi / 3) G rho^2 (R^2 - r^2), the porous pressure
+P_s(alpha_0 rho, e) / alpha_0 of the internal energy e the setup solves for.  Per compaction
+parameter set and resolution (cells per radius):
+
+- ``initial_pressure_error``: the largest |P / alpha_k - p(r)| over the central pressure p(0) in
+  the cells holding the body at t = 0 (P the cell pressure, volume-fraction weighted, alpha_k the
+  body's volume fraction);
+- ``max_speed_over_escape``, ``inside_0.95R_over_escape``: the largest speed over the escape speed
+  v_esc = R sqrt(8 pi G rho / 3) in the cells at least half full, and those inside 0.95 R;
+- ``max_distension_change``: the largest |alpha - alpha_0| / alpha_0 in those cells at any step,
+  and ``inside_0.95R_distension_change`` inside 0.95 R;
+- ``energy_with_potential_drift``: the drift of E_mesh + W over |W| (W = (1/2) sum m Phi).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from impactpipe.hydro.problems import PROBLEMS
+from impactpipe.hydro.problems.impact import lithostatic_pressure
+from impactpipe.hydro.self_gravity import G
+from impactpipe.pipeline.presets import resolve_eos, resolve_porosity
+
+BASALT = resolve_eos("tillotson", "basalt", {})
+RHO_SOLID = 2700.0
+ALPHA0 = 1.5
+RADIUS = 50.0e3
+#: Compaction parameter sets: the `basalt` preset (Raducan et al. 2019's published iSALE inputs)
+#: and the set written out in configs/porous/case9_porous.yaml.
+POROSITY = {
+    "basalt preset": resolve_porosity({"preset": "basalt", "alpha0": ALPHA0}),
+    "case9_porous": {"alpha0": ALPHA0, "eps_e": -1.0e-5, "kappa": 0.98, "alpha_x": 1.0},
+}
+
+
+def porous_body(porosity: dict, cells_per_radius: int):
+    """The hydrostatic_body Simulation of a porous basalt sphere (module docstring)."""
+    params = {"body": {"material": "porous_basalt", "radius": RADIUS}, "cells_per_radius": cells_per_radius}
+    return PROBLEMS["hydrostatic_body"].setup(params, {"porous_basalt": {"eos": BASALT, "porosity": porosity}})
+
+
+def radius_of_cells(mesh) -> np.ndarray:
+    """Distance (m) of each cell centre from the origin, (NB, nx, ny, nz)."""
+    return np.sqrt((mesh.cell_centers() ** 2).sum(axis=1))
+
+
+def initial_pressure_error(sim) -> float:
+    """max |P / alpha_k - p(r)| / p(0) over the body's cells at t = 0."""
+    snap = sim.snapshot()
+    fill = snap.volume_fraction[:, 0]
+    body = fill > 0.0
+    rho = RHO_SOLID / ALPHA0
+    exact = lithostatic_pressure(rho, RADIUS, radius_of_cells(sim.mesh))
+    error = np.abs(snap.pressure[body] / fill[body] - exact[body])
+    return float(error.max() / lithostatic_pressure(rho, RADIUS, 0.0))
+
+
+def at_rest(porosity: dict, cells_per_radius: int) -> dict:
+    """The measures of the module docstring for one parameter set and resolution."""
+    sim = porous_body(porosity, cells_per_radius)
+    pressure_error = initial_pressure_error(sim)
+    mesh, state = sim.mesh, sim.state
+    rho0 = RHO_SOLID / ALPHA0
+    escape = np.sqrt(8.0 * np.pi * G * rho0 / 3.0) * RADIUS
+    crossing = RADIUS / np.sqrt(26.7e9 / RHO_SOLID)
+    r = radius_of_cells(mesh)
+    sim.step()
+    start = sim.totals()["energy"] + sim.gravity.potential_energy
+    fastest = inside = change = change_inside = 0.0
+    while sim.time < crossing:
+        sim.step()
+        rho = mesh.interior(state.arho).sum(axis=1)
+        full = rho > 0.5 * rho0
+        deep = full & (r < 0.95 * RADIUS)
+        speed = np.linalg.norm(mesh.interior(state.momentum), axis=1) / np.where(rho > 0.0, rho, 1.0)
+        distension = mesh.interior(state.arhoq)[:, 0] / np.where(rho > 0.0, rho, 1.0)
+        fastest = max(fastest, float(speed[full].max()))
+        inside = max(inside, float(speed[deep].max()))
+        change = max(change, float(np.abs(distension[full] / ALPHA0 - 1.0).max()))
+        change_inside = max(change_inside, float(np.abs(distension[deep] / ALPHA0 - 1.0).max()))
+    drift = sim.totals()["energy"] + sim.gravity.potential_energy - start
+    return {"steps": sim.step_count, "initial_pressure_error": pressure_error,
+            "max_speed_over_escape": fastest / escape, "inside_0.95R_over_escape": inside / escape,
+            "max_distension_change": change, "inside_0.95R_distension_change": change_inside,
+            "energy_with_potential_drift": drift / abs(sim.gravity.potential_energy)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON document")
+    parser.add_argument("--cells", type=int, nargs="+", default=[32, 64], help="cells per radius")
+    args = parser.parse_args()
+    result = {f"{name}, r-z {cells}": at_rest(porosity, cells)
+              for name, porosity in POROSITY.items() for cells in args.cells}
+    print(json.dumps(result, indent=1) if args.json else result)
+
+
+if __name__ == "__main__":
+    main()
