@@ -18,6 +18,13 @@ parameter set and resolution (cells per radius):
 - ``max_distension_change``: the largest |alpha - alpha_0| / alpha_0 in those cells at any step,
   and ``inside_0.95R_distension_change`` inside 0.95 R;
 - ``energy_with_potential_drift``: the drift of E_mesh + W over |W| (W = (1/2) sum m Phi).
+
+``cold`` (per parameter set, no run): what the body's centre would need to carry p(0) cold,
+on its compaction curve at e = 0 instead of through thermal pressure at zero strain: the porous
+pressure at the elastic limit, P_s(alpha_0 rho_00 exp(-eps_e), 0) / alpha_0 (Pa), and the strain
+eps_v where P_s(alpha(eps_v) rho_00 exp(-eps_v), 0) / alpha(eps_v) = p(0), with its alpha and the
+relative rise of the bulk density exp(-eps_v) - 1; ``central_energy``, the e (J/kg) of the
+thermal start at the centre, P_s(rho_s0, e) = alpha_0 p(0).
 """
 
 from __future__ import annotations
@@ -26,7 +33,10 @@ import argparse
 import json
 
 import numpy as np
+from scipy.optimize import brentq
 
+from impactpipe.hydro.eos import energy_from_pressure, pack_eos, pressure_sound_speed
+from impactpipe.hydro.eos.porosity import distension_of_strain, pack_porosity
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.impact import lithostatic_pressure
 from impactpipe.hydro.self_gravity import G
@@ -96,6 +106,27 @@ def at_rest(porosity: dict, cells_per_radius: int) -> dict:
             "energy_with_potential_drift": drift / abs(sim.gravity.potential_energy)}
 
 
+def cold(porosity: dict) -> dict:
+    """The body's centre carrying p(0) cold, on its compaction curve (module docstring)."""
+    spec = {**BASALT, "porosity": porosity}
+    eos = pack_eos([spec])
+    row = pack_porosity([spec], eos)[0]
+    rho00 = RHO_SOLID / ALPHA0
+    central = float(lithostatic_pressure(rho00, RADIUS, 0.0))
+
+    def cold_pressure(strain):
+        alpha = distension_of_strain(row, strain)
+        matrix_density = alpha * rho00 * np.exp(-strain)
+        return pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, matrix_density, 0.0)[0] / alpha
+
+    strain = brentq(lambda x: cold_pressure(x) - central, -0.3, porosity["eps_e"])
+    return {"central_pressure": central, "elastic_limit_pressure": cold_pressure(porosity["eps_e"]),
+            "strain": strain, "distension": distension_of_strain(row, strain),
+            "bulk_density_rise": float(np.expm1(-strain)),
+            "central_energy": energy_from_pressure(eos.kind[0], eos.params[0], eos.table, RHO_SOLID,
+                                                   ALPHA0 * central)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON document")
@@ -103,6 +134,7 @@ def main() -> None:
     args = parser.parse_args()
     result = {f"{name}, r-z {cells}": at_rest(porosity, cells)
               for name, porosity in POROSITY.items() for cells in args.cells}
+    result.update({f"{name}, cold": cold(porosity) for name, porosity in POROSITY.items()})
     print(json.dumps(result, indent=1) if args.json else result)
 
 
