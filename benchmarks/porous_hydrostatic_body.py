@@ -8,7 +8,8 @@ one sound-crossing time R / c_s0 (c_s0 = sqrt(A / rho_s0), the matrix's sound sp
 exact solution is its initial state: bulk density rho_s0 / alpha_0, distension alpha_0 and the
 lithostatic pressure p(r) = (2 pi / 3) G rho^2 (R^2 - r^2), the porous pressure
 P_s(alpha_0 rho, e) / alpha_0 of the internal energy e the setup solves for.  Per compaction
-parameter set and resolution (cells per radius):
+parameter set (strengthless, and the `basalt` preset with GEO `weak` strength) and resolution
+(cells per radius):
 
 - ``initial_pressure_error``: the largest |P / alpha_k - p(r)| over the central pressure p(0) in
   the cells holding the body at t = 0 (P the cell pressure, volume-fraction weighted, alpha_k the
@@ -36,11 +37,11 @@ import numpy as np
 from scipy.optimize import brentq
 
 from impactpipe.hydro.eos import energy_from_pressure, pack_eos, pressure_sound_speed
-from impactpipe.hydro.eos.porosity import distension_of_strain, pack_porosity
+from impactpipe.hydro.eos.porosity import distension_of_strain, distension_slot, pack_porosity
 from impactpipe.hydro.problems import PROBLEMS
 from impactpipe.hydro.problems.impact import lithostatic_pressure
 from impactpipe.hydro.self_gravity import G
-from impactpipe.pipeline.presets import resolve_eos, resolve_porosity
+from impactpipe.pipeline.presets import resolve_eos, resolve_porosity, resolve_strength
 
 BASALT = resolve_eos("tillotson", "basalt", {})
 RHO_SOLID = 2700.0
@@ -52,12 +53,20 @@ POROSITY = {
     "basalt preset": resolve_porosity({"preset": "basalt", "alpha0": ALPHA0}),
     "case9_porous": {"alpha0": ALPHA0, "eps_e": -1.0e-5, "kappa": 0.98, "alpha_x": 1.0},
 }
+#: The bodies at rest: each parameter set strengthless, and the `basalt` preset with the GEO
+#: `weak` strength of configs/large_body/porous.yaml.
+BODIES = {
+    **{name: {"porosity": porosity} for name, porosity in POROSITY.items()},
+    "basalt preset, GEO weak": {"porosity": POROSITY["basalt preset"],
+                                "strength": resolve_strength("geo", "weak", {})},
+}
 
 
-def porous_body(porosity: dict, cells_per_radius: int):
-    """The hydrostatic_body Simulation of a porous basalt sphere (module docstring)."""
+def porous_body(material: dict, cells_per_radius: int):
+    """The hydrostatic_body Simulation of a porous basalt sphere (module docstring); ``material``
+    the porous material's ``porosity`` and optional ``strength``."""
     params = {"body": {"material": "porous_basalt", "radius": RADIUS}, "cells_per_radius": cells_per_radius}
-    return PROBLEMS["hydrostatic_body"].setup(params, {"porous_basalt": {"eos": BASALT, "porosity": porosity}})
+    return PROBLEMS["hydrostatic_body"].setup(params, {"porous_basalt": {"eos": BASALT, **material}})
 
 
 def radius_of_cells(mesh) -> np.ndarray:
@@ -76,9 +85,9 @@ def initial_pressure_error(sim) -> float:
     return float(error.max() / lithostatic_pressure(rho, RADIUS, 0.0))
 
 
-def at_rest(porosity: dict, cells_per_radius: int) -> dict:
-    """The measures of the module docstring for one parameter set and resolution."""
-    sim = porous_body(porosity, cells_per_radius)
+def at_rest(material: dict, cells_per_radius: int) -> dict:
+    """The measures of the module docstring for one body of :data:`BODIES` and resolution."""
+    sim = porous_body(material, cells_per_radius)
     pressure_error = initial_pressure_error(sim)
     mesh, state = sim.mesh, sim.state
     rho0 = RHO_SOLID / ALPHA0
@@ -88,13 +97,14 @@ def at_rest(porosity: dict, cells_per_radius: int) -> dict:
     sim.step()
     start = sim.totals()["energy"] + sim.gravity.potential_energy
     fastest = inside = change = change_inside = 0.0
+    slot = distension_slot(state.arhoq.shape[1])
     while sim.time < crossing:
         sim.step()
         rho = mesh.interior(state.arho).sum(axis=1)
         full = rho > 0.5 * rho0
         deep = full & (r < 0.95 * RADIUS)
         speed = np.linalg.norm(mesh.interior(state.momentum), axis=1) / np.where(rho > 0.0, rho, 1.0)
-        distension = mesh.interior(state.arhoq)[:, 0] / np.where(rho > 0.0, rho, 1.0)
+        distension = mesh.interior(state.arhoq)[:, slot] / np.where(rho > 0.0, rho, 1.0)
         fastest = max(fastest, float(speed[full].max()))
         inside = max(inside, float(speed[deep].max()))
         change = max(change, float(np.abs(distension[full] / ALPHA0 - 1.0).max()))
@@ -132,8 +142,8 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.add_argument("--cells", type=int, nargs="+", default=[32, 64], help="cells per radius")
     args = parser.parse_args()
-    result = {f"{name}, r-z {cells}": at_rest(porosity, cells)
-              for name, porosity in POROSITY.items() for cells in args.cells}
+    result = {f"{name}, r-z {cells}": at_rest(material, cells)
+              for name, material in BODIES.items() for cells in args.cells}
     result.update({f"{name}, cold": cold(porosity) for name, porosity in POROSITY.items()})
     print(json.dumps(result, indent=1) if args.json else result)
 
