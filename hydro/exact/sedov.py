@@ -98,17 +98,29 @@ class SedovSolution:
 
 
 def _rhs(log_xi, y, gamma, nu):
-    """d(f, g, h)/d(ln xi) from the linear system of the similarity ODEs."""
+    """d(f, g, h)/d(ln xi) of the similarity ODEs, their linear system solved in closed form.
+
+    With w = f - xi, k = (delta - 1) / delta and delta = 2 / (nu + 2), the system
+
+        g f' + w g' = -(nu - 1) g f / xi,   w f' + h' / g = -k f,   -gamma h w g' / g + w h' = -2 k h
+
+    (primes d/dxi) gives g' = (g r2 - w r1 - r3 / w) / (gamma h / g - w^2), then f' and h'.  Its
+    determinant w (gamma h / g - w^2) vanishes only at w = 0 and at the sonic point; a trial state
+    of the integrator near one gets a large derivative, which its error control rejects, where a
+    general linear solver raised on the singular matrix.
+    """
     f, g, h = y
     xi = math.exp(log_xi)
     delta = 2.0 / (nu + 2.0)
     k = (delta - 1.0) / delta
     w = f - xi
-    matrix = np.array([[g, w, 0.0],
-                       [w, 0.0, 1.0 / g],
-                       [0.0, -gamma * h * w / g, w]])
-    rhs = np.array([-(nu - 1.0) * g * f / xi, -k * f, -2.0 * k * h])
-    return xi * np.linalg.solve(matrix, rhs)
+    r1 = -(nu - 1.0) * g * f / xi
+    r2 = -k * f
+    r3 = -2.0 * k * h
+    dg = (g * r2 - w * r1 - r3 / w) / (gamma * h / g - w * w)
+    df = (r1 - w * dg) / g
+    dh = r3 / w + gamma * h * dg / g
+    return np.array([xi * df, xi * dg, xi * dh])
 
 
 def sedov_solution(gamma, nu):
