@@ -96,6 +96,24 @@ def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbo
                 _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
 
 
+@njit(cache=True, parallel=True)
+def fill_ghosts_from_ranks_where(field, neighbor, neighbor_level, axis, ghost, blocks, lo, hi, wanted, layers):
+    """For the blocks listed in ``blocks`` (int64) with ``wanted[b]`` != 0, the ghost slabs of
+    ``field`` along ``axis`` whose same-level neighbour lies outside ``lo .. hi - 1`` (another
+    MPI rank's block, its strips just received), their ``layers`` layers next to the interior,
+    without sign flips: what :func:`fill_ghosts_where` writes there.  The other slabs are left
+    as they are (filled before the strips arrived,
+    :meth:`impactpipe.hydro.parallel.distributed.BlockRanges.start_field_ghosts`)."""
+    for e in prange(blocks.shape[0]):
+        b = blocks[e]
+        if wanted[b] == 0:
+            continue
+        for side in range(2):
+            nbr = neighbor[b, axis, side]
+            if nbr >= 0 and neighbor_level[b, axis, side] == 0 and not (lo <= nbr < hi):
+                _fill_block_side(field, b, side, nbr, axis, ghost, -1, layers)
+
+
 def every_layer(arhoq: np.ndarray, ghost: int) -> np.ndarray:
     """``q_layers`` of :func:`fill_state_ghost_slabs` that fills every ghost layer of every column of ``arhoq``."""
     return np.full(arhoq.shape[1], ghost, dtype=np.int64)

@@ -171,6 +171,24 @@ def overlap_groups(mesh, cuts: np.ndarray, rank: int) -> list[tuple[np.ndarray, 
     return groups
 
 
+def field_overlap_groups(mesh, cuts: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(inner, edge)``: the blocks of ``rank`` (block numbers, int64) none of whose faces along
+    any used axis has another rank's block beside it (inner), and the rest (edge).
+
+    The stress step's kernels read the ghosts along every axis at once, filled by one ghost fill
+    per axis: while the strips of those fills travel they can advance the inner blocks, the
+    edge blocks after (:meth:`~impactpipe.hydro.strength.model.MaterialStrength.kick`).  On an
+    adaptive mesh every block is an edge block, as in :func:`overlap_groups`."""
+    lo, hi = int(cuts[rank]), int(cuts[rank + 1])
+    owned = np.arange(lo, hi, dtype=np.int64)
+    if mesh.adaptive:
+        return owned[:0], owned
+    used = [axis for axis in range(3) if mesh.ghost[axis] > 0]
+    nbr = mesh.neighbor[lo:hi][:, used, :]
+    remote = ((nbr >= 0) & ((nbr < lo) | (nbr >= hi))).any(axis=(1, 2))
+    return owned[~remote], owned[remote]
+
+
 def _face_strips(mesh, axis: int, owner: np.ndarray) -> dict[tuple[int, int], list[tuple[int, int]]]:
     """(sender, receiver) -> [(block, side)]: the faces along ``axis`` whose neighbour another rank owns."""
     out: dict[tuple[int, int], list[tuple[int, int]]] = {}

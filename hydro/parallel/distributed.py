@@ -30,12 +30,12 @@ import numpy as np
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh.boundary import (
-    every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_where, fill_state_ghost_slabs, fill_state_ghosts,
-    fill_state_ghosts_from_ranks,
+    every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_from_ranks_where, fill_ghosts_where,
+    fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
 
-from .decomposition import (block_costs, block_routes, exchange_routes, neighbourhood_routes, overlap_groups,
-                            owned_ranges, owners, plan_routes)
+from .decomposition import (block_costs, block_routes, exchange_routes, field_overlap_groups, neighbourhood_routes,
+                            overlap_groups, owned_ranges, owners, plan_routes)
 from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips, Traffic,
                        broadcast_arrays, exchange_strips, finish_strips, gather_owned_blocks, gather_rows,
                        post_strips, share_owned_blocks)
@@ -55,6 +55,20 @@ class GhostFill:
     pending: PendingStrips | None = None
 
 
+@dataclass
+class FieldFill:
+    """A ghost fill of the ``components`` of a derived field along ``axis`` in two parts
+    (:meth:`WholeMesh.start_field_ghosts`): of the blocks where ``wanted[b]`` is not 0, their
+    ``layers`` ghost layers next to the interior; ``pending``: the strips still travelling, or
+    None (the fill is complete)."""
+
+    axis: int
+    components: slice
+    wanted: np.ndarray | None
+    layers: int | None
+    pending: PendingStrips | None = None
+
+
 class WholeMesh:
     """One process advances every block; ``traffic`` (:class:`~.exchange.Traffic`) stays zero."""
 
@@ -64,6 +78,7 @@ class WholeMesh:
 
     def __init__(self):
         self.traffic = Traffic()
+        self._field_groups = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
 
     def fill_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> None:
         """Fill the ghosts of every block along ``axis``; ``q_layers``: the ghost layers of each
@@ -89,6 +104,26 @@ class WholeMesh:
         not 0, when given, and of those only the ``layers`` ghost layers next to the interior),
         without sign flips (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`)."""
         fill_field_ghosts(field[:, components], mesh, axis, wanted=wanted, layers=layers)
+
+    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+                           wanted: np.ndarray | None = None, layers: int | None = None) -> FieldFill:
+        """Fill the ghosts of :meth:`fill_field_ghosts` as far as this process can without waiting
+        for another's strips; the blocks ``early`` of :meth:`field_groups` may then be advanced
+        before :meth:`finish_field_ghosts` completes the rest.  One process fills every ghost here."""
+        self.fill_field_ghosts(field, mesh, axis, components, wanted, layers)
+        return FieldFill(axis, components, wanted, layers)
+
+    def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
+        """Complete the ghost fill :meth:`start_field_ghosts` began (nothing left for one process)."""
+
+    def field_groups(self, mesh) -> tuple[np.ndarray, np.ndarray]:
+        """(early, late): the blocks (int64 block numbers) a kernel reading the ghosts along every
+        axis may advance between :meth:`start_field_ghosts` and :meth:`finish_field_ghosts`,
+        and the rest.  One process: none early, every block late (kept until the mesh's block
+        count changes)."""
+        if self._field_groups[1].size != mesh.nblocks:
+            self._field_groups = (np.zeros(0, dtype=np.int64), np.arange(mesh.nblocks, dtype=np.int64))
+        return self._field_groups
 
     def combine_rate(self, rate: float, first_bad: int) -> tuple[float, int]:
         """(largest signal rate (1/s), first block with a non-finite rate or -1) over every process."""
@@ -171,6 +206,9 @@ class BlockRanges(WholeMesh):
         #: Per axis: (inner, edge) owned blocks, by index within ``blocks``
         #: (:func:`~.decomposition.overlap_groups`).
         self.overlap = overlap_groups(mesh, cuts, comm.rank)
+        #: (inner, edge) owned blocks over every axis, by block number
+        #: (:func:`~.decomposition.field_overlap_groups`).
+        self.field_overlap = field_overlap_groups(mesh, cuts, comm.rank)
         #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their routes.
         self._plans: dict[int, dict] = {}
         #: The routes of the face fluxes per (axis, row length), built on first use.
@@ -255,6 +293,42 @@ class BlockRanges(WholeMesh):
             exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, self.traffic,
                             components)
             prolong_field_ghosts(field[:, components], plans["prolong"])
+
+    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+                           wanted: np.ndarray | None = None, layers: int | None = None) -> FieldFill:
+        """Post the strips of the ``components`` of ``field`` along ``axis``
+        (:func:`~.exchange.post_strips`) and fill the ghosts of the owned blocks where
+        ``wanted[b]`` is not 0 (their ``layers`` layers next to the interior) from what this
+        rank holds, then return while the strips travel: the inner blocks of
+        :meth:`field_groups` have their ghosts along ``axis`` complete.  The slabs of the edge
+        blocks that face another rank's block are filled again by :meth:`finish_field_ghosts`.
+        Without ``wanted``, or on an adaptive mesh, the whole fill happens here
+        (:meth:`fill_field_ghosts`)."""
+        g = int(mesh.ghost[axis])
+        if g == 0 or wanted is None or mesh.adaptive:
+            self.fill_field_ghosts(field, mesh, axis, components, wanted, layers)
+            return FieldFill(axis, components, wanted, layers)
+        layers = g if layers is None else layers
+        pending = post_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, components)
+        fill_ghosts_where(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
+                          wanted, layers)
+        return FieldFill(axis, components, wanted, layers, pending)
+
+    def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
+        """Wait for the strips of :meth:`start_field_ghosts` and fill the edge blocks' slabs that
+        face another rank's block (:func:`~impactpipe.hydro.mesh.boundary.fill_ghosts_from_ranks_where`);
+        their other slabs keep what :meth:`start_field_ghosts` gave them."""
+        if fill.pending is None:
+            return
+        finish_strips(fill.pending)
+        fill_ghosts_from_ranks_where(field[:, fill.components], mesh.neighbor, mesh.neighbor_level, fill.axis,
+                                     int(mesh.ghost[fill.axis]), self.field_overlap[1], self.lo, self.hi,
+                                     fill.wanted, fill.layers)
+
+    def field_groups(self, mesh) -> tuple[np.ndarray, np.ndarray]:
+        """(early, late): the owned blocks none of whose faces has another rank's block beside
+        it, and the rest (:func:`~.decomposition.field_overlap_groups`)."""
+        return self.field_overlap
 
     def plans(self, mesh, axis: int) -> dict:
         """This rank's rows of the coarse/fine plans of ``axis`` (destination blocks it owns) and

@@ -75,6 +75,7 @@ from impactpipe.hydro.amr.transfer import allocate_face_flux, prolong_field_ghos
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import fill_ghosts_where
 from impactpipe.hydro.mesh.state import HydroState
+from impactpipe.hydro.parallel.distributed import FieldFill
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
 from impactpipe.hydro.strength.flaws import assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes
@@ -161,6 +162,9 @@ class MaterialStrength:
         #: gravity (m/s^2, (3,)) of the surface-layer pressure of the yield strength; None: none
         self.surface_gravity: np.ndarray | None = None
         self._rho0: tuple[object, np.ndarray] | None = None
+        #: The work ghosts' fills :meth:`load_stress` or :meth:`update` started, which the next
+        #: :meth:`kick` completes (:meth:`_start_work_ghosts`).
+        self._incoming: list[FieldFill] = []
 
     def set_rough_wall(self, axis: int, side: int) -> None:
         """Make the reflecting domain face on ``side`` (0 low, 1 high) of ``axis`` a rough, no-slip wall."""
@@ -262,13 +266,13 @@ class MaterialStrength:
         """Cell velocities, fills and the transported mixture stress S^n (from ``arhoq``) of the
         blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`; or one
         refinement ``level``'s blocks, :class:`LevelBlocks`) into the work arrays, then their
-        ghosts: what the first half kick (:meth:`kick`) uses."""
+        ghosts: what the first half kick (:meth:`kick`) uses.  The ghost fills are only started
+        here (:meth:`_start_work_ghosts`); the kick completes them."""
         lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
                                  self.arrays.model, self.ns, self.work, lo, hi, self.holds, self.has_mass,
                                  None if level is None else level.blocks, self.stressed)
-        for axis in range(self.mesh.ndim):
-            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_S + self.ns), level)
+        self._incoming = self._start_work_ghosts(partition, slice(WK_V, WK_S + self.ns), level)
 
     def load_work(self, state: HydroState, eos, blocks: np.ndarray) -> None:
         """Velocities, fills and mixture stresses of the interior cells of ``blocks`` (int64) into
@@ -283,29 +287,35 @@ class MaterialStrength:
         """Advance the stress of the ``partition``'s blocks (or of the ``level``'s) over ``dt`` (s)
         with the current velocities (the half-step ones after the first kick, into the work
         arrays with their ghosts first): Jaumann update, failure, yield, damage and stress
-        power; the new mixture stress S^(n+1) goes to the work arrays, ghosts included."""
+        power; the new mixture stress S^(n+1) goes to the work arrays, ghosts included (their
+        fill only started, :meth:`_start_work_ghosts`: the second kick completes it).  While the
+        velocities' strips travel, the update runs on the blocks that need none of them
+        (:meth:`_around_ghosts`)."""
         a = self.arrays
         mesh = self.mesh
         lo, hi = self._range(partition)
-        blocks = None if level is None else level.blocks
-        cell_velocities(state.arho, state.momentum, self.work, lo, hi, blocks)
-        for axis in range(mesh.ndim):
-            self._fill_work_ghosts(partition, axis, slice(WK_V, WK_V + 3), level)
-        if self.fracture:
-            update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
-                          mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
-                          self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
-                          self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
-                          self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
-                          stressed_blocks=self.stressed)
-        else:
-            update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
-                          mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
-                          self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength, self.work,
-                          self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
-                          porosity=self.porosity, has_mass=self.has_mass, blocks=blocks, stressed_blocks=self.stressed)
-        for axis in range(mesh.ndim):
-            self._fill_work_ghosts(partition, axis, slice(WK_S, WK_S + self.ns), level)
+        cell_velocities(state.arho, state.momentum, self.work, lo, hi, None if level is None else level.blocks)
+        fills = self._start_work_ghosts(partition, slice(WK_V, WK_V + 3), level)
+
+        def update_blocks(blocks):
+            """The stress update of ``blocks`` (int64; None: the range ``lo .. hi - 1``)."""
+            if self.fracture:
+                update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
+                              mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
+                              self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength,
+                              self.work, self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
+                              self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
+                              stressed_blocks=self.stressed)
+            else:
+                update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
+                              mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
+                              self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength,
+                              self.work, self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
+                              porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
+                              stressed_blocks=self.stressed)
+
+        self._around_ghosts(partition, fills, update_blocks, level)
+        self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
              amounts: np.ndarray, partition, level: LevelBlocks | None = None) -> None:
@@ -321,10 +331,16 @@ class MaterialStrength:
         momentum and energy columns of the used axes, the only ones the kernel writes, are zeroed
         on the level's blocks first (the other columns and the unused axes stay zero from the
         allocation).  The hourglass viscosity is not split by levels.
+
+        The work ghosts' fills that :meth:`load_stress` or :meth:`update` started are completed
+        here: the stress divergence runs on the blocks that need no other rank's strips while
+        they travel, then on the rest (:meth:`_around_ghosts`).
         """
         mesh = self.mesh
         lo, hi = self._range(partition)
+        fills, self._incoming = self._incoming, []
         if level is not None:
+            self._finish_work_ghosts(partition, fills)
             if self.hourglass[0] > 0.0:
                 raise ValueError("the hourglass viscosity does not step per refinement level")
             if mesh.adaptive:
@@ -335,9 +351,14 @@ class MaterialStrength:
                                     self.face_flux, 3 * self.nmat, lo, hi, level.blocks, self.stressed)
             return
         self.face_flux[...] = 0.0
-        apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
-                                mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                self.face_flux, 3 * self.nmat, lo, hi, None, self.stressed)
+
+        def kick_blocks(blocks):
+            """The stress divergence of ``blocks`` (int64; None: the range ``lo .. hi - 1``)."""
+            apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
+                                    mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
+                                    self.face_flux, 3 * self.nmat, lo, hi, blocks, self.stressed)
+
+        self._around_ghosts(partition, fills, kick_blocks)
         if self.hourglass[0] > 0.0:
             apply_hourglass_viscosity(dt, mesh.ndim, self.hourglass[0], self.hourglass[1], state.momentum,
                                       state.energy, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work,
@@ -385,11 +406,46 @@ class MaterialStrength:
             skipped.add(WK_V + 2)
         return 1, frozenset(skipped)
 
-    def _fill_work_ghosts(self, partition, axis: int, slots: slice, level: LevelBlocks | None = None) -> None:
+    def _start_work_ghosts(self, partition, slots: slice, level: LevelBlocks | None = None) -> list[FieldFill]:
+        """Start the ghost fills of the work arrays' ``slots`` along every axis
+        (:meth:`_fill_work_ghosts`); the fills whose strips from other MPI ranks still travel
+        are returned, for :meth:`_finish_work_ghosts` (after :meth:`_around_ghosts` ran the
+        kernels that need none of them)."""
+        fills = []
+        for axis in range(self.mesh.ndim):
+            fills += self._fill_work_ghosts(partition, axis, slots, level)
+        return fills
+
+    def _finish_work_ghosts(self, partition, fills: list[FieldFill]) -> None:
+        """Complete the ghost ``fills`` of :meth:`_start_work_ghosts`: the slabs facing other
+        MPI ranks' blocks from their strips (``partition.finish_field_ghosts``)."""
+        for fill in fills:
+            partition.finish_field_ghosts(fill, self.work, self.mesh)
+
+    def _around_ghosts(self, partition, fills: list[FieldFill], kernel, level: LevelBlocks | None = None) -> None:
+        """Run ``kernel(blocks)`` (a stress-step kernel on the int64 ``blocks``, None for the
+        partition's whole range) on every block the ``partition`` advances (or on the
+        ``level``'s), the ghost ``fills`` completed first where the kernel reads them: the
+        blocks none of whose neighbours another MPI rank owns (``partition.field_groups``)
+        run while the strips travel, the others after :meth:`_finish_work_ghosts`.  Every
+        block runs the same arithmetic either way, and each writes only its own cells and
+        counters, so the answer does not depend on the split."""
+        early, late = partition.field_groups(self.mesh)
+        if level is not None or early.size == 0:
+            self._finish_work_ghosts(partition, fills)
+            kernel(None if level is None else level.blocks)
+            return
+        kernel(early)
+        self._finish_work_ghosts(partition, fills)
+        kernel(late)
+
+    def _fill_work_ghosts(self, partition, axis: int, slots: slice, level: LevelBlocks | None = None
+                          ) -> list[FieldFill]:
         """Ghosts of the work arrays' ``slots`` along ``axis`` that some kernel reads
         (:meth:`_ghost_reads`): copies of the neighbours' cells (coarse/fine faces: restriction
         and copies; neighbours of another MPI rank: received strips;
-        ``partition.fill_field_ghosts``), then the wall sign flips.  A copied velocity or fill
+        ``partition.start_field_ghosts``, whose unfinished fills are returned: they complete
+        the slabs facing other ranks' blocks), then the wall sign flips.  A copied velocity or fill
         equals the one computed from copied conserved ghosts, so the work arrays never need the
         state's ghosts.  On a uniform mesh only the blocks holding material get ghosts
         (:attr:`holds`), and of those only the layers the kernels read: the stress step reads
@@ -407,18 +463,21 @@ class MaterialStrength:
         if self.mesh.adaptive and not by_level:
             layers = GHOST
         wanted = level.mask & self.holds if by_level else None
+        fills = []
         start = slots.start
         for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
             if stop > start:
                 if by_level:
                     _fill_level_work_ghosts(self.work[:, start:stop], self.mesh, axis, level, wanted, layers)
                 else:
-                    partition.fill_field_ghosts(self.work, self.mesh, axis, slice(start, stop), self.holds, layers)
+                    fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, slice(start, stop),
+                                                              self.holds, layers))
                 for side in (0, 1):
                     flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
                     self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if start <= c < stop], layers,
                                            level.walls[axis, side] if by_level else None)
             start = stop + 1
+        return fills
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
                           blocks: np.ndarray | None = None) -> None:
