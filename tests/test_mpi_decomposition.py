@@ -13,6 +13,7 @@ from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.decomposition import (
     TRACER_REACH,
     exchange_routes,
+    field_overlap_groups,
     neighbourhood_routes,
     owned_ranges,
     owners,
@@ -74,6 +75,24 @@ def test_the_exchange_plan_delivers_every_ghost_source_from_another_rank():
                 assert np.array_equal(route.send.blocks, back.receive.blocks)
                 assert np.array_equal(route.send.cells, back.receive.cells)
     assert plans[0][2] == []
+
+
+def test_the_stress_step_s_inner_blocks_have_no_face_towards_another_rank_on_any_axis():
+    """2d-planar, 8 x 6 blocks, periodic along x, on 3 ranks: a rank's inner blocks (the stress
+    step's kernels run on them while the strips travel) are exactly its blocks none of whose
+    neighbours along x or y another rank owns; with the edge blocks they are its range, in order."""
+    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 0.75], [32, 24], [("periodic", "periodic"),
+                                                                           ("outflow", "reflecting")], 4, 1)
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    owner = owners(cuts)
+    for rank in range(3):
+        inner, edge = field_overlap_groups(mesh, cuts, rank)
+        assert np.array_equal(np.sort(np.concatenate([inner, edge])), np.arange(cuts[rank], cuts[rank + 1]))
+        assert (np.diff(inner) > 0).all() and (np.diff(edge) > 0).all()
+        for b in range(cuts[rank], cuts[rank + 1]):
+            foreign = [int(n) for n in mesh.neighbor[b, :2].ravel() if n >= 0 and owner[n] != rank]
+            assert (b in edge) == bool(foreign)
+    assert sum(field_overlap_groups(mesh, cuts, rank)[0].size for rank in range(3)) > 0
 
 
 @pytest.mark.parametrize("geometry", ["2d-planar", "3d"])

@@ -19,8 +19,11 @@ momentum sources with a kick - update - kick splitting (velocity Verlet; docs/st
 The work arrays' ghosts are filled after each of steps 1 to 3, for the slots that step wrote
 and a kernel reads in a ghost, one layer deep unless the hourglass viscosity reads two
 (:meth:`MaterialStrength._ghost_reads`; reflecting walls mirror them: the normal velocity and
-the shear components with one index normal to the wall change sign).  The state's ghosts are
-not used.  Updating the stress between two
+the shear components with one index normal to the wall change sign).  Across MPI ranks on a
+uniform mesh a fill only starts there: the next kernel (the kick's stress divergence, or the
+stress update) runs on the blocks with no face towards another rank's block while the strips
+travel, and on the others once they have arrived (:meth:`MaterialStrength._around_ghosts`).
+The state's ghosts are not used.  Updating the stress between two
 half kicks is neutral for elastic waves up to the CFL limit; updating it before one full kick
 (the scheme this replaced) amplified them by 2 % per step at cfl 0.4 (docs/strength.md).
 
