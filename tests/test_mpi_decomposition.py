@@ -8,6 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
+from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.regrid import plan_leaves, remesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.decomposition import (
@@ -15,6 +16,7 @@ from impactpipe.hydro.parallel.decomposition import (
     exchange_routes,
     field_overlap_groups,
     neighbourhood_routes,
+    overlap_groups,
     owned_ranges,
     owners,
     touching_blocks,
@@ -93,6 +95,31 @@ def test_the_stress_step_s_inner_blocks_have_no_face_towards_another_rank_on_any
             foreign = [int(n) for n in mesh.neighbor[b, :2].ravel() if n >= 0 and owner[n] != rank]
             assert (b in edge) == bool(foreign)
     assert sum(field_overlap_groups(mesh, cuts, rank)[0].size for rank in range(3)) > 0
+
+
+def test_on_an_adaptive_mesh_the_blocks_of_the_coarse_fine_plans_are_swept_after_the_strips():
+    """2d-planar, two levels around one corner block, on 3 ranks: a rank's edge blocks along an
+    axis are those with a neighbour of another rank along it and those a row of the axis's
+    restriction or prolongation writes or reads (their ghosts are completed after the wait);
+    some blocks are inner."""
+    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 1.0], [32, 32], [("outflow", "outflow")] * 2, 4, 3)
+    for _ in range(2):
+        refine = np.zeros(mesh.nblocks, dtype=bool)
+        refine[np.argmin(mesh.block_lo[:, :2].sum(axis=1))] = True
+        mesh, _ = remesh(mesh, HydroState.empty(mesh, 1), plan_leaves(mesh, refine, np.zeros_like(refine)))
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    owner = owners(cuts)
+    for axis in range(2):
+        plans = axis_plans(mesh, axis)
+        touched = set(np.concatenate([plans[name][:, column] for name in ("restrict", "prolong")
+                                      for column in (0, 4)]).tolist())
+        for rank in range(3):
+            inner, edge = overlap_groups(mesh, cuts, rank)[axis]
+            for b in range(cuts[rank], cuts[rank + 1]):
+                foreign = any(n >= 0 and owner[n] != rank for n in mesh.neighbor[b, axis])
+                assert (b - cuts[rank] in edge) == (foreign or b in touched)
+            assert inner.size + edge.size == cuts[rank + 1] - cuts[rank]
+        assert touched and sum(overlap_groups(mesh, cuts, rank)[axis][0].size for rank in range(3)) > 0
 
 
 @pytest.mark.parametrize("geometry", ["2d-planar", "3d"])

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 #: Cells beyond a block's faces, edges and corners that the stencil of a tracer in the block reads.
@@ -155,20 +156,35 @@ def overlap_groups(mesh, cuts: np.ndarray, rank: int) -> list[tuple[np.ndarray, 
 
     While the strips of a ghost fill travel, the sweep can advance the inner blocks; the edge
     blocks wait for them (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.start_ghosts`).
-    On an adaptive mesh every block is an edge block: a coarse/fine ghost is restricted or
-    prolonged from cells that other ranks' strips bring, through plans that cross blocks.
+    On an adaptive mesh the blocks that a row of the axis's coarse/fine plans writes or reads
+    (:func:`impactpipe.hydro.amr.plans.axis_plans`: the restriction's coarse and fine blocks, the
+    prolongation's fine and coarse blocks) are edge blocks too: their ghosts are completed after
+    the strips arrive, from cells that must not have been swept yet.
     """
     lo, hi = int(cuts[rank]), int(cuts[rank + 1])
     local = np.arange(hi - lo, dtype=np.int64)
     groups = []
     for axis in range(3):
-        if mesh.adaptive or mesh.ghost[axis] == 0:
+        if mesh.ghost[axis] == 0:
             groups.append((local[:0], local))
             continue
         nbr = mesh.neighbor[lo:hi, axis, :]
         remote = ((nbr >= 0) & ((nbr < lo) | (nbr >= hi))).any(axis=1)
+        if mesh.adaptive:
+            remote |= _in_level_plans(axis_plans(mesh, axis), lo, hi)
         groups.append((local[~remote], local[remote]))
     return groups
+
+
+def _in_level_plans(plans: dict, lo: int, hi: int) -> np.ndarray:
+    """(hi - lo,) bool: whether block lo + i is the destination or the source block of a row of
+    the coarse/fine ``plans``' restriction or prolongation (columns 0 and 4)."""
+    touched = np.zeros(hi - lo, dtype=bool)
+    for name in ("restrict", "prolong"):
+        for block in (plans[name][:, 0], plans[name][:, 4]):
+            mine = block[(block >= lo) & (block < hi)]
+            touched[mine - lo] = True
+    return touched
 
 
 def field_overlap_groups(mesh, cuts: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray]:
@@ -178,7 +194,8 @@ def field_overlap_groups(mesh, cuts: np.ndarray, rank: int) -> tuple[np.ndarray,
     The stress step's kernels read the ghosts along every axis at once, filled by one ghost fill
     per axis: while the strips of those fills travel they can advance the inner blocks, the
     edge blocks after (:meth:`~impactpipe.hydro.strength.model.MaterialStrength.kick`).  On an
-    adaptive mesh every block is an edge block, as in :func:`overlap_groups`."""
+    adaptive mesh every block is an edge block (its work arrays' coarse/fine ghosts are filled
+    before the kernels)."""
     lo, hi = int(cuts[rank]), int(cuts[rank + 1])
     owned = np.arange(lo, hi, dtype=np.int64)
     if mesh.adaptive:

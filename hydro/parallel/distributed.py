@@ -53,6 +53,8 @@ class GhostFill:
     early: np.ndarray
     late: np.ndarray
     pending: PendingStrips | None = None
+    #: On an adaptive mesh: the fine cells of other ranks' blocks that the restriction reads, still travelling.
+    restricting: PendingStrips | None = None
 
 
 @dataclass
@@ -226,15 +228,11 @@ class BlockRanges(WholeMesh):
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
         if mesh.adaptive:
-            plans = self.plans(mesh, axis)
-            exchange_strips(self.comm, plans["restrict_routes"], fields, RESTRICT_TAG + axis, self.traffic)
+            exchange_strips(self.comm, self.plans(mesh, axis)["restrict_routes"], fields, RESTRICT_TAG + axis,
+                            self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
         if mesh.adaptive:
-            for arr in fields:
-                restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
-            exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis, self.traffic)
-            prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
-                                 mesh.ndim)
+            self._fill_level_ghosts(fields, mesh, axis)
 
     def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> GhostFill:
         """Post the strips along ``axis`` (:func:`~.exchange.post_strips`) and fill every owned
@@ -242,32 +240,53 @@ class BlockRanges(WholeMesh):
         fill's ``early`` blocks (the inner blocks of :func:`~.decomposition.overlap_groups`,
         whose ghosts along ``axis`` are now complete) can be swept meanwhile.  The slabs of the
         ``late`` blocks that face another rank's block are filled again by
-        :meth:`finish_ghosts` (every layer).  On an adaptive mesh the whole fill happens here
-        (:meth:`fill_ghosts`) and every block is late.  ``q_layers`` as in :meth:`fill_ghosts`."""
+        :meth:`finish_ghosts` (every layer).  On an adaptive mesh the fine cells that the
+        restriction reads from other ranks' blocks are posted too, every layer is filled, and
+        the coarse/fine ghosts are left to :meth:`finish_ghosts`.  ``q_layers`` as in
+        :meth:`fill_ghosts`."""
         inner, edge = self.overlap[axis]
         g = int(mesh.ghost[axis])
-        if mesh.adaptive or g == 0:
-            self.fill_ghosts(state, mesh, axis)
+        if g == 0:
             return GhostFill(inner, edge)
-        if q_layers is None:
+        if q_layers is None or mesh.adaptive:
             q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         pending = post_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
+        restricting = None
+        if mesh.adaptive:
+            restricting = post_strips(self.comm, self.plans(mesh, axis)["restrict_routes"], fields,
+                                      RESTRICT_TAG + axis, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
-        return GhostFill(inner, edge, pending)
+        return GhostFill(inner, edge, pending, restricting)
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
         """Wait for the strips of :meth:`start_ghosts` and fill the edge blocks' slabs that face
         another rank's block (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts_from_ranks`);
         their other slabs keep what :meth:`start_ghosts` gave them, from the blocks as they were
-        before the early sweep."""
+        before the early sweep.  On an adaptive mesh the coarse/fine ghosts follow, as in
+        :meth:`fill_ghosts`: the restriction, the exchange of the coarse cells the prolongation
+        reads, the prolongation; every block they read or write is late."""
         if fill.pending is None:
             return
         finish_strips(fill.pending)
+        if fill.restricting is not None:
+            finish_strips(fill.restricting)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         g = int(mesh.ghost[axis])
         fill_state_ghosts_from_ranks(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, fill.late + self.lo,
                                      self.lo, self.hi, every_layer(state.arhoq, g))
+        if mesh.adaptive:
+            self._fill_level_ghosts(fields, mesh, axis)
+
+    def _fill_level_ghosts(self, fields: tuple, mesh, axis: int) -> None:
+        """The coarse/fine ghosts of the state's ``fields`` along ``axis`` after the same-level
+        ones: restriction of this rank's rows, the coarse cells of other ranks that the
+        prolongation reads (received), the prolongation of this rank's rows."""
+        plans = self.plans(mesh, axis)
+        for arr in fields:
+            restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
+        exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis, self.traffic)
+        prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
                           wanted: np.ndarray | None = None, layers: int | None = None) -> None:
