@@ -14,6 +14,7 @@ import numpy as np
 from scipy.constants import G
 
 from impactpipe.hydro.eos import pack_eos, pressure_sound_speed, reference_density
+from impactpipe.hydro.eos.porosity import initial_distension
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.problems.common import root_cell_multiple
@@ -40,7 +41,7 @@ def reference_state(material: dict[str, Any]) -> tuple[float, float]:
     arrays = pack_eos([material["eos"]])
     rho0 = reference_density(arrays.kind[0], arrays.params[0], arrays.table)
     _, c2, _ = pressure_sound_speed(arrays.kind[0], arrays.params[0], arrays.table, rho0, 0.0)
-    return float(rho0) / distension(material), float(math.sqrt(c2))
+    return float(rho0) / initial_distension(material), float(math.sqrt(c2))
 
 
 def porosity_choice(materials: dict[str, dict[str, Any]]) -> tuple[bool, str]:
@@ -83,11 +84,6 @@ def central_pressure(rho: float, radius: float) -> float:
     P_c = (2 pi / 3) G rho^2 R^2 (:func:`impactpipe.hydro.problems.impact.lithostatic_pressure` at r = 0).
     """
     return float(impact.lithostatic_pressure(rho, radius, 0.0))
-
-
-def distension(material: dict[str, Any]) -> float:
-    """Initial distension alpha0 (-) of a resolved material, 1 without a ``porosity`` block."""
-    return float((material.get("porosity") or {}).get("alpha0", 1.0))
 
 
 def hydrostatic_initial_state(rho: float, radius: float, alpha0: float) -> str:
@@ -149,7 +145,7 @@ def derive(config: Config) -> dict[str, Any]:
     else:
         out["end_time"] = config.hydro.end_time
         out["end_time_rule"] = "set in the config"
-    alpha_t = distension(materials[scene.target.material])
+    alpha_t = initial_distension(materials[scene.target.material])
     out["self_gravity"], out["self_gravity_rule"] = self_gravity_choice(
         config.hydro.self_gravity, rho_t, scene.target.radius, materials[scene.target.material]["strength"],
         c_t, out["end_time"], alpha_t)
