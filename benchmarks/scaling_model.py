@@ -22,9 +22,13 @@ The model follows what the code does in this version (:mod:`impactpipe.hydro.par
   material: 0 without strength, NS + 2 with it, NS = 4 stress components in 2D and 6 in
   3D).  With strength the step fills the work arrays' ghosts three more times per axis
   (:mod:`impactpipe.hydro.strength.model`): after loading the stress, the velocities, fill
-  and stress (c = 4 + NS); after the half kick, the velocities (c = 3); after the stress
-  update, the stress (c = NS) (:func:`exchange_components`).  The exchanges are blocking:
-  nothing overlaps them.
+  and stress; after the half kick, the velocities; after the stress update, the stress;
+  each without the slots no kernel reads in a ghost (in 2D S_zz, in r-z v_theta too), one
+  message per run of consecutive slots (:func:`exchange_components`: in r-z runs of 2, 3
+  and 1, then 2, then 2 and 1 slots; in 3D 10, 3 and 6).  The code overlaps the
+  exchanges of a uniform mesh with the kernels of the blocks that need no other rank's
+  strips; the model gives the step with the exchanges blocking and the bound an overlap
+  can reach (below).
 * Reductions.  One allreduce for the time step, one per sweep for the failure check, and
   with strength one for the non-finite momentum check: R = 1 + d (+ 1) per step, each
   alpha ceil(log2 P) s.
@@ -38,17 +42,18 @@ Time of one step on P ranks (s), the slowest rank setting each phase:
 
     t_compute  = max_r W_r n_b c_cell
     t_exchange = sum over fills k and axes d of
-                 max_r [ m_rd alpha + 2 f_rd s_kd c_pack + f_on_rd s_kd / beta_shm ]
+                 max_r [ m_rd (alpha + c_msg) + 2 f_rd s_kd c_pack + f_on_rd s_kd / beta_shm ]
                  + max_n f_off_nd s_kd / beta_link
     t_reduce   = R alpha ceil(log2 P)
 
 with f_rd the rank's block faces along d whose neighbour another rank owns (f_on_rd of them
 to ranks on its own node, f_off_nd the faces of node n's ranks to other nodes), m_rd its
 peers along d, c_cell (s) the measured compute cost of a cell-update on one core, c_pack
-(s/B) the measured cost of packing and unpacking a byte of strips, alpha (s) the latency,
+(s/B) the measured cost of packing and unpacking a byte of strips, c_msg (s) the measured
+fixed cost of one message (posting, the packing call, the unpacking of the reply), alpha (s) the latency,
 beta_shm (B/s) the on-node bandwidth of one rank and beta_link (B/s) the bandwidth of one
 node's link, which all the node's off-node strips share.  The latency and transfer terms (not
-c_pack) are what overlapping the exchange with the interior's sweep could hide:
+c_pack and c_msg) are what overlapping the exchange with the interior's sweep could hide:
 t_step = t_compute + t_exchange + t_reduce without overlap (the code),
 max(t_compute, t_network) + t_pack + t_reduce with it (a projection).  A run of n steps
 and n_snap snapshots takes
@@ -67,7 +72,7 @@ each regrid), rank 0 writing the snapshots, the cost estimate's error in the cut
 impact's blocks, and memory: every rank holds the whole state.
 
     python benchmarks/scaling_model.py --measured ONE.json TWO.json ONE_8.json TWO_8.json \\
-        --steps STEPS_8C.json STEPS_OBLIQUE.json --json
+        --steps STEPS_8C.json STEPS_OBLIQUE.json --json [--runs case8c-160 oblique45-20]
 
 (JSON documents of benchmarks/mpi_scaling.py on 1 and 2 ranks, and of
 benchmarks/handoff_steps.py; docs/performance.md, "Several MPI ranks".)
@@ -87,6 +92,7 @@ from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.parallel.decomposition import owned_ranges, owners
 from impactpipe.hydro.problems.common import adaptive_mesh
 from impactpipe.hydro.solver import LOG_INTERVAL
+from impactpipe.hydro.strength.model import slot_runs, work_ghost_reads
 from impactpipe.hydro.strength.update import WK_S, WK_V, stress_slots
 
 #: Bytes of one exchanged value (float64).
@@ -107,6 +113,9 @@ IMPACT_MATERIALS = 2
 #: Geometry of the mesh that stands for a measured case's in :func:`check_measured` (the neighbour
 #: table, all the check needs, depends on the block counts and the periodic axes only).
 CHECK_GEOMETRY = {2: "2d-planar", 3: "3d"}
+#: The measured cases in r-z, whose work-array fills leave out v_theta (:func:`exchange_components`).
+CASE_GEOMETRY = {"2d-cyl-tillotson": "2d-cylindrical", "2d-cyl-strength": "2d-cylindrical",
+                 "2d-cyl-fracture": "2d-cylindrical"}
 
 
 @dataclass(frozen=True)
@@ -124,10 +133,13 @@ class Interconnect:
 @dataclass(frozen=True)
 class Costs:
     """Measured on one core: ``cell_update_s`` c_cell (s per cell-update), ``pack_s_per_byte``
-    c_pack (s per byte sent or received), ``snapshot_s_per_cell`` c_snap (s per cell)."""
+    c_pack (s per byte sent or received), ``message_s`` c_msg (s per message sent, with the
+    unpacking of the one received from the same peer: the fixed cost of a strip message),
+    ``snapshot_s_per_cell`` c_snap (s per cell)."""
 
     cell_update_s: float
     pack_s_per_byte: float
+    message_s: float
     snapshot_s_per_cell: float
 
 
@@ -147,15 +159,21 @@ def padded_state_bytes(mesh: BlockMesh, components: int) -> int:
     return WORD * components * mesh.nblocks * int(np.prod(mesh.padded_shape))
 
 
-def exchange_components(ndim: int, nmat: int, strength: bool) -> list[int]:
-    """Float64 components per cell of each ghost fill along one axis in one step: the state
-    (3M + 4 + M NQ, NQ = NS + 2 with strength) and, with strength, the three fills of the work
-    arrays (:mod:`impactpipe.hydro.strength.model`): velocities, fill and stress
-    (slots WK_V .. WK_S + NS - 1, 4 + NS), velocities (3), stress (NS)."""
+def exchange_components(ndim: int, geometry_code: int, nmat: int, strength: bool) -> list[int]:
+    """Float64 components per cell of each message of one step's ghost fills along one axis (per
+    peer rank): the state's (3M + 4 + M NQ, NQ = NS + 2 with strength) and, with strength, the
+    three fills of the work arrays (:mod:`impactpipe.hydro.strength.model`): velocities, fill and
+    stress (slots WK_V .. WK_S + NS - 1), velocities (WK_V .. WK_V + 2) and stress (WK_S ..
+    WK_S + NS - 1), each without the slots no kernel reads in a ghost and sent as one message
+    per run of consecutive slots (:func:`~impactpipe.hydro.strength.model.work_ghost_reads`,
+    :func:`~impactpipe.hydro.strength.model.slot_runs`)."""
     if not strength:
         return [3 * nmat + 4]
     ns = stress_slots(ndim)
-    return [3 * nmat + 4 + nmat * (ns + 2), WK_S + ns - WK_V, 3, ns]
+    _, skipped = work_ghost_reads(ndim, geometry_code, False)
+    fills = (slice(WK_V, WK_S + ns), slice(WK_V, WK_V + 3), slice(WK_S, WK_S + ns))
+    return [3 * nmat + 4 + nmat * (ns + 2)] + [run.stop - run.start for fill in fills
+                                               for run in slot_runs(fill, skipped)]
 
 
 def reductions_per_step(ndim: int, strength: bool) -> int:
@@ -215,7 +233,7 @@ def step_time(mesh: BlockMesh, components: list[int], reductions: int, costs: Co
         for axis, faces in enumerate(face_counts(mesh, cuts, net.ranks_per_node)):
             for c in components:
                 strip = WORD * strip_values(mesh, axis, c)
-                packing = 2 * faces["faces"] * strip * costs.pack_s_per_byte
+                packing = 2 * faces["faces"] * strip * costs.pack_s_per_byte + faces["peers"] * costs.message_s
                 moving = faces["peers"] * net.latency_s + faces["on_node"] * strip / net.shm_bytes_per_s
                 slowest = int(np.argmax(packing + moving))
                 pack += packing[slowest]
@@ -310,8 +328,9 @@ def run_mesh(config_path: Path, overrides: dict) -> tuple[BlockMesh, dict]:
 
 
 def costs_from(measured: list[dict], case: str, block_cells: int) -> Costs:
-    """c_cell and c_snap from the one-rank measurements of ``case`` on ``block_cells`` blocks,
-    c_pack from its two-rank ones: the medians over the documents (and ranks)."""
+    """c_cell and c_snap from the one-rank measurements of ``case`` on ``block_cells`` blocks (the
+    medians over the documents), c_pack and c_msg from every two-rank measurement of the
+    documents (:func:`exchange_costs`)."""
 
     def results(ranks: int) -> list[dict]:
         return [r for document in measured if document["ranks"] == ranks for r in document["results"]
@@ -320,20 +339,36 @@ def costs_from(measured: list[dict], case: str, block_cells: int) -> Costs:
     one, two = results(1), results(2)
     if not one or not two:
         raise ValueError(f"{case} on {block_cells}-cell blocks needs one-rank and two-rank measurements")
-    pack = [(rank["exchange_s"] - rank["wait_s"]) / (rank["bytes_sent"] + rank["bytes_received"])
-            for r in two for rank in r["ranks"]]
-    return Costs(float(np.median([r["ranks"][0]["compute_s_per_cell_update"] for r in one])), float(np.median(pack)),
+    pack, message = exchange_costs(measured)
+    return Costs(float(np.median([r["ranks"][0]["compute_s_per_cell_update"] for r in one])), pack, message,
                  float(np.median([r["ranks"][0]["snapshot_s"] / r["cells"] for r in one])))
 
 
+def exchange_costs(measured: list[dict]) -> tuple[float, float]:
+    """(c_pack, c_msg): the least-squares fit of every rank's exchange time less its waits per
+    step, exchange - Waitall = c_msg messages + c_pack bytes (sent and received), over the
+    two-rank results of every case in ``measured``.  The cases must differ in bytes per message
+    (the 3D box's few large strips and the 2D impact's many small ones) for both to be found."""
+    rows = [(rank["messages_sent"], rank["bytes_sent"] + rank["bytes_received"], rank["exchange_s"] - rank["wait_s"])
+            for document in measured if document["ranks"] == 2 for r in document["results"] if "skipped" not in r
+            for rank in r["ranks"]]
+    a = np.array([[messages, nbytes] for messages, nbytes, _ in rows], dtype=float)
+    if np.linalg.matrix_rank(a) < 2:
+        raise ValueError("c_pack and c_msg need two-rank measurements of cases with different bytes per message")
+    (message, pack), *_ = np.linalg.lstsq(a, np.array([t for *_, t in rows]), rcond=None)
+    return float(pack), float(message)
+
+
 def project(measured: list[dict], steps: dict[str, dict], net: Interconnect) -> dict:
-    """Strong and weak scaling of every run of RUNS at RANKS (weak: N / P of the run at 256 ranks)."""
+    """Strong and weak scaling of the runs of RUNS named in ``steps`` at RANKS (weak: N / P of
+    the run at 256 ranks)."""
     out = {}
-    for name, (config_path, overrides, case) in RUNS.items():
+    for name in steps:
+        config_path, overrides, case = RUNS[name]
         mesh, values = run_mesh(config_path, overrides)
         n = overrides["hydro.cells_per_projectile_radius"]
         strength = values["strength_on"]
-        components = exchange_components(mesh.ndim, IMPACT_MATERIALS, strength)
+        components = exchange_components(mesh.ndim, mesh.geometry_code, IMPACT_MATERIALS, strength)
         reductions = reductions_per_step(mesh.ndim, strength)
         costs = costs_from(measured, case, mesh.block_cells)
         rows = {"strong": [], "weak": []}
@@ -365,10 +400,12 @@ def check_measured(measured: list[dict]) -> list[dict]:
             ndim = len(r["blocks_per_axis"])
             cells = [n * r["block_cells"] for n in r["blocks_per_axis"]]
             boundaries = [("periodic",) * 2 if periodic else ("outflow",) * 2 for periodic in r["periodic"]]
-            mesh = BlockMesh.uniform(CHECK_GEOMETRY[ndim], [0.0] * ndim, [1.0] * ndim, cells, boundaries,
-                                     r["block_cells"])
+            geometry = CASE_GEOMETRY.get(r["case"], CHECK_GEOMETRY[ndim])
+            if geometry == "2d-cylindrical":
+                boundaries[0] = ("reflecting", "outflow")
+            mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [1.0] * ndim, cells, boundaries, r["block_cells"])
             cuts = np.concatenate([[0], np.cumsum([rank["blocks"] for rank in r["ranks"]])])
-            components = exchange_components(ndim, r["materials"], r["strength"])
+            components = exchange_components(ndim, mesh.geometry_code, r["materials"], r["strength"])
             faces = face_counts(mesh, cuts, len(cuts))
             model = sum(WORD * strip_values(mesh, axis, c) * f["faces"]
                         for axis, f in enumerate(faces) for c in components)
@@ -386,15 +423,19 @@ def check_measured(measured: list[dict]) -> list[dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--measured", nargs="+", required=True, help="benchmarks/mpi_scaling.py --json documents")
-    parser.add_argument("--steps", nargs=2, required=True, metavar=("CASE8C", "OBLIQUE45"),
-                        help="benchmarks/handoff_steps.py --json documents of the two configs")
+    parser.add_argument("--steps", nargs="+", required=True, metavar="STEPS",
+                        help="benchmarks/handoff_steps.py --json documents of the runs, in the order of --runs")
+    parser.add_argument("--runs", nargs="+", choices=list(RUNS), default=list(RUNS),
+                        help=f"the runs to project (default: {' '.join(RUNS)})")
     parser.add_argument("--latency", type=float, default=1.5e-6, help="alpha (s), default 1.5e-6")
     parser.add_argument("--link-bandwidth", type=float, default=12.5e9, help="beta_link (B/s), default 12.5e9")
     parser.add_argument("--ranks-per-node", type=int, default=64, help="default 64")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     args = parser.parse_args()
     measured = [json.loads(Path(path).read_text()) for path in args.measured]
-    steps = dict(zip(RUNS, (json.loads(Path(path).read_text()) for path in args.steps)))
+    if len(args.steps) != len(args.runs):
+        raise SystemExit(f"--steps needs one document per run of --runs ({len(args.runs)})")
+    steps = dict(zip(args.runs, (json.loads(Path(path).read_text()) for path in args.steps)))
     links = [d["pingpong"] for d in measured if d.get("pingpong")]
     if not links:
         raise SystemExit("no two-rank measurement with a ping-pong (the on-node bandwidth)")

@@ -1,7 +1,7 @@
 """The hydro stage shared between 2, 3 and 4 MPI ranks (oversubscribed) gives the single-process
 answer bit for bit, on uniform and adaptive meshes, in r-z and in 3d, with and without
 strength and tracers, with external gravity (the column collapse), and with a porous target with
-strength:
+strength and self-gravity:
 every dataset of hydro.h5 (the snapshots, the tracers and their history),
 the hydro budget, the stage's counters and the summary's tracer counts; tracers that move into
 another rank's blocks keep their records; a run checkpointed on 2 ranks resumes on 3 or on
@@ -233,8 +233,9 @@ def test_the_tracer_scene_samples_tracers_and_records_their_peaks(serial):
 
 
 def test_a_porous_run_with_strength_on_two_ranks_gives_the_single_process_answer_bit_for_bit(tmp_path):
-    """A porous target with strength and chi (the distension transported, compacted and exchanged with the
-    strength scalars between ranks): the hydro stage on two ranks gives the single-process answer bit for bit."""
+    """A porous target with strength, chi and self-gravity (the distension transported, compacted and exchanged
+    with the strength scalars between ranks; the lithostatic start and the potential's moments summed over the
+    ranks): the hydro stage on two ranks gives the single-process answer bit for bit."""
     config = CONFIGS / "impact_porous.yaml"
     result = impactpipe_run(config, tmp_path / "serial")
     assert result.returncode == 0, result.stderr

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impactpipe.hydro.mesh.blocks import GHOST, BlockMesh
+from impactpipe.hydro.mesh.blocks import GEOMETRY_CODES, GHOST, BlockMesh
 from impactpipe.hydro.parallel.decomposition import exchange_routes
+from impactpipe.hydro.strength.model import slot_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("scaling_model", ROOT / "benchmarks" / "scaling_model.py")
@@ -18,7 +19,7 @@ sm = importlib.util.module_from_spec(_spec)
 sys.modules["scaling_model"] = sm  # dataclasses look their module up
 _spec.loader.exec_module(sm)
 
-COSTS = sm.Costs(cell_update_s=4e-7, pack_s_per_byte=1e-10, snapshot_s_per_cell=5e-8)
+COSTS = sm.Costs(cell_update_s=4e-7, pack_s_per_byte=1e-10, message_s=2e-5, snapshot_s_per_cell=5e-8)
 NET = sm.Interconnect(latency_s=1.5e-6, link_bytes_per_s=12.5e9, ranks_per_node=4, shm_bytes_per_s=5e9)
 
 
@@ -166,12 +167,46 @@ def test_load_imbalance_follows_whole_blocks():
     assert row["step_terms_s"]["compute"] == pytest.approx(2 * 16 ** 2 * 4e-7)
 
 
-def test_exchange_components_count_the_state_and_the_three_strength_fills():
-    """State 3M + 4 + M (NS + 2); the work arrays' velocities + fill + stress (4 + NS), the
-    velocities (3), the stress (NS): 22 + 8 + 3 + 4 = 37 values per strip cell in 2D."""
-    assert sm.exchange_components(3, 2, strength=False) == [10]
-    assert sm.exchange_components(2, 2, strength=True) == [3 * 2 + 4 + 2 * 6, 4 + 4, 3, 4]
-    assert sm.exchange_components(3, 2, strength=True) == [3 * 2 + 4 + 2 * 8, 4 + 6, 3, 6]
+def test_exchange_components_count_the_state_and_the_runs_of_the_three_strength_fills():
+    """State 3M + 4 + M (NS + 2) = 22 values per strip cell in 2D; the work arrays' fills of
+    velocities + fill + stress, velocities, stress, one message per run of the slots a kernel
+    reads in a ghost: in r-z without v_theta and S_zz (2, 3, 1; 2; 2, 1), in plane 2D without
+    S_zz (6, 1; 3; 2, 1), in 3D every slot (10; 3; 6)."""
+    rz, planar, cube = GEOMETRY_CODES["2d-cylindrical"], GEOMETRY_CODES["2d-planar"], GEOMETRY_CODES["3d"]
+    assert sm.exchange_components(3, cube, 2, strength=False) == [10]
+    assert sm.exchange_components(2, rz, 2, strength=True) == [22, 2, 3, 1, 2, 2, 1]
+    assert sm.exchange_components(2, planar, 2, strength=True) == [22, 6, 1, 3, 2, 1]
+    assert sm.exchange_components(3, cube, 2, strength=True) == [3 * 2 + 4 + 2 * 8, 10, 3, 6]
+
+
+def test_slot_runs_leave_out_the_skipped_slots():
+    assert slot_runs(slice(0, 8), frozenset({2, 6})) == [slice(0, 2), slice(3, 6), slice(7, 8)]
+    assert slot_runs(slice(4, 8), frozenset({6})) == [slice(4, 6), slice(7, 8)]
+    assert slot_runs(slice(0, 3), frozenset({2})) == [slice(0, 2)]
+    assert slot_runs(slice(4, 10), frozenset()) == [slice(4, 10)]
+
+
+def test_exchange_costs_separate_the_cost_per_message_from_the_cost_per_byte():
+    """Two cases, few large strips and many small ones, timed as c_msg messages + c_pack bytes:
+    the fit returns both."""
+
+    def document(case, messages, sent):
+        rank = {"messages_sent": messages, "bytes_sent": sent, "bytes_received": sent,
+                "exchange_s": 3e-3 + messages * 8e-5 + 2 * sent * 6e-10, "wait_s": 3e-3}
+        return {"ranks": 2, "results": [{"case": case, "ranks": [rank, rank]}]}
+
+    pack, message = sm.exchange_costs([document("3d", 1, 5242880), document("2d", 14, 337920)])
+    assert pack == pytest.approx(6e-10) and message == pytest.approx(8e-5)
+    with pytest.raises(ValueError, match="different bytes per message"):
+        sm.exchange_costs([document("3d", 1, 5242880)])
+
+
+def test_each_message_costs_its_fixed_share_of_the_packing():
+    mesh = box((4, 4, 4), 8, (False, False, False))
+    cuts = sm.cuts_for(mesh, 2)
+    one = sm.step_time(mesh, [10], 4, COSTS, NET, cuts)["pack"]
+    two = sm.step_time(mesh, [5, 5], 4, COSTS, NET, cuts)["pack"]
+    assert two - one == pytest.approx(COSTS.message_s)
 
 
 def test_reductions_are_the_time_step_the_sweeps_and_the_strength_check():

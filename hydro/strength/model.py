@@ -96,6 +96,32 @@ _REFLECT_FLIP = {0: (WK_V, WK_S + 3, WK_S + 4), 1: (WK_V + 1, WK_S + 3, WK_S + 5
 _ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
 
 
+def work_ghost_reads(ndim: int, geometry_code: int, hourglass: bool) -> tuple[int, frozenset]:
+    """(layers, slots): how many ghost layers of the work arrays the kernels of the stress step
+    read, and the work slots they read in no ghost.  The velocity gradient (:func:`update_stress`)
+    and the stress divergence read the cells next to a cell, one layer, and on a 2-D mesh neither
+    S_zz (the hoop stress of r-z, read in its own cell only) nor, in r-z (``geometry_code``
+    :data:`CYLINDRICAL`), v_theta (the update sets the theta derivatives to zero).  The hourglass
+    viscosity reads two layers and every slot; a 3-D mesh fills two layers of every slot."""
+    if hourglass or ndim != 2:
+        return GHOST, frozenset()
+    skipped = {WK_S + 2}
+    if geometry_code == CYLINDRICAL:
+        skipped.add(WK_V + 2)
+    return 1, frozenset(skipped)
+
+
+def slot_runs(slots: slice, skipped: frozenset) -> list[slice]:
+    """The runs of consecutive work slots of ``slots`` left when the ``skipped`` slots are taken
+    out: one ghost fill each (one message per peer rank across MPI ranks)."""
+    runs, start = [], slots.start
+    for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
+        if stop > start:
+            runs.append(slice(start, stop))
+        start = stop + 1
+    return runs
+
+
 class LevelBlocks(NamedTuple):
     """One refinement level's share of a strength step per level (``time_stepping = "per_level"``,
     :mod:`impactpipe.hydro.amr.subcycle`): the kernels run on ``blocks`` (int64, the level's
@@ -396,18 +422,8 @@ class MaterialStrength:
         return rho0 / self.porosity[:, ALPHA0]
 
     def _ghost_reads(self) -> tuple[int, frozenset]:
-        """(layers, slots): how many ghost layers of the work arrays the kernels of the stress
-        step read, and the work slots they read in no ghost.  The velocity gradient
-        (:func:`update_stress`) and the stress divergence read the cells next to a cell, one
-        layer, and on a 2-D mesh neither S_zz (the hoop stress of r-z, read in its own cell
-        only) nor, in r-z, v_theta (the update sets the theta derivatives to zero).  The
-        hourglass viscosity reads two layers and every slot."""
-        if self.hourglass[0] > 0.0 or self.mesh.ndim != 2:
-            return GHOST, frozenset()
-        skipped = {WK_S + 2}
-        if self.mesh.geometry_code == CYLINDRICAL:
-            skipped.add(WK_V + 2)
-        return 1, frozenset(skipped)
+        """(layers, slots) of :func:`work_ghost_reads` for this mesh and hourglass viscosity."""
+        return work_ghost_reads(self.mesh.ndim, self.mesh.geometry_code, self.hourglass[0] > 0.0)
 
     def _start_work_ghosts(self, partition, slots: slice, level: LevelBlocks | None = None) -> list[FieldFill]:
         """Start the ghost fills of the work arrays' ``slots`` along every axis
@@ -467,19 +483,15 @@ class MaterialStrength:
             layers = GHOST
         wanted = level.mask & self.holds if by_level else None
         fills = []
-        start = slots.start
-        for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
-            if stop > start:
-                if by_level:
-                    _fill_level_work_ghosts(self.work[:, start:stop], self.mesh, axis, level, wanted, layers)
-                else:
-                    fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, slice(start, stop),
-                                                              self.holds, layers))
-                for side in (0, 1):
-                    flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-                    self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if start <= c < stop], layers,
-                                           level.walls[axis, side] if by_level else None)
-            start = stop + 1
+        for run in slot_runs(slots, skipped):
+            if by_level:
+                _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, wanted, layers)
+            else:
+                fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, run, self.holds, layers))
+            for side in (0, 1):
+                flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
+                self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if run.start <= c < run.stop], layers,
+                                       level.walls[axis, side] if by_level else None)
         return fills
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
