@@ -12,6 +12,7 @@ has been still, the run-out (L_f - L0) / L0 and height H_f / L0 against the laws
 
 ``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them;
 ``--settling`` switches on the void settling (``scene.settling``, hydro/scheme/settling.py);
+``--face-shear`` the face shear stress (``scene.face_shear``, hydro/strength/face_shear.py);
 ``--room R`` lengthens the mesh to R run-outs of the law beyond the column (a deposit that
 reaches the far edge stops the run with an error).
 ``--dilation`` adds two columns at the end: the share of the mass in partly filled cells (fill
@@ -46,11 +47,13 @@ DILATED_FILL = 0.99
 
 
 def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
-        surface_layer: bool, plot: Path | None = None, room: float | None = None, settling: bool = False) -> dict:
+        surface_layer: bool, plot: Path | None = None, room: float | None = None, settling: bool = False,
+        face_shear: bool = False) -> dict:
     """One collapse; returns the row's numbers (lengths in units of L0, times in tau)."""
     config = load_config(CONFIG)
     scene = config.scene.model_dump(exclude={"problem", "geometry"})
-    scene.update(width=scene["height"] / aspect, cells_per_height=cells, hourglass=hourglass, settling=settling)
+    scene.update(width=scene["height"] / aspect, cells_per_height=cells, hourglass=hourglass, settling=settling,
+                 face_shear=face_shear)
     if room is not None:
         scene["room"] = room
     materials = config.resolved_materials()
@@ -120,6 +123,8 @@ def main() -> None:
                         help="without the surface-layer pressure of the yield strength (as before it existed)")
     parser.add_argument("--settling", action="store_true",
                         help="with the void settling (scene.settling: true, hydro/scheme/settling.py)")
+    parser.add_argument("--face-shear", action="store_true",
+                        help="with the face shear stress (scene.face_shear: true, hydro/strength/face_shear.py)")
     parser.add_argument("--plot", type=Path, default=None, help="folder for the thickness profile plots")
     parser.add_argument("--room", type=float, default=None,
                         help="scene.room: mesh length beyond the column in run-outs of the law (the config's if omitted)")
@@ -134,7 +139,8 @@ def main() -> None:
             for cfl in args.cfl:
                 for cells in args.cells:
                     r = run(aspect, phi, cfl, cells, args.end, args.cohesion, args.hourglass,
-                            not args.no_surface_layer, args.plot, args.room, args.settling)
+                            not args.no_surface_layer, args.plot, args.room, args.settling,
+                            args.face_shear)
                     print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
                           f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
                           f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "

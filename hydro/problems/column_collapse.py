@@ -37,7 +37,9 @@ tensile limit acts on the state at the end of each step, not between the sweeps
 (``Simulation.step_tensile_limit``, :mod:`impactpipe.hydro.scheme.step_tension`): between the
 sweeps it held the flowing column at zero pressure in more cells the larger the step.  With ``settling``
 (off by default) void under resting material settles out at the end of each step
-(``Simulation.void_settling``, :mod:`impactpipe.hydro.scheme.settling`).  The mesh spans L0 plus
+(``Simulation.void_settling``, :mod:`impactpipe.hydro.scheme.settling`).  With ``face_shear`` (off by
+default) each cell face carries an elastic-plastic shear stress against the odd-even modes
+(:mod:`impactpipe.hydro.strength.face_shear`), for use with ``hourglass`` 0.  The mesh spans L0 plus
 ``room`` run-outs of the law; :class:`ColumnCollapseSimulation` stops the run with an error
 when the deposit reaches the mesh's far edge.  A strengthless material collapses as a fluid
 (dam break) on a free-slip floor.
@@ -100,6 +102,8 @@ PARAMETERS = {
                            "(impactpipe.hydro.strength.hourglass); 0 for none"),
     "settling": Parameter(False, kind=bool, description="void under resting material settles out at the end of "
                           "each step (Simulation.void_settling; docs/validation.md, 'Void settling')"),
+    "face_shear": Parameter(False, kind=bool, description="an elastic-plastic shear stress on each cell face "
+                            "against the odd-even velocity modes (impactpipe.hydro.strength.face_shear)"),
     "room": Parameter(2.0, gt=0, description="mesh length beyond the column, in run-outs L_f - L0 of the scaling law"),
 }
 
@@ -201,20 +205,34 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
             sim.strength.set_surface_layer_pressure([0.0, -p["gravity"], 0.0])
             if p["hourglass"] > 0.0:
                 sim.strength.set_hourglass_viscosity(p["hourglass"], impedance(eos, sim.shear_modulus[0]))
+            if p["face_shear"]:
+                sim.strength.set_face_shear(shear_modulus(eos, sim.shear_modulus[0]))
         return sim
 
     return refine_initial(mesh, build)
+
+
+def _at_rest(eos, shear: np.ndarray) -> tuple[float, float, float]:
+    """(rho0 (kg/m^3), c_K^2 (m^2/s^2), G (Pa)) of material 0 of the packed ``eos`` at its reference
+    density and zero pressure, G = shear[0] + shear[1] rho0 c_K^2 from its ``shear`` row."""
+    kind, row = eos.kind[0], eos.params[0]
+    rho0 = float(reference_density(kind, row, eos.table))
+    _, c2, _ = pressure_sound_speed(kind, row, eos.table, rho0, energy_from_pressure(kind, row, eos.table, rho0, 0.0))
+    return rho0, float(c2), float(shear[0] + shear[1] * rho0 * c2)
 
 
 def impedance(eos, shear: np.ndarray) -> float:
     """Longitudinal impedance rho0 c_L (kg/(m^2 s)) of material 0 of the packed ``eos`` at its
     reference density and zero pressure, c_L^2 = c_K^2 + 4 G / (3 rho0), G from its ``shear``
     row (G = shear[0] + shear[1] rho0 c_K^2, Pa)."""
-    kind, row = eos.kind[0], eos.params[0]
-    rho0 = float(reference_density(kind, row, eos.table))
-    _, c2, _ = pressure_sound_speed(kind, row, eos.table, rho0, energy_from_pressure(kind, row, eos.table, rho0, 0.0))
-    modulus = shear[0] + shear[1] * rho0 * c2
+    rho0, c2, modulus = _at_rest(eos, shear)
     return rho0 * float(np.sqrt(c2 + 4.0 * modulus / (3.0 * rho0)))
+
+
+def shear_modulus(eos, shear: np.ndarray) -> float:
+    """Shear modulus G (Pa) of material 0 of the packed ``eos`` at its reference density and zero
+    pressure, from its ``shear`` row (G = shear[0] + shear[1] rho0 c_K^2)."""
+    return _at_rest(eos, shear)[2]
 
 
 def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:

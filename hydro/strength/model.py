@@ -57,12 +57,15 @@ a bed roughened with the same grains does.  The face velocity is zero, so the tr
 no work: the kinetic energy it removes becomes internal energy through the stress power.
 The sweeps still see a free-slip wall (they carry the pressure only).
 
-Two options a scene may switch on (the granular column collapse does):
+Options a scene may switch on (the granular column collapse does):
 :meth:`MaterialStrength.set_surface_layer_pressure` (the yield strength of material in a cell
 with void at no less than the pressure at mid-depth of the layer it forms under gravity,
-:func:`impactpipe.hydro.strength.update.update_stress` step 4) and
+:func:`impactpipe.hydro.strength.update.update_stress` step 4),
 :meth:`MaterialStrength.set_hourglass_viscosity` (the traction of
-:mod:`impactpipe.hydro.strength.hourglass` against odd-even velocity modes, added in each kick).
+:mod:`impactpipe.hydro.strength.hourglass` against odd-even velocity modes, added in each kick)
+and :meth:`MaterialStrength.set_face_shear` (the elastic-plastic face stresses of
+:mod:`impactpipe.hydro.strength.face_shear` against the same modes: advanced at the start of the
+kick that follows the stress update, their tractions added in each kick).
 """
 
 from __future__ import annotations
@@ -78,32 +81,37 @@ from impactpipe.hydro.amr.transfer import allocate_face_flux, prolong_field_ghos
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import fill_ghosts_where
 from impactpipe.hydro.mesh.state import HydroState
-from impactpipe.hydro.parallel.distributed import FieldFill
+from impactpipe.hydro.parallel.distributed import FieldFill, WholeMesh
 from impactpipe.hydro.strength.divergence import apply_stress_divergence
+from impactpipe.hydro.strength.face_shear import apply_face_shear, update_face_shear
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
 from impactpipe.hydro.strength.flaws import assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes
 from impactpipe.hydro.strength.parameters import (
     DAMAGE0, GRADY_KIPP, NODE0, NONE, WEIBULL_K, WEIBULL_M, DamageArrays, StrengthArrays, pack_damage,
 )
 from impactpipe.hydro.strength.update import (
-    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NFLAW, NSAMOUNT, NWORK, WK_S, WK_V, cell_velocities, cell_velocity_and_stress,
-    scalar_slots, stress_slots, update_stress,
+    AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NFLAW, NSAMOUNT, NWORK, NWORK_FACE, WK_L, WK_S, WK_V, WK_Y, cell_velocities,
+    cell_velocity_and_stress, gradient_slot, scalar_slots, stress_slots, update_stress,
 )
 
 #: Work slots whose sign flips in a reflecting ghost, per wall-normal axis (velocity and shear stress).
 _REFLECT_FLIP = {0: (WK_V, WK_S + 3, WK_S + 4), 1: (WK_V + 1, WK_S + 3, WK_S + 5), 2: (WK_V + 2, WK_S + 4, WK_S + 5)}
 #: Work slots whose sign flips in a rough (no-slip) wall's ghost: every velocity component, no stress.
 _ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
+#: Work slots of the face shear stress whose sign flips in a wall's ghost, reflecting or rough, per
+#: wall-normal axis a: the velocity gradients L_ai along the wall (the face across the wall reads them).
+_GRADIENT_FLIP = {a: tuple(WK_L + gradient_slot(a, i) for i in range(3) if i != a) for a in range(3)}
 
 
-def work_ghost_reads(ndim: int, geometry_code: int, hourglass: bool) -> tuple[int, frozenset]:
+def work_ghost_reads(ndim: int, geometry_code: int, wide: bool) -> tuple[int, frozenset]:
     """(layers, slots): how many ghost layers of the work arrays the kernels of the stress step
     read, and the work slots they read in no ghost.  The velocity gradient (:func:`update_stress`)
     and the stress divergence read the cells next to a cell, one layer, and on a 2-D mesh neither
     S_zz (the hoop stress of r-z, read in its own cell only) nor, in r-z (``geometry_code``
-    :data:`CYLINDRICAL`), v_theta (the update sets the theta derivatives to zero).  The hourglass
-    viscosity reads two layers and every slot; a 3-D mesh fills two layers of every slot."""
-    if hourglass or ndim != 2:
+    :data:`CYLINDRICAL`), v_theta (the update sets the theta derivatives to zero).  With ``wide``
+    a kernel reads two layers and every slot (the hourglass viscosity, the face shear stress); a
+    3-D mesh fills two layers of every slot."""
+    if wide or ndim != 2:
         return GHOST, frozenset()
     skipped = {WK_S + 2}
     if geometry_code == CYLINDRICAL:
@@ -173,6 +181,13 @@ class MaterialStrength:
         self.ns = stress_slots(mesh.ndim)
         self.nq = scalar_slots(mesh.ndim, self.fracture, porous)
         self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
+        #: face shear stress (:meth:`set_face_shear`): the shear modulus G (Pa), None while off
+        self.face_modulus: float | None = None
+        #: the faces' shear stresses T (Pa, NaN on a face carrying none;
+        #: :mod:`impactpipe.hydro.strength.face_shear`) while it is on
+        self.face: np.ndarray | None = None
+        #: the step dt (s) of the last :meth:`update`, whose face stresses the next :meth:`kick` advances first
+        self._face_dt: float | None = None
         #: per block, whether it has a cell holding material at the last :meth:`load_stress` (1) or not (0)
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         #: per block, whether some cell has mass at the last :meth:`load_stress` (1) or not (0)
@@ -215,6 +230,22 @@ class MaterialStrength:
                              f"{impedance})")
         self.hourglass = (float(coefficient), float(impedance))
 
+    def set_face_shear(self, modulus: float) -> None:
+        """Give each cell face the elastic-plastic shear stress of
+        :mod:`impactpipe.hydro.strength.face_shear` against the odd-even velocity modes (planar
+        meshes on one level); ``modulus`` G (Pa), the material's shear modulus.  The work arrays
+        get the slots ``WK_Y`` and ``WK_L`` for the cells' shear strength and off-diagonal velocity
+        gradients (NWORK_FACE in all)."""
+        if self.mesh.geometry_code == CYLINDRICAL or self.mesh.ndim < 2:
+            raise ValueError("the face shear stress is implemented on 2-D and 3-D planar meshes only")
+        if self.mesh.adaptive:
+            raise ValueError("the face shear stress is implemented on a mesh of one level only")
+        if not modulus > 0.0:
+            raise ValueError(f"face shear stress: the shear modulus must be > 0 (got {modulus})")
+        self.face_modulus = float(modulus)
+        self.work = np.zeros((self.mesh.nblocks, NWORK_FACE) + self.mesh.padded_shape)
+        self.face = np.full((self.mesh.nblocks, self.mesh.ndim ** 2) + self.mesh.padded_shape, np.nan)
+
     def set_surface_layer_pressure(self, gravity) -> None:
         """Let the yield strength of material in a cell with void see at least the pressure at
         mid-depth of the layer it forms under ``gravity`` (m/s^2, three components)
@@ -228,9 +259,12 @@ class MaterialStrength:
         return np.zeros((3,) + one.shape)
 
     def mesh_changed(self, mesh: BlockMesh) -> None:
-        """Follow a regrid: new work arrays; the per-block counters' totals move to block 0."""
+        """Follow a regrid: new work arrays (the face shear stresses start again from the cells'
+        stress); the per-block counters' totals move to block 0."""
         self.mesh = mesh
-        self.work = np.zeros((mesh.nblocks, NWORK) + mesh.padded_shape)
+        self.work = np.zeros((mesh.nblocks, self.work.shape[1]) + mesh.padded_shape)
+        if self.face is not None:
+            self.face = np.full((mesh.nblocks, mesh.ndim ** 2) + mesh.padded_shape, np.nan)
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
@@ -334,17 +368,22 @@ class MaterialStrength:
                               self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength,
                               self.work, self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
                               self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
-                              stressed_blocks=self.stressed)
+                              stressed_blocks=self.stressed, store_strength=self.face is not None)
             else:
                 update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
                               mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
                               self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength,
                               self.work, self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
                               porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
-                              stressed_blocks=self.stressed)
+                              stressed_blocks=self.stressed, store_strength=self.face is not None)
 
         self._around_ghosts(partition, fills, update_blocks, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
+        if self.face is not None:
+            if not isinstance(partition, WholeMesh):
+                raise ValueError("the face shear stress runs on one process; several MPI ranks are not supported yet")
+            self._incoming += self._start_work_ghosts(partition, slice(WK_Y, NWORK_FACE), level)
+            self._face_dt = dt
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
              amounts: np.ndarray, partition, level: LevelBlocks | None = None) -> None:
@@ -359,7 +398,10 @@ class MaterialStrength:
         :attr:`face_flux` for the flux registers of :mod:`impactpipe.hydro.amr.subcycle`: the
         momentum and energy columns of the used axes, the only ones the kernel writes, are zeroed
         on the level's blocks first (the other columns and the unused axes stay zero from the
-        allocation).  The hourglass viscosity is not split by levels.
+        allocation).  The hourglass viscosity and the face shear stress are not split by levels.
+        With the face shear stress the kick that follows :meth:`update` first advances the
+        faces' stresses over that update's dt (with the work arrays' ghosts complete), and
+        every kick adds their tractions (:mod:`impactpipe.hydro.strength.face_shear`).
 
         The work ghosts' fills that :meth:`load_stress` or :meth:`update` started are completed
         here: the stress divergence runs on the blocks that need no other rank's strips while
@@ -370,8 +412,8 @@ class MaterialStrength:
         fills, self._incoming = self._incoming, []
         if level is not None:
             self._finish_work_ghosts(partition, fills)
-            if self.hourglass[0] > 0.0:
-                raise ValueError("the hourglass viscosity does not step per refinement level")
+            if self.hourglass[0] > 0.0 or self.face is not None:
+                raise ValueError("the hourglass viscosity and the face shear stress do not step per refinement level")
             if mesh.adaptive:
                 col0 = 3 * self.nmat
                 self.face_flux[:mesh.ndim, level.blocks, :, col0:col0 + 4] = 0.0
@@ -392,6 +434,13 @@ class MaterialStrength:
             apply_hourglass_viscosity(dt, mesh.ndim, self.hourglass[0], self.hourglass[1], state.momentum,
                                       state.energy, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work,
                                       boundary, lo, hi)
+        if self.face is not None:
+            if self._face_dt is not None:
+                update_face_shear(self._face_dt, mesh.ndim, self.face_modulus, mesh.block_dx, mesh.neighbor,
+                                  mesh.neighbor_level, self.work, self.face, lo, hi)
+                self._face_dt = None
+            apply_face_shear(dt, mesh.ndim, state.momentum, state.energy, mesh.block_dx, mesh.neighbor,
+                             mesh.neighbor_level, self.work, self.face, boundary, lo, hi)
         if mesh.adaptive:
             for axis in range(mesh.ndim):
                 plans = partition.plans(mesh, axis)
@@ -422,8 +471,10 @@ class MaterialStrength:
         return rho0 / self.porosity[:, ALPHA0]
 
     def _ghost_reads(self) -> tuple[int, frozenset]:
-        """(layers, slots) of :func:`work_ghost_reads` for this mesh and hourglass viscosity."""
-        return work_ghost_reads(self.mesh.ndim, self.mesh.geometry_code, self.hourglass[0] > 0.0)
+        """(layers, slots) of :func:`work_ghost_reads` for this mesh, the hourglass viscosity and the
+        face shear stress."""
+        return work_ghost_reads(self.mesh.ndim, self.mesh.geometry_code,
+                                self.hourglass[0] > 0.0 or self.face is not None)
 
     def _start_work_ghosts(self, partition, slots: slice, level: LevelBlocks | None = None) -> list[FieldFill]:
         """Start the ghost fills of the work arrays' ``slots`` along every axis
@@ -490,6 +541,7 @@ class MaterialStrength:
                 fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, run, self.holds, layers))
             for side in (0, 1):
                 flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
+                flips += _GRADIENT_FLIP[axis]
                 self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if run.start <= c < run.stop], layers,
                                        level.walls[axis, side] if by_level else None)
         return fills

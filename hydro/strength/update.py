@@ -93,7 +93,7 @@ from impactpipe.hydro.strength.fracture import (
 from impactpipe.hydro.strength.parameters import (
     ACTIVE_LIMIT, FLAW_NODES, GRADY_KIPP, NODE0, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG,
 )
-from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
+from impactpipe.hydro.strength.yield_strength import SQRT3, equivalent_yield_stress, yield_strength
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 # work array slots (``work[NB, NWORK, NX, NY, NZ]``)
@@ -102,6 +102,17 @@ WK_PHI = 3          # material fill of a cell holding material (phi >= PHI_VOID 
                     # min(sum_k alpha_k, sum_k alpha_k rho_k / rho0_k); 0 in void cells
 WK_S = 4            # + slot: mixture deviatoric stress (xx, yy, zz, xy, xz, yz) (Pa)
 NWORK = 10
+# with the face shear stress only (work arrays of NWORK_FACE slots), written by update_stress:
+WK_Y = 10           # the cell's shear strength sum_k alpha_k Y_eq,k / sqrt(3) (Pa)
+WK_L = 11           # + gradient_slot(d, i): its off-diagonal velocity gradients L_di = d v_d / d x_i (1/s)
+NWORK_FACE = 17
+
+
+@njit(inline="always")
+def gradient_slot(d, i):
+    """Offset from ``WK_L`` of the off-diagonal velocity gradient L_di (d != i): 0 .. 5."""
+    return 2 * d + (i if i < d else i - 1)
+
 
 # counter slots (``counts[NB, NCOUNT]``) and amount slots (``amounts[NB, NSAMOUNT]``)
 CNT_YIELD = 0
@@ -387,7 +398,7 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
                   damage_model=None, damage_params=None, surface_gravity=None, porosity=None, has_mass=None,
-                  blocks=None, stressed_blocks=None):
+                  blocks=None, stressed_blocks=None, store_strength=False):
     """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``
     (or the ``blocks`` listed, int64, when given: one refinement level's); see the module docstring.
     ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
@@ -412,6 +423,12 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     ``stressed_blocks[NB]`` (uint8) or None: when given, whether block b's new mixture stress has a
     component other than 0 in some interior cell (1) or not (0), as
     :func:`cell_velocity_and_stress` records it for the first half kick.
+    ``store_strength``: also write each cell's shear strength, the sqrt(J2) yield limit
+    k = sum_k alpha_k Y_eq,k / sqrt(3) (Pa, fill-weighted like S; Y_eq the sqrt(3 J2) bound of
+    step 4, evaluated then in every material, stressed or not) into ``work[:, WK_Y]`` and the
+    off-diagonal velocity gradients L_di (1/s) into ``work[:, WK_L + gradient_slot(d, i)]``, for
+    the face shear stress (:mod:`impactpipe.hydro.strength.face_shear`; the work arrays then have
+    NWORK_FACE slots).
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
@@ -447,6 +464,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                 _clear_strength_scalars(arhoq, b, k * nq, nq, porosity[k, ALPHA0] > 1.0, ix, iy, iz)
                         continue
                     s0 = s1 = s2 = s3 = s4 = s5 = 0.0
+                    strength = 0.0
                     # velocity gradient L[i][j] = d v_i / d x_j
                     lxx = lxy = lxz = lyx = lyy = lyz = lzx = lzy = lzz = 0.0
                     lxx = _derivative(work, b, 0, ix, iy, iz, 0, dxs[0])
@@ -550,7 +568,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         y = 0.0
                         if gradual and model[k] != ROCK:
                             p_held = damaged_pressure(p_matrix, dmg)
-                            if stressed:
+                            if stressed or store_strength:
                                 tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
                                 y = (1.0 - dmg) * equivalent_yield_stress(
                                     model[k], yield_strength(model[k], params[k], dist * p_matrix, tk, 0.0)) / dist
@@ -561,7 +579,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                 if layer > p_held:
                                     p_held = layer
                                     counts[b, CNT_SURFACE_LAYER] += 1
-                            if stressed:
+                            if stressed or store_strength:
                                 tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
                                 y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k],
                                                                                      dist * p_held, tk, dmg)) / dist
@@ -597,7 +615,16 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         s3 += a * sxy
                         s4 += a * sxz
                         s5 += a * syz
+                        strength += a * y
                     _store_stress(work, b, ix, iy, iz, ns, s0, s1, s2, s3, s4, s5)
+                    if store_strength:
+                        work[b, WK_Y, ix, iy, iz] = strength / SQRT3
+                        work[b, WK_L + gradient_slot(0, 1), ix, iy, iz] = lxy
+                        work[b, WK_L + gradient_slot(1, 0), ix, iy, iz] = lyx
+                        work[b, WK_L + gradient_slot(0, 2), ix, iy, iz] = lxz
+                        work[b, WK_L + gradient_slot(2, 0), ix, iy, iz] = lzx
+                        work[b, WK_L + gradient_slot(1, 2), ix, iy, iz] = lyz
+                        work[b, WK_L + gradient_slot(2, 1), ix, iy, iz] = lzy
                     carries = carries or _nonzero(s0, s1, s2, s3, s4, s5)
         if stressed_blocks is not None:
             stressed_blocks[b] = 1 if carries else 0
