@@ -30,7 +30,7 @@ for itself only.  The timers cost about a microsecond per call.
 
     NUMBA_NUM_THREADS=1 python benchmarks/amr_profile.py [--cells-per-projectile-radius 10]
         [--end-time T] [--uniform-steps N | --uniform-to-end] [--time-stepping per_level|global]
-        [--interfaces all|active|off] [--json]
+        [--interfaces all|active|off] [--override KEY=VALUE ...] [--json]
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ import impactpipe.hydro.parallel.distributed as distributed
 import impactpipe.hydro.solver as solver
 import impactpipe.hydro.strength.model as strength_model
 import impactpipe.hydro.tracers.motion as motion
-from amr_reference import _simulation, mesh_arguments
+from amr_reference import _simulation, mesh_arguments, overrides_of
 
 #: (module or class, attribute, phase) of every timed call.
 TIMED = (
@@ -133,12 +133,14 @@ def _timed_run(timers: PhaseTimers, advance) -> float:
 
 
 def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepping: str,
-        cells: int | None, interfaces: str | None = None, uniform_to_end: bool = False) -> dict:
-    """The per-phase table of the module docstring as a dict."""
+        cells: int | None, interfaces: str | None = None, uniform_to_end: bool = False,
+        overrides: dict | None = None) -> dict:
+    """The per-phase table of the module docstring as a dict; ``overrides`` (dotted config keys) apply to
+    the adaptive run."""
     timers = PhaseTimers()
     saved = timers.install()
     try:
-        sim, values = _simulation(config_path, None, time_stepping, cells, interfaces)
+        sim, values = _simulation(config_path, None, time_stepping, cells, interfaces, overrides)
         end = float(end_time or values["end_time"])
         total = _timed_run(timers, lambda: sim.run(end))
         adaptive = {"cpu_seconds": total, "cell_updates": int(sim.cell_updates), "steps": sim.step_count,
@@ -177,7 +179,7 @@ def main() -> None:
                         help="run the uniform mesh to the end time (no extrapolation; overrides --uniform-steps)")
     args = parser.parse_args()
     result = run(args.config, args.end_time, args.uniform_steps, args.time_stepping, args.cells_per_projectile_radius,
-                 args.interfaces, args.uniform_to_end)
+                 args.interfaces, args.uniform_to_end, overrides_of(args))
     if args.json:
         print(json.dumps(result, indent=2))
         return

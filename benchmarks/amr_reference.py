@@ -20,6 +20,7 @@ steps, and reports
 
     python benchmarks/amr_reference.py --json [--config PATH] [--end-time T] [--uniform-steps N]
                                        [--time-stepping global|per_level] [--interfaces all|active|off]
+                                       [--override KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import time
 
 import numba
 import numpy as np
+import yaml
 
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.pipeline.adapters.hydro import build_simulation
@@ -38,8 +40,8 @@ from impactpipe.pipeline.derived import derive
 
 
 def _simulation(config_path: str, levels, time_stepping: str = "global", cells: int | None = None,
-                interfaces: str | None = None):
-    config = load_config(config_path)
+                interfaces: str | None = None, overrides: dict | None = None):
+    config = load_config(config_path, overrides=overrides or None)
     config.hydro.time_stepping = time_stepping
     if interfaces is not None:
         config.hydro.refinement.interfaces = interfaces
@@ -52,9 +54,10 @@ def _simulation(config_path: str, levels, time_stepping: str = "global", cells: 
 
 
 def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepping: str = "global",
-        cells: int | None = None, interfaces: str | None = None) -> dict:
-    """The measurements of the module docstring, as a dict (no uniform run when ``uniform_steps`` is 0)."""
-    sim, values = _simulation(config_path, None, time_stepping, cells, interfaces)
+        cells: int | None = None, interfaces: str | None = None, overrides: dict | None = None) -> dict:
+    """The measurements of the module docstring, as a dict (no uniform run when ``uniform_steps`` is 0);
+    ``overrides`` (dotted config keys) apply to the adaptive run."""
+    sim, values = _simulation(config_path, None, time_stepping, cells, interfaces, overrides)
     end = float(end_time or values["end_time"])
     start = sim.totals()
     started = time.perf_counter()
@@ -122,14 +125,22 @@ def mesh_arguments(description: str, uniform_steps: int, time_stepping: str) -> 
                         help="the adaptive run's hydro.time_stepping (the uniform run has one level either way)")
     parser.add_argument("--interfaces", choices=["all", "active", "off"], default=None,
                         help="override the adaptive run's hydro.refinement.interfaces")
+    parser.add_argument("--override", action="append", default=[], metavar="KEY=VALUE",
+                        help="set a config key of the adaptive run (dotted, value read as YAML), e.g. "
+                             "hydro.refinement.pressure_floor=0.01; repeatable")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     return parser
+
+
+def overrides_of(args: argparse.Namespace) -> dict:
+    """The ``--override`` options as {dotted key: value}."""
+    return {key: yaml.safe_load(value) for key, value in (o.split("=", 1) for o in args.override)}
 
 
 def main() -> None:
     args = mesh_arguments(__doc__.splitlines()[0], 50, "global").parse_args()
     result = run(args.config, args.end_time, args.uniform_steps, args.time_stepping, args.cells_per_projectile_radius,
-                 args.interfaces)
+                 args.interfaces, overrides_of(args))
     if args.json:
         print(json.dumps(result, indent=2))
     else:

@@ -329,6 +329,13 @@ class Simulation:
             return max(1, self.refinement.interval // 2 ** self.mesh.max_level)
         return self.refinement.interval
 
+    def regrid_reach(self) -> int:
+        """Cells a wave may cross between two regrids, plus the indicators' stencil cell:
+        ceil(cfl x finest substeps between regrids) + 1 (``refinement.buffer: reach``,
+        :func:`impactpipe.hydro.amr.regrid.block_wants`)."""
+        substeps = self.regrid_interval() * (2 ** self.mesh.max_level if self.time_stepping == PER_LEVEL else 1)
+        return int(np.ceil(self.cfl * substeps)) + 1
+
     def step(self, dt_max: float = np.inf) -> float:
         """Advance one step of at most ``dt_max`` (s); returns the step taken (s).
 
@@ -581,7 +588,7 @@ class Simulation:
             fill_state_ghosts(self.state, self.mesh, axis)
         refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
                                                           self.tensile_strength, self.refinement, self.peak_pressure,
-                                                          self.grady_kipp, self.porosity)
+                                                          self.grady_kipp, self.porosity, self.regrid_reach())
         return refine, coarsen
 
     def _regrid(self) -> bool:

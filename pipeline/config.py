@@ -301,6 +301,10 @@ class Refinement(Strict):
                                        description="relative density jump across a cell that refines (null: off)")
     pressure_floor: float = Field(RefinementRule.pressure_floor, gt=0, lt=1,
                                   description="pressure floor of the jump indicator, fraction of the largest |p|")
+    buffer: Literal["block", "reach"] = Field(
+        RefinementRule.buffer, description="neighbours refined with a block holding a pressure or density jump: all "
+                                           "(block) or those across the faces the jump lies within a regrid's wave "
+                                           "travel of (reach)")
     boxes: list[RefinementBox] = Field(default_factory=list)
 
     @field_validator("interfaces", mode="before")

@@ -391,3 +391,33 @@ def test_a_reflux_that_empties_a_material_leaves_no_energy_or_scalars_on_its_res
     alpha, arho, arhoe, arhoq, _, _, floors, _ = _one_cell_correction(arho_before, -1.0, -1.0e5, 1.0)
     assert arho[0, 0, 0, 0, 0] == 1.0 and arhoe[0, 0, 0, 0, 0] == 1.0e5 and arhoq[0, 0, 0, 0, 0] == 4.0e6 + 1.0
     assert floors.sum() == 0
+
+
+@pytest.mark.parametrize("cell, reached", [((8, 8), set()), ((1, 8), {(0, 1)}), ((14, 8), {(2, 1)}),
+                                           ((1, 1), {(0, 1), (1, 0), (0, 0)}), ((8, 14), {(1, 2)})])
+def test_buffer_reach_refines_only_the_neighbours_a_jump_lies_near(cell, reached):
+    """A pressure spike (p = 2 in one cell of gas at p = 1, jump indicator 1/3 > 0.2) in root block
+    (1, 1) of a 4 x 4 block mesh (16^2 cells each, one finer level).  With ``buffer: block`` the
+    block and its 8 neighbours ask for level 1; with ``buffer: reach`` (reach 3 cells) the block
+    and only the neighbours across the faces and corners the spike's stencil (the cell and its
+    4 face neighbours) lies within 3 cells of."""
+    from impactpipe.hydro.amr.regrid import block_wants
+    from impactpipe.hydro.mesh.boundary import fill_state_ghosts
+
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [64, 64], [("reflecting", "reflecting")] * 2, 16,
+                             max_level=1)
+    eos = pack_eos([GAS])
+    pressure = np.ones((mesh.nblocks, 16, 16, 1))
+    spike = mesh.lookup([0], [[1, 1, 0]])[0]
+    pressure[spike, cell[0], cell[1], 0] = 2.0
+    state = HydroState.empty(mesh, 1)
+    state.set_material(mesh, 1.0, 0, eos, 1.0, np.zeros(3), pressure=pressure)
+    for axis in range(2):
+        fill_state_ghosts(state, mesh, axis)
+    index = {tuple(int(i) for i in mesh.block_index[b, :2]): b for b in range(mesh.nblocks)}
+    ring = {(1 + i, 1 + j) for i in (-1, 0, 1) for j in (-1, 0, 1)}
+    for buffer, expected in (("block", ring), ("reach", {(1, 1)} | reached)):
+        rule = RefinementRule(buffer=buffer)
+        wants = block_wants(mesh, state, eos, np.zeros((1, 2)), np.zeros(1), rule, reach=3)
+        assert {key for key, b in index.items() if wants.want[b] == 1} == expected
+        assert {key for key, b in index.items() if wants.keep[b] == 1} == expected

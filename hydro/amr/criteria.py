@@ -25,7 +25,11 @@ at rest (or far from anything that happens) then does not hold the finest level;
 A block is refined when an indicator exceeds its threshold (interface: INTERFACE_JUMP) and
 may be coarsened when every enabled indicator stays below half of it (hysteresis, so a block
 does not flip between levels every regrid).  The indicators look one cell beyond the block
-(its ghosts), which with a regrid every few steps keeps a moving shock inside refined blocks.
+(its ghosts).  A jump also refines neighbouring blocks, so that a moving shock stays inside
+refined blocks until the next regrid: every neighbour (``buffer: block``), or with ``buffer:
+reach`` only those across the faces, edges and corners the jump lies within ``margin``
+cells of, the distance a wave crosses between two regrids (:func:`block_indicators` records
+the jumps near each face; :func:`impactpipe.hydro.amr.regrid.block_wants`).
 """
 
 from __future__ import annotations
@@ -81,10 +85,13 @@ def _neighbours(ix, iy, iz, d, step):
 
 
 @njit(cache=True, parallel=True)
-def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out, void=None):
-    """Per block the largest interface, pressure-jump and density-jump indicators, |p| and speed into
-    ``out[NB, 5]``; blocks b with ``void[b]`` != 0 (uint8, when given: void ghosts included, pressure
-    0.0) are skipped, their indicators all 0.0, as ``out`` must hold there already."""
+def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, margin, out, near, void=None):
+    """Per block the largest interface, pressure-jump and density-jump indicators, |p| (Pa) and speed
+    (m/s) into ``out[NB, 5]``, and into ``near[NB, 3, 2, 2]`` (axis, side 0 = low / 1 = high, jump 0 =
+    pressure / 1 = density) the largest jumps of the cells within ``margin`` cells of each face (the
+    cells 0 .. margin - 1 counted from it).  Blocks b with ``void[b]`` != 0 (uint8, when given: void
+    ghosts included, pressure 0.0) are skipped, their indicators all 0.0, as ``out`` and ``near``
+    must hold there already."""
     nb, nmat, nx, ny, nz = alpha.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
@@ -108,6 +115,8 @@ def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out, void=None):
                         speed2 = (mom[b, 0, ix, iy, iz] ** 2 + mom[b, 1, ix, iy, iz] ** 2
                                   + mom[b, 2, ix, iy, iz] ** 2)
                         vmax = max(vmax, np.sqrt(speed2) / rho)
+                    cell_p = 0.0
+                    cell_r = 0.0
                     for d in range(ndim):
                         lx, ly, lz = _neighbours(ix, iy, iz, d, -1)
                         hx, hy, hz = _neighbours(ix, iy, iz, d, 1)
@@ -129,9 +138,25 @@ def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, out, void=None):
                         if phi_l >= PHI_SECOND_ORDER and phi_h >= PHI_SECOND_ORDER:
                             p_l = pressure[b, lx, ly, lz]
                             p_h = pressure[b, hx, hy, hz]
-                            pjump = max(pjump, abs(p_h - p_l) / (abs(p_h) + abs(p_l) + p_floor))
+                            cell_p = max(cell_p, abs(p_h - p_l) / (abs(p_h) + abs(p_l) + p_floor))
                         if same:
-                            rjump = max(rjump, abs(rho_h - rho_l) / (rho_h + rho_l))
+                            cell_r = max(cell_r, abs(rho_h - rho_l) / (rho_h + rho_l))
+                    pjump = max(pjump, cell_p)
+                    rjump = max(rjump, cell_r)
+                    if cell_p > 0.0 or cell_r > 0.0:
+                        for d in range(ndim):
+                            if d == 0:
+                                low, high = ix - gx, nx - gx - 1 - ix
+                            elif d == 1:
+                                low, high = iy - gy, ny - gy - 1 - iy
+                            else:
+                                low, high = iz - gz, nz - gz - 1 - iz
+                            if low < margin:
+                                near[b, d, 0, 0] = max(near[b, d, 0, 0], cell_p)
+                                near[b, d, 0, 1] = max(near[b, d, 0, 1], cell_r)
+                            if high < margin:
+                                near[b, d, 1, 0] = max(near[b, d, 1, 0], cell_p)
+                                near[b, d, 1, 1] = max(near[b, d, 1, 1], cell_r)
         out[b, IND_INTERFACE] = face
         out[b, IND_PRESSURE] = pjump
         out[b, IND_DENSITY] = rjump

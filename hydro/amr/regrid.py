@@ -44,6 +44,8 @@ from impactpipe.hydro.mesh.state import FIELDS, HydroState
 
 #: Values of :attr:`RefinementRule.interfaces`.
 INTERFACE_MODES = ("all", "active", "off")
+#: Values of :attr:`RefinementRule.buffer`.
+BUFFER_MODES = ("block", "reach")
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,10 @@ class RefinementRule:
         density_jump: the same for density (None: off).
         pressure_floor: p_floor of the pressure indicator (and the activity threshold of
             ``interfaces: active``) as a fraction of the largest |p| on the mesh so far.
+        buffer: which neighbours of a block with a pressure or density jump refine with it:
+            "block" (every neighbour across its faces, edges and corners) or "reach" (those
+            across the faces, edges and corners the jump lies within ``reach`` cells of: the
+            cells a wave crosses between two regrids, :func:`block_wants`).
         boxes: ((lo, hi, level), ...): refine every block overlapping [lo, hi] (m) to at
             least ``level``.
     """
@@ -70,6 +76,7 @@ class RefinementRule:
     pressure_jump: float | None = 0.2
     density_jump: float | None = 0.1
     pressure_floor: float = 1.0e-3
+    buffer: str = "block"
     boxes: tuple = ()
 
     def __post_init__(self):
@@ -77,27 +84,58 @@ class RefinementRule:
             raise ValueError(f"refinement interval must be >= 1 step, got {self.interval}")
         if self.interfaces not in INTERFACE_MODES:
             raise ValueError(f"refinement interfaces must be one of {INTERFACE_MODES}, got {self.interfaces!r}")
+        if self.buffer not in BUFFER_MODES:
+            raise ValueError(f"refinement buffer must be one of {BUFFER_MODES}, got {self.buffer!r}")
         for name in ("pressure_jump", "density_jump"):
             value = getattr(self, name)
             if value is not None and not 0.0 < value < 1.0:
                 raise ValueError(f"refinement {name} must lie in (0, 1) or be None, got {value}")
 
 
-def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
+@dataclass(frozen=True)
+class BlockWants:
+    """What the refinement rule asks of each block at one regrid (:func:`block_wants`).
+
+    Attributes:
+        indicators: (NB, NINDICATOR) the block indicators (:func:`~impactpipe.hydro.amr.criteria.block_indicators`).
+        floor: p_floor (Pa) of the pressure indicator and the activity threshold.
+        active: (NB,) bool, the block moves or is loaded (``interfaces: active``; all True otherwise).
+        shock: (NB,) the level the block's own pressure or density jump asks for (the finest or 0).
+        shock_keep: (NB,) the same at half the thresholds (the level it may not coarsen below).
+        face: (NB,) the level its interface asks for (the finest, one coarser where inactive, or 0).
+        face_keep: (NB,) the same at half the interface threshold.
+        boxes: (NB,) the finest level a user box asks for.
+        want: (NB,) the level asked for: the jumps of the block and its neighbours, its interface.
+        keep: (NB,) the level below which it may not coarsen, by the same rules at half the thresholds.
+        peak_pressure: the largest |p| (Pa) of this and the earlier regrids.
+    """
+
+    indicators: np.ndarray
+    floor: float
+    active: np.ndarray
+    shock: np.ndarray
+    shock_keep: np.ndarray
+    face: np.ndarray
+    face_keep: np.ndarray
+    boxes: np.ndarray
+    want: np.ndarray
+    keep: np.ndarray
+    peak_pressure: float
+
+
+def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
                 rule: RefinementRule, peak_pressure: float = 0.0,
                 grady_kipp: np.ndarray | None = None,
-                porosity: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
-    """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
+                porosity: np.ndarray | None = None, reach: int | None = None) -> BlockWants:
+    """The levels the refinement rule asks of each block (:class:`BlockWants`; arguments as :func:`flag_blocks`).
 
-    The state's ghosts along every used axis must be filled.  ``peak_pressure`` is the largest
-    |p| of earlier regrids: the pressure floor is ``pressure_floor`` times the largest |p|
-    ever on the mesh, so the waves left behind once the impact's shock has decayed (acoustic
-    noise on the scale of the event) do not keep the whole body refined.  ``grady_kipp``: the
-    materials bearing (1 - D) of their tension (:func:`impactpipe.hydro.scheme.mixture.tension_factor`);
-    ``porosity``: the porous materials' rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`) or None.
-    The pressure and indicators of the void blocks (ghosts included,
-    :func:`~impactpipe.hydro.mesh.last_good.void_blocks`) are not computed: they are 0.
-    """
+    With ``buffer: reach`` a jump refines the neighbours across the faces, edges and corners
+    of its block that it lies within ``reach`` cells of (an edge or corner neighbour when the
+    block holds such a jump near each of the faces meeting there): a shock crosses at most
+    cfl cells of its level per substep, so ``reach`` = ceil(cfl x finest substeps between
+    regrids) + 1 (the indicators' stencil) keeps it inside refined blocks until the next
+    regrid, and the blocks it has left may coarsen.  None: the whole block (``buffer:
+    block`` whatever ``reach``)."""
     void = np.zeros(mesh.nblocks, dtype=np.uint8)
     void_blocks(*(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
                                                      state.energy)), 0, mesh.nblocks, void)
@@ -107,7 +145,9 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)).max(initial=0.0)))
     floor = rule.pressure_floor * max(peak_pressure, 1e-300)
     ind = np.zeros((mesh.nblocks, NINDICATOR))
-    block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, ind, void)
+    near = np.zeros((mesh.nblocks, 3, 2, 2))
+    margin = mesh.block_cells if reach is None or rule.buffer == "block" else int(reach)
+    block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, margin, ind, near, void)
     thresholds = np.full(IND_MAX_PRESSURE, np.inf)
     if rule.interfaces != "off":
         thresholds[IND_INTERFACE] = INTERFACE_JUMP
@@ -118,23 +158,50 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     # the level each block's indicators ask for: the finest, or (a quiet interface under
     # "active") one level below it; keep: the level below which it may not coarsen
     finest = mesh.max_level
-    interface_level = np.full(mesh.nblocks, finest)
+    active = np.ones(mesh.nblocks, dtype=bool)
     if rule.interfaces == "active":
         speed_floor = rule.pressure_floor * ind[:, IND_MAX_SPEED].max(initial=0.0)
         active = (ind[:, IND_MAX_PRESSURE] > floor) | (ind[:, IND_MAX_SPEED] > speed_floor)
-        interface_level = np.where(active, finest, max(finest - 1, 0))
+    interface_level = np.where(active, finest, max(finest - 1, 0))
     jumps = ind[:, :IND_MAX_PRESSURE]
     shock = np.where((jumps[:, 1:] > thresholds[1:]).any(axis=1), finest, 0)
     shock_keep = np.where((jumps[:, 1:] > 0.5 * thresholds[1:]).any(axis=1), finest, 0)
     face = np.where(jumps[:, IND_INTERFACE] > thresholds[IND_INTERFACE], interface_level, 0)
     face_keep = np.where(jumps[:, IND_INTERFACE] > 0.5 * thresholds[IND_INTERFACE], interface_level, 0)
     boxes = box_levels(mesh.block_lo, mesh.block_hi, mesh.ndim, rule.boxes)
+    if margin < mesh.block_cells:
+        want = np.maximum(_with_reached_neighbours(mesh, shock, (near > thresholds[1:]).any(axis=3)), face)
+        keep = np.maximum(_with_reached_neighbours(mesh, shock_keep, (near > 0.5 * thresholds[1:]).any(axis=3)),
+                          face_keep)
+    else:
+        want = np.maximum(_with_neighbours(mesh, shock), face)
+        keep = np.maximum(_with_neighbours(mesh, shock_keep), face_keep)
+    return BlockWants(ind, floor, active, shock, shock_keep, face, face_keep, boxes, want, keep, peak_pressure)
+
+
+def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
+                rule: RefinementRule, peak_pressure: float = 0.0,
+                grady_kipp: np.ndarray | None = None,
+                porosity: np.ndarray | None = None, reach: int | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
+
+    The state's ghosts along every used axis must be filled.  ``peak_pressure`` is the largest
+    |p| of earlier regrids: the pressure floor is ``pressure_floor`` times the largest |p|
+    ever on the mesh, so the waves left behind once the impact's shock has decayed (acoustic
+    noise on the scale of the event) do not keep the whole body refined.  ``grady_kipp``: the
+    materials bearing (1 - D) of their tension (:func:`impactpipe.hydro.scheme.mixture.tension_factor`);
+    ``porosity``: the porous materials' rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`) or None.
+    The pressure and indicators of the void blocks (ghosts included,
+    :func:`~impactpipe.hydro.mesh.last_good.void_blocks`) are not computed: they are 0.
+    ``reach``: the cells a wave crosses between two regrids plus one, for ``buffer: reach``
+    (:func:`block_wants`).
+    """
+    wants = block_wants(mesh, state, eos, shear_modulus, tensile_strength, rule, peak_pressure, grady_kipp,
+                        porosity, reach)
     level = mesh.block_level
-    want = np.maximum(_with_neighbours(mesh, shock), face)
-    keep = np.maximum(_with_neighbours(mesh, shock_keep), face_keep)
-    refine = ((want > level) | (boxes > level)) & (level < finest)
-    coarsen = (keep < level) & (boxes < level) & (level > 0)
-    return refine, coarsen, peak_pressure
+    refine = ((wants.want > level) | (wants.boxes > level)) & (level < mesh.max_level)
+    coarsen = (wants.keep < level) & (wants.boxes < level) & (level > 0)
+    return refine, coarsen, wants.peak_pressure
 
 
 def _with_neighbours(mesh: BlockMesh, levels: np.ndarray) -> np.ndarray:
@@ -155,6 +222,32 @@ def _with_neighbours(mesh: BlockMesh, levels: np.ndarray) -> np.ndarray:
             inside = np.nonzero(nbr >= 0)[0]
             np.maximum.at(spread, nbr[inside], out[inside])
         out = spread
+    return out
+
+
+def _with_reached_neighbours(mesh: BlockMesh, levels: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """The largest of ``levels`` over each block and those neighbours whose faces ``near`` marks.
+
+    ``near[b, d, side]`` (bool, (NB, 3, 2)): block b's jump lies close to its face (d, side);
+    ``levels[b]`` then spreads to the neighbour across that face, and to the neighbour across
+    an edge or corner where ``near`` marks every face meeting there.  Such a neighbour is
+    reached through the face neighbour tables axis by axis, in every order of the axes (on a
+    mesh with level changes the orders can end on different blocks; each gets the level).
+    """
+    out = levels.copy()
+    for o in _offsets(mesh.ndim):
+        steps = [(d, 0 if o[d] < 0 else 1) for d in range(mesh.ndim) if o[d]]
+        mask = levels > 0
+        for d, side in steps:
+            mask &= near[:, d, side]
+        source = np.nonzero(mask)[0]
+        for order in itertools.permutations(steps):
+            src, dst = source, source
+            for d, side in order:
+                dst = mesh.neighbor[dst, d, side]
+                inside = dst >= 0
+                src, dst = src[inside], dst[inside]
+            np.maximum.at(out, dst, levels[src])
     return out
 
 
