@@ -301,6 +301,9 @@ class Refinement(Strict):
                                        description="relative density jump across a cell that refines (null: off)")
     pressure_floor: float = Field(RefinementRule.pressure_floor, gt=0, lt=1,
                                   description="pressure floor of the jump indicator, fraction of the largest |p|")
+    activity_floor: float | None = Field(RefinementRule.activity_floor, gt=0, lt=1,
+                                         description="activity threshold of interfaces: active, fraction of the "
+                                                     "largest |p| and speed (null: pressure_floor)")
     buffer: Literal["block", "reach"] = Field(
         RefinementRule.buffer, description="neighbours refined with a block holding a pressure or density jump: all "
                                            "(block) or those across the faces the jump lies within a regrid's wave "

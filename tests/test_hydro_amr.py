@@ -421,3 +421,28 @@ def test_buffer_reach_refines_only_the_neighbours_a_jump_lies_near(cell, reached
         wants = block_wants(mesh, state, eos, np.zeros((1, 2)), np.zeros(1), rule, reach=3)
         assert {key for key, b in index.items() if wants.want[b] == 1} == expected
         assert {key for key, b in index.items() if wants.keep[b] == 1} == expected
+
+
+@pytest.mark.parametrize("pressure_floor, activity_floor, active", [(1e-3, None, False), (1e-5, None, True),
+                                                                    (1e-5, 1e-3, False), (1e-3, 1e-5, True)])
+def test_activity_floor_sets_which_interfaces_hold_the_finest_level(pressure_floor, activity_floor, active):
+    """A dense disc at rest at p = 1 in gas at p = 1, the run's largest |p| so far 1e4: under
+    ``interfaces: active`` the disc's edge asks for the finest level where its blocks' |p| = 1
+    exceeds activity_floor x 1e4 (``pressure_floor`` when ``activity_floor`` is None), one level
+    coarser where it does not."""
+    from impactpipe.hydro.amr.regrid import block_wants
+    from impactpipe.hydro.mesh.boundary import fill_state_ghosts
+
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [32, 32], [("reflecting", "reflecting")] * 2, 8,
+                             max_level=2)
+    state, _ = dense_disc_state(mesh)
+    state.momentum[:] = 0.0
+    eos = pack_eos([GAS, HEAVY])
+    for axis in range(2):
+        fill_state_ghosts(state, mesh, axis)
+    rule = RefinementRule(interfaces="active", pressure_floor=pressure_floor, activity_floor=activity_floor)
+    wants = block_wants(mesh, state, eos, np.zeros((2, 2)), np.zeros(2), rule, peak_pressure=1.0e4)
+    edge = wants.indicators[:, 0] > 0.1
+    assert edge.sum() == 4
+    assert (wants.active[edge] == active).all()
+    assert (wants.face[edge] == (2 if active else 1)).all()

@@ -17,8 +17,8 @@ filled), three indicators are evaluated and their maxima over a block's cells re
   steps at interfaces and free surfaces belong to the interface indicator.
 
 An interface is ``active`` where its block moves or is loaded: the block's largest |p| or
-speed exceeds ``pressure_floor`` times the largest |p| of the run / the largest speed on the
-mesh.  The free surface of a body
+speed exceeds ``activity_floor`` (default: ``pressure_floor``) times the largest |p| of the
+run / the largest speed on the mesh.  The free surface of a body
 at rest (or far from anything that happens) then does not hold the finest level; with
 ``interfaces: all`` every interface does.
 

@@ -61,8 +61,12 @@ class RefinementRule:
         pressure_jump: refine where the relative pressure jump across a cell exceeds this
             (None: off); see :mod:`impactpipe.hydro.amr.criteria`.
         density_jump: the same for density (None: off).
-        pressure_floor: p_floor of the pressure indicator (and the activity threshold of
-            ``interfaces: active``) as a fraction of the largest |p| on the mesh so far.
+        pressure_floor: p_floor of the pressure indicator (and, unless ``activity_floor`` is
+            given, the activity threshold of ``interfaces: active``) as a fraction of the
+            largest |p| on the mesh so far.
+        activity_floor: the activity threshold of ``interfaces: active`` as a fraction of the
+            largest |p| on the mesh so far and of the largest speed on the mesh now (None:
+            ``pressure_floor``).
         buffer: which neighbours of a block with a pressure or density jump refine with it:
             "block" (every neighbour across its faces, edges and corners) or "reach" (those
             across the faces, edges and corners the jump lies within ``reach`` cells of: the
@@ -76,6 +80,7 @@ class RefinementRule:
     pressure_jump: float | None = 0.2
     density_jump: float | None = 0.1
     pressure_floor: float = 1.0e-3
+    activity_floor: float | None = None
     buffer: str = "block"
     boxes: tuple = ()
 
@@ -98,7 +103,7 @@ class BlockWants:
 
     Attributes:
         indicators: (NB, NINDICATOR) the block indicators (:func:`~impactpipe.hydro.amr.criteria.block_indicators`).
-        floor: p_floor (Pa) of the pressure indicator and the activity threshold.
+        floor: p_floor (Pa) of the pressure indicator.
         active: (NB,) bool, the block moves or is loaded (``interfaces: active``; all True otherwise).
         shock: (NB,) the level the block's own pressure or density jump asks for (the finest or 0).
         shock_keep: (NB,) the same at half the thresholds (the level it may not coarsen below).
@@ -160,8 +165,10 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     finest = mesh.max_level
     active = np.ones(mesh.nblocks, dtype=bool)
     if rule.interfaces == "active":
-        speed_floor = rule.pressure_floor * ind[:, IND_MAX_SPEED].max(initial=0.0)
-        active = (ind[:, IND_MAX_PRESSURE] > floor) | (ind[:, IND_MAX_SPEED] > speed_floor)
+        fraction = rule.pressure_floor if rule.activity_floor is None else rule.activity_floor
+        speed_floor = fraction * ind[:, IND_MAX_SPEED].max(initial=0.0)
+        active = ((ind[:, IND_MAX_PRESSURE] > fraction * max(peak_pressure, 1e-300))
+                  | (ind[:, IND_MAX_SPEED] > speed_floor))
     interface_level = np.where(active, finest, max(finest - 1, 0))
     jumps = ind[:, :IND_MAX_PRESSURE]
     shock = np.where((jumps[:, 1:] > thresholds[1:]).any(axis=1), finest, 0)
