@@ -29,7 +29,9 @@ level coarser halves their share, and the blocks it frees may still be held by b
         [--times 2 6 12] [--interfaces all|active|off] [--override KEY=VALUE ...] [--json]
 
 ``--override hydro.refinement.pressure_floor=0.01`` (repeatable, values read as YAML) sets
-any config key, so candidate rules are compared on the same scene.
+any config key, so candidate rules are compared on the same scene.  The run's last step
+before each stop is shortened to end there, so it is not the uninterrupted run step for step
+(case 8c at 10 cells: 471 root steps to 12 s with twelve stops, 468 without).
 """
 
 from __future__ import annotations

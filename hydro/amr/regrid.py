@@ -139,8 +139,8 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     block holds such a jump near each of the faces meeting there): a shock crosses at most
     cfl cells of its level per substep, so ``reach`` = ceil(cfl x finest substeps between
     regrids) + 1 (the indicators' stencil) keeps it inside refined blocks until the next
-    regrid, and the blocks it has left may coarsen.  None: the whole block (``buffer:
-    block`` whatever ``reach``)."""
+    regrid, and the blocks it has left may coarsen.  With ``buffer: block``, or ``reach``
+    None, a jump refines every neighbour."""
     void = np.zeros(mesh.nblocks, dtype=np.uint8)
     void_blocks(*(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
                                                      state.energy)), 0, mesh.nblocks, void)
