@@ -65,7 +65,8 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
         for axis in range(mesh.ndim):
             sweep(axis, dt, mesh.geometry_code, alpha, arho, arhoe, arhoq, mom, energy, lo, dx, nbr, nlev, eos.kind,
                   eos.params, eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch, *counters,
-                  sim.plain_pencils, np.arange(len(blocks)))
+                  sim.plain_pencils, np.arange(len(blocks)), sim._sweep_grady_kipp, sim._sweep_porosity,
+                  sim.bulk_pressure_predictor)
         if work is not None:
             strength = sim.strength
             a = strength.arrays

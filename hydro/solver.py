@@ -34,8 +34,8 @@ from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.mesh.last_good import block_runs, void_blocks
 from impactpipe.hydro.eos import pack_eos
-from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, compact, distension_field,
-                                           pack_porosity)
+from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
+                                           distension_field, pack_porosity)
 from impactpipe.hydro.gravity import gravity_from_spec
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
@@ -236,6 +236,12 @@ class Simulation:
         #: (M,) True for the materials whose tension is borne as (1 - D) of the EOS tension (Grady-Kipp
         #: fracture, :func:`impactpipe.hydro.scheme.mixture.tension_factor`); None when there are none.
         self.grady_kipp = gradual if gradual.any() else None
+        #: The sweep's ``grady_kipp`` and ``porosity`` arguments, arrays in every scene (all False;
+        #: rows of alpha_0 = 1 without porous materials, which the sweep reads as non-porous): one
+        #: compiled sweep serves every scene, where None and arrays would compile four (a cold
+        #: compile of the sweep takes minutes).  The results are the same bit for bit.
+        self._sweep_grady_kipp = gradual
+        self._sweep_porosity = self.porosity if self.porosity is not None else np.ones((state.nmat, NPOROSITY))
         porous = self.porosity is not None
         #: Counters of the compaction step (:data:`impactpipe.hydro.eos.porosity.COUNT_NAMES`), per block.
         self.porosity_counts = np.zeros((nb, len(POROSITY_COUNT_NAMES)), dtype=np.int64)
@@ -420,7 +426,7 @@ class Simulation:
               self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
               self.eos.table, self.shear_modulus, self._sweep_tensile_strength(), self._scratch, self.boundary[own],
               self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-              blocks, self.grady_kipp, self.porosity, self.bulk_pressure_predictor)
+              blocks, self._sweep_grady_kipp, self._sweep_porosity, self.bulk_pressure_predictor)
 
     def _settle_void(self) -> None:
         """Settle the void under resting material out of every column (:attr:`void_settling`,

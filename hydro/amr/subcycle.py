@@ -360,7 +360,7 @@ class LevelStepper:
                           st.energy, mesh.block_lo, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, sim.eos.kind,
                           sim.eos.params, sim.eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch,
                           sim.boundary, sim.floors, sim.amounts, sim._failure, sim._face_flux, sim.plain_pencils,
-                          blocks, sim.grady_kipp, sim.porosity, sim.bulk_pressure_predictor)
+                          blocks, sim._sweep_grady_kipp, sim._sweep_porosity, sim.bulk_pressure_predictor)
                     failed = sim.partition.first_failure(sim._failure)
                     if failed >= 0:
                         sim._raise_sweep_failure(failed)

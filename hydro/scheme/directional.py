@@ -193,9 +193,11 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     With ``plain_pencils`` a pencil that one material fills alone takes the plain path
     (:mod:`impactpipe.hydro.scheme.plain_pencils`); without, every pencil takes the general path.
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
-    (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), None in scenes without them.
-    ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`),
-    None in scenes without porous materials.  ``bulk_predictor``: the pressure predictor of
+    (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), or None.
+    ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`;
+    a row of alpha_0 = 1 is a material without pores), or None.  The solver passes arrays in every
+    scene (all False, all alpha_0 = 1 where none applies), so that one compiled sweep serves them all;
+    a distension of exactly 1 divides nothing, so the answers are those of None bit for bit.  ``bulk_predictor``: the pressure predictor of
     cells holding a material with a shear modulus uses the bulk modulus K, not K_L (module
     docstring, step 2).
     """
@@ -427,15 +429,16 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
         if porosity[m, ALPHA0] > 1.0 and ar > 0.0:
             dist = arhoq_f[iq + (nq - 2) * cs] / ar
     pk, c2b, flag = pressure_sound_speed_in_line(kind, params, eos_table, dist * rk, ek)
-    pk /= dist
-    rho0_m = rho0_m / dist
+    if dist != 1.0:
+        pk /= dist
+        rho0_m = rho0_m / dist
     ytk = tensile_strength[m]
     if nq > 0 and ar > 0.0:
         ytk = tension_left(ytk, arhoq_f[iq + (nq - 1) * cs], ar)
         if grady_kipp is not None:
             if grady_kipp[m] and pk < 0.0:
                 pk *= tension_left(1.0, arhoq_f[iq + (nq - 1) * cs], ar)
-    if porosity is not None:
+    if dist != 1.0:
         ytk /= dist
     p_min = -ytk
     if rk < DISTENDED_FRACTION * rho0_m:

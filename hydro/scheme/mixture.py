@@ -127,11 +127,14 @@ def material_state(a, ar, are, kind, params, table, shear, tensile_strength, ten
     rk = ar / a
     ek = are / ar
     pk, c2k, flag = pressure_sound_speed(kind, params, table, distension * rk, ek)
-    pk /= distension
+    p_min = -tensile_strength
+    rho0 = reference_density(kind, params, table)
+    if distension != 1.0:
+        pk /= distension
+        p_min = -tensile_strength / distension
+        rho0 = rho0 / distension
     if tension_share != 1.0 and pk < 0.0:
         pk *= tension_share
-    p_min = -tensile_strength / distension
-    rho0 = reference_density(kind, params, table) / distension
     if rk < DISTENDED_FRACTION * rho0:
         p_min = 0.0
     limited = pk < p_min
@@ -185,7 +188,7 @@ def mixture_state(alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params
             a, ar, arhoe[b, k, ix, iy, iz], eos_kind[k], eos_params[k], eos_table, shear_modulus[k], ytk,
             tension_factor(grady_kipp, arhoq, nq, b, k, ix, iy, iz, ar), dist)
         if porosity is not None:
-            if present:
+            if present and dist != 1.0:
                 ytk /= dist
         if present:
             p += a * pk
