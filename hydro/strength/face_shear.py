@@ -60,17 +60,8 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
+from impactpipe.hydro.strength.hourglass import shifted_cell
 from impactpipe.hydro.strength.update import WK_L, WK_PHI, WK_S, WK_V, WK_Y, gradient_slot
-
-
-@njit(cache=True, inline="always")
-def _shifted(ix, iy, iz, d, k):
-    """The cell ``k`` steps from (ix, iy, iz) along axis ``d``."""
-    if d == 0:
-        return ix + k, iy, iz
-    if d == 1:
-        return ix, iy + k, iz
-    return ix, iy, iz + k
 
 
 @njit(cache=True, inline="always")
@@ -98,7 +89,7 @@ def _next_to_level(b, d, j, n, neighbor, neighbor_level):
 def _mean_shear(work, b, ix, iy, iz, d, i):
     """The cells' mean shear s = (S_id,j / phi_j + S_id,j+1 / phi_j+1) / 2 (Pa) at the face j + 1/2
     along ``d``, j = (ix, iy, iz)."""
-    bx, by, bz = _shifted(ix, iy, iz, d, 1)
+    bx, by, bz = shifted_cell(ix, iy, iz, d, 1)
     slot = _shear_slot(i, d)
     return 0.5 * (work[b, slot, ix, iy, iz] / work[b, WK_PHI, ix, iy, iz]
                   + work[b, slot, bx, by, bz] / work[b, WK_PHI, bx, by, bz])
@@ -112,7 +103,7 @@ def _trial(work, face, b, ix, iy, iz, d, i, ndim, h, gdt):
     old = face[b, d * ndim + i, ix, iy, iz]
     if math.isnan(old):
         return _mean_shear(work, b, ix, iy, iz, d, i)
-    bx, by, bz = _shifted(ix, iy, iz, d, 1)
+    bx, by, bz = shifted_cell(ix, iy, iz, d, 1)
     slot = WK_L + gradient_slot(d, i)
     rate = (work[b, WK_V + i, bx, by, bz] - work[b, WK_V + i, ix, iy, iz]) / h + 0.5 * (
         work[b, slot, ix, iy, iz] + work[b, slot, bx, by, bz])
@@ -137,7 +128,7 @@ def update_face_shear(dt, ndim, modulus, block_dx, neighbor, neighbor_level, wor
                 for iy in range(y0, ny - GHOST if ny > 1 else 1):
                     for iz in range(z0, nz - GHOST if nz > 1 else 1):
                         j = ix if d == 0 else (iy if d == 1 else iz)
-                        bx, by, bz = _shifted(ix, iy, iz, d, 1)
+                        bx, by, bz = shifted_cell(ix, iy, iz, d, 1)
                         fa = work[b, WK_PHI, ix, iy, iz]
                         fb = work[b, WK_PHI, bx, by, bz]
                         if fa <= 0.0 or fb <= 0.0 or _next_to_level(b, d, j, n, neighbor, neighbor_level):
@@ -189,8 +180,8 @@ def apply_face_shear(dt, ndim, mom, energy, block_dx, neighbor, neighbor_level, 
                         i_face = ix if d == 0 else (iy if d == 1 else iz)
                         for side in range(2):
                             # the face j + 1/2 is stored at cell j: this cell (side 1) or the one below (side 0)
-                            ax, ay, az = _shifted(ix, iy, iz, d, side - 1)
-                            bx, by, bz = _shifted(ix, iy, iz, d, side)
+                            ax, ay, az = shifted_cell(ix, iy, iz, d, side - 1)
+                            bx, by, bz = shifted_cell(ix, iy, iz, d, side)
                             fill = min(work[b, WK_PHI, ax, ay, az], work[b, WK_PHI, bx, by, bz])
                             if fill <= 0.0:
                                 continue

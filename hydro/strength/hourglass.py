@@ -42,7 +42,7 @@ from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
 
 
 @njit(cache=True, inline="always")
-def _shifted(ix, iy, iz, d, k):
+def shifted_cell(ix, iy, iz, d, k):
     """The cell ``k`` steps from (ix, iy, iz) along axis ``d``."""
     if d == 0:
         return ix + k, iy, iz
@@ -92,12 +92,12 @@ def apply_hourglass_viscosity(dt, ndim, coefficient, impedance, mom, energy, blo
                                 continue
                             phi_min = 1.0e300
                             for k in range(-1, 3):
-                                jx, jy, jz = _shifted(ix, iy, iz, d, first + k)
+                                jx, jy, jz = shifted_cell(ix, iy, iz, d, first + k)
                                 phi_min = min(phi_min, work[b, WK_PHI, jx, jy, jz])
                             if phi_min <= 0.0:
                                 continue
-                            ax, ay, az = _shifted(ix, iy, iz, d, first)
-                            bx, by, bz = _shifted(ix, iy, iz, d, first + 1)
+                            ax, ay, az = shifted_cell(ix, iy, iz, d, first)
+                            bx, by, bz = shifted_cell(ix, iy, iz, d, first + 1)
                             eta = coefficient * h * impedance * min(work[b, WK_PHI, ax, ay, az],
                                                                     work[b, WK_PHI, bx, by, bz])
                             t0 = 0.0
@@ -105,8 +105,8 @@ def apply_hourglass_viscosity(dt, ndim, coefficient, impedance, mom, energy, blo
                             t2 = 0.0
                             power = 0.0
                             for c in range(3):
-                                mx, my, mz = _shifted(ix, iy, iz, d, first - 1)
-                                px, py, pz = _shifted(ix, iy, iz, d, first + 2)
+                                mx, my, mz = shifted_cell(ix, iy, iz, d, first - 1)
+                                px, py, pz = shifted_cell(ix, iy, iz, d, first + 2)
                                 jump = (-work[b, WK_V + c, px, py, pz] + 3.0 * work[b, WK_V + c, bx, by, bz]
                                         - 3.0 * work[b, WK_V + c, ax, ay, az] + work[b, WK_V + c, mx, my, mz])
                                 traction = eta * jump / (4.0 * h)
