@@ -79,6 +79,26 @@ def test_the_exchange_plan_delivers_every_ghost_source_from_another_rank():
     assert plans[0][2] == []
 
 
+def test_the_runs_of_components_of_a_fill_travel_in_one_buffer_one_run_after_another():
+    """The stress step's fill of the work slots 0-1, 3-5 and 7 (v_theta and S_zz stay home) is
+    one message per peer: the strips' flat indices are each run's, run by run, and the buffer
+    holds those 6 of the 8 components' values of every strip cell, kept between calls."""
+    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 0.75], [16, 12], [("periodic", "periodic"),
+                                                                           ("outflow", "reflecting")], 4, 1)
+    work = np.arange(mesh.nblocks * 8 * int(np.prod(mesh.padded_shape)), dtype=float).reshape(
+        (mesh.nblocks, 8) + mesh.padded_shape)
+    runs = (slice(0, 2), slice(3, 6), slice(7, 8))
+    strips = exchange_routes(mesh, owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3), 0)[0][0].send
+    indices = strips.indices(work, runs)
+    assert np.array_equal(indices, np.concatenate([strips.indices(work, (run,)) for run in runs]))
+    packed = work.reshape(-1)[indices].reshape(6, -1)
+    for row, component in enumerate([0, 1, 3, 4, 5, 7]):
+        assert np.array_equal(packed[row], work[:, component].reshape(mesh.nblocks, -1)[strips.blocks, strips.cells])
+    buffer = strips.buffer((work,), runs)
+    assert buffer.size == 6 * len(strips.cells) == strips.values(work, runs)
+    assert strips.buffer((work,), runs) is buffer
+
+
 def test_the_stress_step_s_inner_blocks_have_no_face_towards_another_rank_on_any_axis():
     """2d-planar, 8 x 6 blocks, periodic along x, on 3 ranks: a rank's inner blocks (the stress
     step's kernels run on them while the strips travel) are exactly its blocks none of whose

@@ -90,35 +90,41 @@ class Strips:
 
     blocks: np.ndarray
     cells: np.ndarray
-    #: The flat indices of :meth:`indices` per field shape and components, computed once (an
-    #: exchange runs before every ghost fill).
+    #: The flat indices of :meth:`indices` per field shape and runs of components, computed once
+    #: (an exchange runs before every ghost fill).
     _indices: dict = field(default_factory=dict, compare=False, repr=False)
-    #: The message buffers of :meth:`buffer` per set of field shapes and components.
+    #: The message buffers of :meth:`buffer` per set of field shapes and runs of components.
     _buffers: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def indices(self, values: np.ndarray, components: slice = slice(None)) -> np.ndarray:
+    def indices(self, values: np.ndarray, runs: tuple[slice, ...] = (slice(None),)) -> np.ndarray:
         """Flat indices into ``values.reshape(-1)`` (a field (NB, C, NX, NY, NZ)) of every cell of
-        the strips, for each of the ``components`` in turn: (ncomponents, ncells) raveled."""
-        key = (values.shape, components.indices(values.shape[1]))
+        the strips, for each component of the ``runs`` (slices of C, one after another) in turn:
+        (ncomponents, ncells) raveled."""
+        key = (values.shape, run_bounds(runs, values.shape[1]))
         if key not in self._indices:
             ncomp = values.shape[1]
             per_block = int(np.prod(values.shape[2:]))
             base = self.blocks * (ncomp * per_block) + self.cells
-            chosen = np.arange(*key[1])
+            chosen = np.concatenate([np.arange(*bounds) for bounds in key[1]])
             self._indices[key] = (base[None, :] + (chosen * per_block)[:, None]).ravel()
         return self._indices[key]
 
-    def buffer(self, fields: tuple[np.ndarray, ...], components: slice = slice(None)) -> np.ndarray:
-        """A float64 buffer for the strips' values of the ``components`` of every field in
-        ``fields`` (one message), allocated once per set of field shapes and reused."""
-        key = (tuple(f.shape for f in fields), components.indices(fields[0].shape[1]) if fields else ())
+    def buffer(self, fields: tuple[np.ndarray, ...], runs: tuple[slice, ...] = (slice(None),)) -> np.ndarray:
+        """A float64 buffer for the strips' values of the components of the ``runs`` of every field
+        in ``fields`` (one message), allocated once per set of field shapes and runs and reused."""
+        key = (tuple(f.shape for f in fields), run_bounds(runs, fields[0].shape[1]) if fields else ())
         if key not in self._buffers:
-            self._buffers[key] = np.empty(sum(self.values(f, components) for f in fields))
+            self._buffers[key] = np.empty(sum(self.values(f, runs) for f in fields))
         return self._buffers[key]
 
-    def values(self, values: np.ndarray, components: slice = slice(None)) -> int:
-        """Number of values of the ``components`` of the field ``values`` the strips hold."""
-        return len(range(*components.indices(values.shape[1]))) * len(self.cells)
+    def values(self, values: np.ndarray, runs: tuple[slice, ...] = (slice(None),)) -> int:
+        """Number of values of the components of the ``runs`` of the field ``values`` the strips hold."""
+        return sum(len(range(*bounds)) for bounds in run_bounds(runs, values.shape[1])) * len(self.cells)
+
+
+def run_bounds(runs: tuple[slice, ...], ncomponents: int) -> tuple[tuple[int, int, int], ...]:
+    """(start, stop, step) of each slice of ``runs`` over ``ncomponents`` components (a hashable key)."""
+    return tuple(run.indices(ncomponents) for run in runs)
 
 
 @dataclass(frozen=True)

@@ -59,13 +59,14 @@ class GhostFill:
 
 @dataclass
 class FieldFill:
-    """A ghost fill of the ``components`` of a derived field along ``axis`` in two parts
-    (:meth:`WholeMesh.start_field_ghosts`): of the blocks where ``wanted[b]`` is not 0, their
-    ``layers`` ghost layers next to the interior; ``pending``: the strips still travelling, or
-    None (the fill is complete)."""
+    """A ghost fill of the components of a derived field that the ``runs`` (slices of its
+    component axis) select, along ``axis``, in two parts (:meth:`WholeMesh.start_field_ghosts`):
+    of the blocks where ``wanted[b]`` is not 0, their ``layers`` ghost layers next to the
+    interior; ``pending``: the strips of every run still travelling (one message per peer
+    rank), or None (the fill is complete)."""
 
     axis: int
-    components: slice
+    runs: tuple[slice, ...]
     wanted: np.ndarray | None
     layers: int | None
     pending: PendingStrips | None = None
@@ -99,21 +100,23 @@ class WholeMesh:
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
         """Complete the ghost fill :meth:`start_ghosts` began (nothing left for one process)."""
 
-    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
                           wanted: np.ndarray | None = None, layers: int | None = None) -> None:
-        """Fill the ghosts of the ``components`` of a derived field (velocities, stresses) of
-        every block along ``axis`` (on a uniform mesh only of the blocks where ``wanted[b]`` is
-        not 0, when given, and of those only the ``layers`` ghost layers next to the interior),
-        without sign flips (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`)."""
-        fill_field_ghosts(field[:, components], mesh, axis, wanted=wanted, layers=layers)
+        """Fill the ghosts of the components of a derived field (velocities, stresses) that the
+        ``runs`` (slices of its component axis) select, of every block along ``axis`` (on a
+        uniform mesh only of the blocks where ``wanted[b]`` is not 0, when given, and of those
+        only the ``layers`` ghost layers next to the interior), without sign flips
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`, run by run)."""
+        for run in runs:
+            fill_field_ghosts(field[:, run], mesh, axis, wanted=wanted, layers=layers)
 
-    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
                            wanted: np.ndarray | None = None, layers: int | None = None) -> FieldFill:
         """Fill the ghosts of :meth:`fill_field_ghosts` as far as this process can without waiting
         for another's strips; the blocks ``early`` of :meth:`field_groups` may then be advanced
         before :meth:`finish_field_ghosts` completes the rest.  One process fills every ghost here."""
-        self.fill_field_ghosts(field, mesh, axis, components, wanted, layers)
-        return FieldFill(axis, components, wanted, layers)
+        self.fill_field_ghosts(field, mesh, axis, runs, wanted, layers)
+        return FieldFill(axis, runs, wanted, layers)
 
     def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
         """Complete the ghost fill :meth:`start_field_ghosts` began (nothing left for one process)."""
@@ -288,61 +291,75 @@ class BlockRanges(WholeMesh):
         exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis, self.traffic)
         prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 
-    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
                           wanted: np.ndarray | None = None, layers: int | None = None) -> None:
-        """Receive the neighbours' strips of the ``components`` of ``field`` along ``axis``, then
+        """Receive the neighbours' strips of the components of ``field`` that the ``runs`` (slices
+        of its component axis) select along ``axis``, every run in one message per peer, then
         fill the owned blocks' ghosts of those components (on a uniform mesh only of the blocks
         where ``wanted[b]`` is not 0, when given, and of those only the ``layers`` ghost layers
-        next to the interior)."""
+        next to the interior).  On an adaptive mesh the fine cells the restriction reads travel
+        with the strips, and the coarse/fine ghosts follow (:meth:`_fill_level_field_ghosts`)."""
         g = int(mesh.ghost[axis])
         if g == 0:
             return
-        exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, components)
+        exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, runs)
         if mesh.adaptive:
-            plans = self.plans(mesh, axis)
-            exchange_strips(self.comm, plans["restrict_routes"], (field,), RESTRICT_TAG + axis, self.traffic,
-                            components)
-        if wanted is not None and not mesh.adaptive:
-            fill_ghosts_where(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
-                              wanted, g if layers is None else layers)
-        else:
-            fill_ghosts(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
+            exchange_strips(self.comm, self.plans(mesh, axis)["restrict_routes"], (field,), RESTRICT_TAG + axis,
+                            self.traffic, runs)
+        for run in runs:
+            if wanted is not None and not mesh.adaptive:
+                fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
+                                  wanted, g if layers is None else layers)
+            else:
+                fill_ghosts(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
         if mesh.adaptive:
-            restrict_ghosts(field[:, components], plans["restrict"], plans["restrict_weight"])
-            exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, self.traffic,
-                            components)
-            prolong_field_ghosts(field[:, components], plans["prolong"])
+            self._fill_level_field_ghosts(field, mesh, axis, runs)
 
-    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, components: slice,
+    def _fill_level_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...]) -> None:
+        """The coarse/fine ghosts along ``axis`` of the components of ``field`` that the ``runs``
+        select, after the same-level ones: restriction of this rank's rows, the coarse cells of
+        other ranks that the prolongation reads (every run in one message per peer), the
+        prolongation of this rank's rows."""
+        plans = self.plans(mesh, axis)
+        for run in runs:
+            restrict_ghosts(field[:, run], plans["restrict"], plans["restrict_weight"])
+        exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, self.traffic, runs)
+        for run in runs:
+            prolong_field_ghosts(field[:, run], plans["prolong"])
+
+    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
                            wanted: np.ndarray | None = None, layers: int | None = None) -> FieldFill:
-        """Post the strips of the ``components`` of ``field`` along ``axis``
-        (:func:`~.exchange.post_strips`) and fill the ghosts of the owned blocks where
-        ``wanted[b]`` is not 0 (their ``layers`` layers next to the interior) from what this
-        rank holds, then return while the strips travel: the inner blocks of
+        """Post the strips of the components of ``field`` that the ``runs`` (slices of its
+        component axis) select along ``axis``, every run in one message per peer
+        (:func:`~.exchange.post_strips`), and fill the ghosts of those components of the owned
+        blocks where ``wanted[b]`` is not 0 (their ``layers`` layers next to the interior) from
+        what this rank holds, then return while the strips travel: the inner blocks of
         :meth:`field_groups` have their ghosts along ``axis`` complete.  The slabs of the edge
         blocks that face another rank's block are filled again by :meth:`finish_field_ghosts`.
         Without ``wanted``, or on an adaptive mesh, the whole fill happens here
         (:meth:`fill_field_ghosts`)."""
         g = int(mesh.ghost[axis])
         if g == 0 or wanted is None or mesh.adaptive:
-            self.fill_field_ghosts(field, mesh, axis, components, wanted, layers)
-            return FieldFill(axis, components, wanted, layers)
+            self.fill_field_ghosts(field, mesh, axis, runs, wanted, layers)
+            return FieldFill(axis, runs, wanted, layers)
         layers = g if layers is None else layers
-        pending = post_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, components)
-        fill_ghosts_where(field[:, components], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
-                          wanted, layers)
-        return FieldFill(axis, components, wanted, layers, pending)
+        pending = post_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, runs)
+        for run in runs:
+            fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, wanted,
+                              layers)
+        return FieldFill(axis, runs, wanted, layers, pending)
 
     def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
         """Wait for the strips of :meth:`start_field_ghosts` and fill the edge blocks' slabs that
-        face another rank's block (:func:`~impactpipe.hydro.mesh.boundary.fill_ghosts_from_ranks_where`);
+        face another rank's block, run by run (:func:`~impactpipe.hydro.mesh.boundary.fill_ghosts_from_ranks_where`);
         their other slabs keep what :meth:`start_field_ghosts` gave them."""
         if fill.pending is None:
             return
         finish_strips(fill.pending)
-        fill_ghosts_from_ranks_where(field[:, fill.components], mesh.neighbor, mesh.neighbor_level, fill.axis,
-                                     int(mesh.ghost[fill.axis]), self.field_overlap[1], self.lo, self.hi,
-                                     fill.wanted, fill.layers)
+        for run in fill.runs:
+            fill_ghosts_from_ranks_where(field[:, run], mesh.neighbor, mesh.neighbor_level, fill.axis,
+                                         int(mesh.ghost[fill.axis]), self.field_overlap[1], self.lo, self.hi,
+                                         fill.wanted, fill.layers)
 
     def field_groups(self, mesh) -> tuple[np.ndarray, np.ndarray]:
         """(early, late): the owned blocks none of whose faces has another rank's block beside

@@ -66,13 +66,14 @@ class Traffic:
 
 
 def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int, traffic: Traffic,
-                    components: slice = slice(None)) -> None:
-    """Send this rank's strips and receive its peers' into the ``components`` of ``fields``, one
-    message per peer (every field packed into one float64 buffer, message tag ``tag``),
-    non-blocking both ways, then unpack; the bytes, messages and seconds go to ``traffic``.
-    The buffers are kept on the routes' strips and reused (:meth:`Strips.buffer`); packing
-    and unpacking are numba loops over the strips' flat indices."""
-    finish_strips(post_strips(comm, routes, fields, tag, traffic, components))
+                    runs: tuple[slice, ...] = (slice(None),)) -> None:
+    """Send this rank's strips and receive its peers' into the components of ``fields`` that the
+    ``runs`` (slices of the component axis) select, one message per peer (every field's runs
+    packed one after another into one float64 buffer, message tag ``tag``), non-blocking both
+    ways, then unpack; the bytes, messages and seconds go to ``traffic``.  The buffers are kept
+    on the routes' strips and reused (:meth:`Strips.buffer`); packing and unpacking are numba
+    loops over the strips' flat indices."""
+    finish_strips(post_strips(comm, routes, fields, tag, traffic, runs))
 
 
 @dataclass
@@ -82,13 +83,13 @@ class PendingStrips:
     requests: list
     received: list
     fields: tuple
-    components: slice
+    runs: tuple
     traffic: Traffic
     sent_bytes: int
 
 
 def post_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int, traffic: Traffic,
-                components: slice = slice(None)) -> PendingStrips:
+                runs: tuple[slice, ...] = (slice(None),)) -> PendingStrips:
     """The first half of :func:`exchange_strips`: post the receives, pack and post the sends,
     and return without waiting, so that work which needs none of the peers' strips can run
     while they travel; :func:`finish_strips` waits and unpacks.  The sent strips are packed
@@ -96,20 +97,20 @@ def post_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: 
     started = time.perf_counter()
     requests, received, sent_bytes = [], [], 0
     for route in routes:
-        buffer = route.receive.buffer(fields, components)
+        buffer = route.receive.buffer(fields, runs)
         requests.append(comm.Irecv(buffer, source=route.peer, tag=tag))
         received.append((buffer, route.receive))
     flats = [_flat(field) for field in fields]
     for route in routes:
-        buffer = route.send.buffer(fields, components)
+        buffer = route.send.buffer(fields, runs)
         start = 0
         for flat, field in zip(flats, fields):
-            start = pack_values(flat, route.send.indices(field, components), buffer, start)
+            start = pack_values(flat, route.send.indices(field, runs), buffer, start)
         requests.append(comm.Isend(buffer, dest=route.peer, tag=tag))
         sent_bytes += buffer.nbytes
     traffic.messages_sent += len(routes)
     traffic.exchange_seconds += time.perf_counter() - started
-    return PendingStrips(requests, received, fields, components, traffic, sent_bytes)
+    return PendingStrips(requests, received, fields, runs, traffic, sent_bytes)
 
 
 def finish_strips(pending: PendingStrips) -> None:
@@ -124,7 +125,7 @@ def finish_strips(pending: PendingStrips) -> None:
     for buffer, strips in pending.received:
         start = 0
         for flat, field in zip(flats, pending.fields):
-            start = unpack_values(buffer, start, strips.indices(field, pending.components), flat)
+            start = unpack_values(buffer, start, strips.indices(field, pending.runs), flat)
     traffic.bytes_sent += pending.sent_bytes
     traffic.bytes_received += sum(buffer.nbytes for buffer, _ in pending.received)
     traffic.messages_received += len(pending.received)

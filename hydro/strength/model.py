@@ -19,11 +19,12 @@ momentum sources with a kick - update - kick splitting (velocity Verlet; docs/st
 The work arrays' ghosts are filled after each of steps 1 to 3, for the slots that step wrote
 and a kernel reads in a ghost, one layer deep unless the hourglass viscosity reads two
 (:meth:`MaterialStrength._ghost_reads`; reflecting walls mirror them: the normal velocity and
-the shear components with one index normal to the wall change sign).  Across MPI ranks on a
-uniform mesh a fill only starts there: the next kernel (the kick's stress divergence, or the
-stress update) runs on the blocks with no face towards another rank's block while the strips
-travel, and on the others once they have arrived (:meth:`MaterialStrength._around_ghosts`).
-The state's ghosts are not used.  Updating the stress between two
+the shear components with one index normal to the wall change sign).  Across MPI ranks a
+fill sends all its slots in one message per neighbouring rank; on a uniform mesh it only
+starts there: the next kernel (the kick's stress divergence, or the stress update) runs on
+the blocks with no face towards another rank's block while the strips travel, and on the
+others once they have arrived (:meth:`MaterialStrength._around_ghosts`).  The state's
+ghosts are not used.  Updating the stress between two
 half kicks is neutral for elastic waves up to the CFL limit; updating it before one full kick
 (the scheme this replaced) amplified them by 2 % per step at cfl 0.4 (docs/strength.md).
 
@@ -119,15 +120,21 @@ def work_ghost_reads(ndim: int, geometry_code: int, wide: bool) -> tuple[int, fr
     return 1, frozenset(skipped)
 
 
-def slot_runs(slots: slice, skipped: frozenset) -> list[slice]:
+def slot_runs(slots: slice, skipped: frozenset) -> tuple[slice, ...]:
     """The runs of consecutive work slots of ``slots`` left when the ``skipped`` slots are taken
-    out: one ghost fill each (one message per peer rank across MPI ranks)."""
+    out: the components of one ghost fill, all sent in one message per peer rank across MPI
+    ranks (packed one run after another)."""
     runs, start = [], slots.start
     for stop in sorted(skipped & set(range(slots.start, slots.stop))) + [slots.stop]:
         if stop > start:
             runs.append(slice(start, stop))
         start = stop + 1
-    return runs
+    return tuple(runs)
+
+
+def _in_runs(slot: int, runs: tuple[slice, ...]) -> bool:
+    """Whether the work slot ``slot`` lies in one of the ``runs`` (:func:`slot_runs`)."""
+    return any(run.start <= slot < run.stop for run in runs)
 
 
 class LevelBlocks(NamedTuple):
@@ -513,37 +520,38 @@ class MaterialStrength:
                           ) -> list[FieldFill]:
         """Ghosts of the work arrays' ``slots`` along ``axis`` that some kernel reads
         (:meth:`_ghost_reads`): copies of the neighbours' cells (coarse/fine faces: restriction
-        and copies; neighbours of another MPI rank: received strips;
-        ``partition.start_field_ghosts``, whose unfinished fills are returned: they complete
-        the slabs facing other ranks' blocks), then the wall sign flips.  A copied velocity or fill
-        equals the one computed from copied conserved ghosts, so the work arrays never need the
-        state's ghosts.  On a uniform mesh only the blocks holding material get ghosts
-        (:attr:`holds`), and of those only the layers the kernels read: the stress step reads
-        none of a void block's (every kernel skips its void cells), and half of an impact's
-        blocks are void.  The ghosts left stale may be flipped at a wall; nothing reads them.
-        An adaptive mesh fills every layer of every block (its prolongation reads the coarse
-        blocks' ghosts); with a ``level`` (:class:`LevelBlocks`) on an adaptive mesh, the level's
-        blocks only: the same-level copies of the layers the kernels read into the blocks
-        holding material, as on a uniform mesh, then every layer at the level's coarse/fine faces
-        (restriction from the finer level, copies of the coarser level's interior cells:
-        :func:`_fill_level_work_ghosts`, which read no ghost), and the wall sign flips of the
-        level's blocks."""
+        and copies; neighbours of another MPI rank: received strips, every run of the slots in
+        one message per peer rank; ``partition.start_field_ghosts``, whose unfinished fills are
+        returned: they complete the slabs facing other ranks' blocks), then the wall sign flips.
+        A copied velocity or fill equals the one computed from copied conserved ghosts, so the
+        work arrays never need the state's ghosts.  On a uniform mesh only the blocks holding
+        material get ghosts (:attr:`holds`), and of those only the layers the kernels read: the
+        stress step reads none of a void block's (every kernel skips its void cells), and half
+        of an impact's blocks are void.  The ghosts left stale may be flipped at a wall; nothing
+        reads them.  An adaptive mesh fills every layer of every block (its prolongation reads
+        the coarse blocks' ghosts); with a ``level`` (:class:`LevelBlocks`) on an adaptive mesh,
+        the level's blocks only: the same-level copies of the layers the kernels read into the
+        blocks holding material, as on a uniform mesh, then every layer at the level's
+        coarse/fine faces (restriction from the finer level, copies of the coarser level's
+        interior cells: :func:`_fill_level_work_ghosts`, which read no ghost), and the wall sign
+        flips of the level's blocks."""
         layers, skipped = self._ghost_reads()
         by_level = level is not None and self.mesh.adaptive
         if self.mesh.adaptive and not by_level:
             layers = GHOST
         wanted = level.mask & self.holds if by_level else None
+        runs = slot_runs(slots, skipped)
         fills = []
-        for run in slot_runs(slots, skipped):
-            if by_level:
+        if by_level:
+            for run in runs:
                 _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, wanted, layers)
-            else:
-                fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, run, self.holds, layers))
-            for side in (0, 1):
-                flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-                flips += _GRADIENT_FLIP[axis]
-                self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if run.start <= c < run.stop], layers,
-                                       level.walls[axis, side] if by_level else None)
+        else:
+            fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, runs, self.holds, layers))
+        for side in (0, 1):
+            flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
+            flips += _GRADIENT_FLIP[axis]
+            self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if _in_runs(c, runs)], layers,
+                                   level.walls[axis, side] if by_level else None)
         return fills
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
