@@ -23,9 +23,9 @@ The model follows what the code does in this version (:mod:`impactpipe.hydro.par
   3D).  With strength the step fills the work arrays' ghosts three more times per axis
   (:mod:`impactpipe.hydro.strength.model`): after loading the stress, the velocities, fill
   and stress; after the half kick, the velocities; after the stress update, the stress;
-  each without the slots no kernel reads in a ghost (in 2D S_zz, in r-z v_theta too), one
-  message per run of consecutive slots (:func:`exchange_components`: in r-z runs of 2, 3
-  and 1, then 2, then 2 and 1 slots; in 3D 10, 3 and 6).  The code overlaps the
+  each without the slots no kernel reads in a ghost (in 2D S_zz, in r-z v_theta too), its
+  runs of consecutive slots packed into one message per peer rank (:func:`exchange_components`:
+  in r-z 6 of 8 slots, 2 of 3 and 3 of 4; in 3D 10, 3 and 6).  The code overlaps the
   exchanges of a uniform mesh with the kernels of the blocks that need no other rank's
   strips; the model gives the step with the exchanges blocking and the bound an overlap
   can reach (below).
@@ -164,16 +164,16 @@ def exchange_components(ndim: int, geometry_code: int, nmat: int, strength: bool
     peer rank): the state's (3M + 4 + M NQ, NQ = NS + 2 with strength) and, with strength, the
     three fills of the work arrays (:mod:`impactpipe.hydro.strength.model`): velocities, fill and
     stress (slots WK_V .. WK_S + NS - 1), velocities (WK_V .. WK_V + 2) and stress (WK_S ..
-    WK_S + NS - 1), each without the slots no kernel reads in a ghost and sent as one message
-    per run of consecutive slots (:func:`~impactpipe.hydro.strength.model.work_ghost_reads`,
+    WK_S + NS - 1), each without the slots no kernel reads in a ghost, its runs of consecutive
+    slots in one message (:func:`~impactpipe.hydro.strength.model.work_ghost_reads`,
     :func:`~impactpipe.hydro.strength.model.slot_runs`)."""
     if not strength:
         return [3 * nmat + 4]
     ns = stress_slots(ndim)
     _, skipped = work_ghost_reads(ndim, geometry_code, False)
     fills = (slice(WK_V, WK_S + ns), slice(WK_V, WK_V + 3), slice(WK_S, WK_S + ns))
-    return [3 * nmat + 4 + nmat * (ns + 2)] + [run.stop - run.start for fill in fills
-                                               for run in slot_runs(fill, skipped)]
+    return [3 * nmat + 4 + nmat * (ns + 2)] + [sum(run.stop - run.start for run in slot_runs(fill, skipped))
+                                               for fill in fills]
 
 
 def reductions_per_step(ndim: int, strength: bool) -> int:
@@ -390,8 +390,9 @@ def project(measured: list[dict], steps: dict[str, dict], net: Interconnect) -> 
 
 
 def check_measured(measured: list[dict]) -> list[dict]:
-    """The model's bytes sent per step and rank for every measured multi-rank case (the case's
-    mesh and cut, its fills per axis), beside the counted bytes: the formulas against the code."""
+    """The model's bytes and messages sent per step and rank for every measured multi-rank case
+    (the case's mesh and cut, its messages per axis and peer, :func:`exchange_components`), and
+    its allreduces, beside the counted ones: the formulas against the code."""
     rows = []
     for document in measured:
         for r in document["results"]:
@@ -447,7 +448,8 @@ def main() -> None:
         return
     for row in report["check"]:
         print(f"check {row['case']} ({row['block_cells']}-cell blocks, {row['ranks']} ranks): bytes sent per step "
-              f"{row['model_bytes_sent']} modelled, {row['measured_bytes_sent']} counted")
+              f"{row['model_bytes_sent']} modelled, {row['measured_bytes_sent']} counted; messages "
+              f"{row['model_messages_sent']} modelled, {row['measured_messages_sent']} counted")
     for name, run in report["runs"].items():
         print(f"{name}: {run['cell_updates']:.3g} cell-updates, c_cell {run['costs']['cell_update_s']:.3g} s")
         for mode in ("strong", "weak"):

@@ -167,23 +167,38 @@ def test_load_imbalance_follows_whole_blocks():
     assert row["step_terms_s"]["compute"] == pytest.approx(2 * 16 ** 2 * 4e-7)
 
 
-def test_exchange_components_count_the_state_and_the_runs_of_the_three_strength_fills():
+def test_exchange_components_count_the_state_and_the_three_strength_fills_one_message_each():
     """State 3M + 4 + M (NS + 2) = 22 values per strip cell in 2D; the work arrays' fills of
-    velocities + fill + stress, velocities, stress, one message per run of the slots a kernel
-    reads in a ghost: in r-z without v_theta and S_zz (2, 3, 1; 2; 2, 1), in plane 2D without
-    S_zz (6, 1; 3; 2, 1), in 3D every slot (10; 3; 6)."""
+    velocities + fill + stress, velocities, stress, each one message of the slots a kernel
+    reads in a ghost: in r-z without v_theta and S_zz (runs 2, 3, 1; 2; 2, 1 packed: 6; 2; 3),
+    in plane 2D without S_zz (7; 3; 3), in 3D every slot (10; 3; 6)."""
     rz, planar, cube = GEOMETRY_CODES["2d-cylindrical"], GEOMETRY_CODES["2d-planar"], GEOMETRY_CODES["3d"]
     assert sm.exchange_components(3, cube, 2, strength=False) == [10]
-    assert sm.exchange_components(2, rz, 2, strength=True) == [22, 2, 3, 1, 2, 2, 1]
-    assert sm.exchange_components(2, planar, 2, strength=True) == [22, 6, 1, 3, 2, 1]
+    assert sm.exchange_components(2, rz, 2, strength=True) == [22, 6, 2, 3]
+    assert sm.exchange_components(2, planar, 2, strength=True) == [22, 7, 3, 3]
     assert sm.exchange_components(3, cube, 2, strength=True) == [3 * 2 + 4 + 2 * 8, 10, 3, 6]
 
 
+def test_the_check_counts_the_bytes_and_messages_the_r_z_impact_with_strength_sends_on_two_ranks():
+    """benchmarks/mpi_scaling.py's 2d-cyl-strength on two ranks (32 x 75 blocks of 16^2, 1104 and
+    1296 blocks) counts 337 920 B in 8 messages per step and rank: one message per axis for the
+    state's fill and for each of the three work-array fills."""
+    ranks = [{"blocks": blocks, "bytes_sent": 337920, "messages_sent": 8, "allreduces": 4} for blocks in (1104, 1296)]
+    document = {"ranks": 2, "results": [{"case": "2d-cyl-strength", "block_cells": 16, "blocks_per_axis": [32, 75],
+                                         "periodic": [False, False], "materials": 2, "strength": True,
+                                         "ranks": ranks}]}
+    (row,) = sm.check_measured([document])
+    assert row["exchange_components"] == [22, 6, 2, 3]
+    assert row["model_bytes_sent"] == row["measured_bytes_sent"] == [337920, 337920]
+    assert row["model_messages_sent"] == row["measured_messages_sent"] == [8, 8]
+    assert row["model_allreduces"] == 4
+
+
 def test_slot_runs_leave_out_the_skipped_slots():
-    assert slot_runs(slice(0, 8), frozenset({2, 6})) == [slice(0, 2), slice(3, 6), slice(7, 8)]
-    assert slot_runs(slice(4, 8), frozenset({6})) == [slice(4, 6), slice(7, 8)]
-    assert slot_runs(slice(0, 3), frozenset({2})) == [slice(0, 2)]
-    assert slot_runs(slice(4, 10), frozenset()) == [slice(4, 10)]
+    assert slot_runs(slice(0, 8), frozenset({2, 6})) == (slice(0, 2), slice(3, 6), slice(7, 8))
+    assert slot_runs(slice(4, 8), frozenset({6})) == (slice(4, 6), slice(7, 8))
+    assert slot_runs(slice(0, 3), frozenset({2})) == (slice(0, 2),)
+    assert slot_runs(slice(4, 10), frozenset()) == (slice(4, 10),)
 
 
 def test_exchange_costs_separate_the_cost_per_message_from_the_cost_per_byte():
@@ -195,7 +210,7 @@ def test_exchange_costs_separate_the_cost_per_message_from_the_cost_per_byte():
                 "exchange_s": 3e-3 + messages * 8e-5 + 2 * sent * 6e-10, "wait_s": 3e-3}
         return {"ranks": 2, "results": [{"case": case, "ranks": [rank, rank]}]}
 
-    pack, message = sm.exchange_costs([document("3d", 1, 5242880), document("2d", 14, 337920)])
+    pack, message = sm.exchange_costs([document("3d", 1, 5242880), document("2d", 8, 337920)])
     assert pack == pytest.approx(6e-10) and message == pytest.approx(8e-5)
     with pytest.raises(ValueError, match="different bytes per message"):
         sm.exchange_costs([document("3d", 1, 5242880)])
