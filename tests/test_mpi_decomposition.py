@@ -13,6 +13,7 @@ from impactpipe.hydro.amr.regrid import plan_leaves, remesh
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.decomposition import (
     TRACER_REACH,
+    every_axis_routes,
     exchange_routes,
     field_overlap_groups,
     neighbourhood_routes,
@@ -77,6 +78,38 @@ def test_the_exchange_plan_delivers_every_ghost_source_from_another_rank():
                 assert np.array_equal(route.send.blocks, back.receive.blocks)
                 assert np.array_equal(route.send.cells, back.receive.cells)
     assert plans[0][2] == []
+
+
+def test_a_fill_along_every_axis_sends_each_peer_its_strips_of_both_axes_in_one_message():
+    """2d-planar, 4 x 3 blocks, periodic along x, on 4 ranks: the joined routes (the stress step's
+    work-array fills) have one route per peer that borders the rank along some axis, whose
+    strips are that peer's strips along x, then along y; every cell is an interior cell (no
+    ghost that another axis's fill writes), and what one rank sends another receives.  Rank 0
+    borders ranks 1 and 2 along both axes: 2 messages where a message per axis made 4."""
+    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 0.75], [16, 12], [("periodic", "periodic"),
+                                                                           ("outflow", "reflecting")], 4, 1)
+    g, n, (px, py, pz) = int(mesh.ghost[0]), mesh.interior_shape[0], mesh.padded_shape
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 4)
+    plans = {rank: exchange_routes(mesh, cuts, rank) for rank in range(4)}
+    joined = {rank: every_axis_routes(plans[rank]) for rank in range(4)}
+    for rank in range(4):
+        peers = sorted({route.peer for axis in range(3) for route in plans[rank][axis]})
+        assert [route.peer for route in joined[rank]] == peers
+        for route in joined[rank]:
+            along = [r for axis in range(3) for r in plans[rank][axis] if r.peer == route.peer]
+            for direction in ("send", "receive"):
+                strips = getattr(route, direction)
+                parts = [getattr(r, direction) for r in along]
+                assert np.array_equal(strips.blocks, np.concatenate([part.blocks for part in parts]))
+                assert np.array_equal(strips.cells, np.concatenate([part.cells for part in parts]))
+            ix, iy = route.send.cells // (py * pz), route.send.cells // pz % py
+            assert ((g <= ix) & (ix < g + n) & (g <= iy) & (iy < g + n)).all()
+            back = next(r for r in joined[route.peer] if r.peer == rank)
+            assert np.array_equal(route.send.blocks, back.receive.blocks)
+            assert np.array_equal(route.send.cells, back.receive.cells)
+    assert sum(len(route.send.cells) for route in joined[0]) == sum(
+        len(route.send.cells) for axis in range(3) for route in plans[0][axis])
+    assert [len(plans[0][axis]) for axis in range(3)] == [2, 2, 0] and len(joined[0]) == 2
 
 
 def test_the_runs_of_components_of_a_fill_travel_in_one_buffer_one_run_after_another():

@@ -14,7 +14,9 @@ neighbour belongs to another rank, its owner sends that strip (the neighbour's i
 cells within ``GHOST`` of the face, over the interior of the other axes) before the fill.
 The plan lists, per axis and per peer rank, the strips in one deterministic order (by block,
 then low face before high face), computed with numpy from the mesh alone, the same on every
-rank.
+rank.  A derived field's fills along every axis (the stress step's work arrays) send the
+strips of every axis to a peer in one message (:func:`every_axis_routes`): the strips are
+interior cells, which no ghost fill writes, so the axes' fills do not wait for each other.
 
 Tracers' neighbourhood: a tracer's velocity and peak-pressure stencil around a point in block
 b reads interior cells of b and of the blocks beside it across faces, edges and corners, at
@@ -154,6 +156,26 @@ def exchange_routes(mesh, cuts: np.ndarray, rank: int) -> list[list[Route]]:
         routes.append([Route(q, _strips(mesh, axis, strips.get((rank, q), [])),
                              _strips(mesh, axis, strips.get((q, rank), []))) for q in peers])
     return routes
+
+
+def every_axis_routes(routes: list[list[Route]]) -> list[Route]:
+    """The routes of :func:`exchange_routes` (per axis, by peer) joined into one per peer rank:
+    its strips along every axis, axis after axis (each axis's in its own order).  A fill of a
+    field along every axis whose strips are interior cells (none a ghost that another axis's
+    fill writes) sends them in one message per peer; a cell beside faces along two axes is
+    sent once per face."""
+    peers = sorted({route.peer for axis_routes in routes for route in axis_routes})
+    joined = []
+    for peer in peers:
+        mine = [route for axis_routes in routes for route in axis_routes if route.peer == peer]
+        joined.append(Route(peer, joined_strips([route.send for route in mine]),
+                            joined_strips([route.receive for route in mine])))
+    return joined
+
+
+def joined_strips(parts: list[Strips]) -> Strips:
+    """The cells of the strips ``parts``, one after another."""
+    return Strips(np.concatenate([part.blocks for part in parts]), np.concatenate([part.cells for part in parts]))
 
 
 def overlap_groups(mesh, cuts: np.ndarray, rank: int) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -34,10 +34,10 @@ from impactpipe.hydro.mesh.boundary import (
     fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
 
-from .decomposition import (block_costs, block_routes, exchange_routes, field_overlap_groups, neighbourhood_routes,
-                            overlap_groups, owned_ranges, owners, plan_routes)
-from .exchange import (FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips, Traffic,
-                       broadcast_arrays, exchange_strips, finish_strips, gather_owned_blocks, gather_rows,
+from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
+                            neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
+from .exchange import (FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
+                       Traffic, broadcast_arrays, exchange_strips, finish_strips, gather_owned_blocks, gather_rows,
                        post_strips, share_owned_blocks)
 
 log = logging.getLogger(__name__)
@@ -60,16 +60,21 @@ class GhostFill:
 @dataclass
 class FieldFill:
     """A ghost fill of the components of a derived field that the ``runs`` (slices of its
-    component axis) select, along ``axis``, in two parts (:meth:`WholeMesh.start_field_ghosts`):
-    of the blocks where ``wanted[b]`` is not 0, their ``layers`` ghost layers next to the
-    interior; ``pending``: the strips of every run still travelling (one message per peer
-    rank), or None (the fill is complete)."""
+    component axis) select, along each of the ``axes``, in two parts
+    (:meth:`WholeMesh.start_field_ghosts`): of the blocks where ``wanted[b]`` is not 0, their
+    ``layers`` ghost layers next to the interior; ``pending``: the strips of every axis and run
+    still travelling (one message per peer rank), or None (the fill is complete)."""
 
-    axis: int
+    axes: tuple[int, ...]
     runs: tuple[slice, ...]
-    wanted: np.ndarray | None
+    wanted: np.ndarray
     layers: int | None
     pending: PendingStrips | None = None
+
+
+def used_axes(mesh) -> tuple[int, ...]:
+    """The axes of ``mesh`` with ghost cells."""
+    return tuple(axis for axis in range(3) if mesh.ghost[axis] > 0)
 
 
 class WholeMesh:
@@ -110,13 +115,21 @@ class WholeMesh:
         for run in runs:
             fill_field_ghosts(field[:, run], mesh, axis, wanted=wanted, layers=layers)
 
-    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
-                           wanted: np.ndarray | None = None, layers: int | None = None) -> FieldFill:
-        """Fill the ghosts of :meth:`fill_field_ghosts` as far as this process can without waiting
-        for another's strips; the blocks ``early`` of :meth:`field_groups` may then be advanced
-        before :meth:`finish_field_ghosts` completes the rest.  One process fills every ghost here."""
-        self.fill_field_ghosts(field, mesh, axis, runs, wanted, layers)
-        return FieldFill(axis, runs, wanted, layers)
+    def start_field_ghosts(self, field: np.ndarray, mesh, runs: tuple[slice, ...], wanted: np.ndarray,
+                           layers: int | None = None) -> FieldFill:
+        """The ghosts of :meth:`fill_field_ghosts` along every used axis of a uniform mesh, as far
+        as this process can fill them without waiting for another's strips; the blocks ``early``
+        of :meth:`field_groups` may then be advanced before :meth:`finish_field_ghosts`
+        completes the rest.  The axes' fills read interior cells only and write disjoint ghost
+        slabs, so their order does not matter.  One process fills every ghost here.  An
+        adaptive mesh fills axis by axis (:meth:`fill_field_ghosts`): its prolongation reads
+        the ghosts that the fills of the axes before wrote."""
+        if mesh.adaptive:
+            raise ValueError("an adaptive mesh fills a field's ghosts axis by axis (fill_field_ghosts)")
+        axes = used_axes(mesh)
+        for axis in axes:
+            self.fill_field_ghosts(field, mesh, axis, runs, wanted, layers)
+        return FieldFill(axes, runs, wanted, layers)
 
     def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
         """Complete the ghost fill :meth:`start_field_ghosts` began (nothing left for one process)."""
@@ -214,6 +227,8 @@ class BlockRanges(WholeMesh):
         #: (inner, edge) owned blocks over every axis, by block number
         #: (:func:`~.decomposition.field_overlap_groups`).
         self.field_overlap = field_overlap_groups(mesh, cuts, comm.rank)
+        #: The strips along every axis by peer, one message each (:func:`~.decomposition.every_axis_routes`).
+        self.field_routes = every_axis_routes(self.routes)
         #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their routes.
         self._plans: dict[int, dict] = {}
         #: The routes of the face fluxes per (axis, row length), built on first use.
@@ -327,39 +342,44 @@ class BlockRanges(WholeMesh):
         for run in runs:
             prolong_field_ghosts(field[:, run], plans["prolong"])
 
-    def start_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
-                           wanted: np.ndarray | None = None, layers: int | None = None) -> FieldFill:
+    def start_field_ghosts(self, field: np.ndarray, mesh, runs: tuple[slice, ...], wanted: np.ndarray,
+                           layers: int | None = None) -> FieldFill:
         """Post the strips of the components of ``field`` that the ``runs`` (slices of its
-        component axis) select along ``axis``, every run in one message per peer
-        (:func:`~.exchange.post_strips`), and fill the ghosts of those components of the owned
-        blocks where ``wanted[b]`` is not 0 (their ``layers`` layers next to the interior) from
-        what this rank holds, then return while the strips travel: the inner blocks of
-        :meth:`field_groups` have their ghosts along ``axis`` complete.  The slabs of the edge
-        blocks that face another rank's block are filled again by :meth:`finish_field_ghosts`.
-        Without ``wanted``, or on an adaptive mesh, the whole fill happens here
+        component axis) select along every used axis of a uniform mesh, every axis and run in one
+        message per peer (:attr:`field_routes`, :func:`~.exchange.post_strips`), and fill the
+        ghosts of those components of the owned blocks where ``wanted[b]`` is not 0 (their
+        ``layers`` layers next to the interior) from what this rank holds, axis by axis, then
+        return while the strips travel: the inner blocks of :meth:`field_groups` have their
+        ghosts complete.  The strips are interior cells and each axis's fill writes its own
+        ghost slabs only, so one axis's strips need nothing from another's fill.  The slabs of
+        the edge blocks that face another rank's block are filled again by
+        :meth:`finish_field_ghosts`.  An adaptive mesh fills axis by axis
         (:meth:`fill_field_ghosts`)."""
-        g = int(mesh.ghost[axis])
-        if g == 0 or wanted is None or mesh.adaptive:
-            self.fill_field_ghosts(field, mesh, axis, runs, wanted, layers)
-            return FieldFill(axis, runs, wanted, layers)
-        layers = g if layers is None else layers
-        pending = post_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, runs)
-        for run in runs:
-            fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, wanted,
-                              layers)
-        return FieldFill(axis, runs, wanted, layers, pending)
+        if mesh.adaptive:
+            raise ValueError("an adaptive mesh fills a field's ghosts axis by axis (fill_field_ghosts)")
+        axes = used_axes(mesh)
+        pending = post_strips(self.comm, self.field_routes, (field,), FIELD_TAG, self.traffic, runs)
+        for axis in axes:
+            g = int(mesh.ghost[axis])
+            for run in runs:
+                fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
+                                  wanted, g if layers is None else layers)
+        return FieldFill(axes, runs, wanted, layers, pending)
 
     def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
         """Wait for the strips of :meth:`start_field_ghosts` and fill the edge blocks' slabs that
-        face another rank's block, run by run (:func:`~impactpipe.hydro.mesh.boundary.fill_ghosts_from_ranks_where`);
-        their other slabs keep what :meth:`start_field_ghosts` gave them."""
+        face another rank's block, axis by axis and run by run
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_ghosts_from_ranks_where`); their other slabs
+        keep what :meth:`start_field_ghosts` gave them."""
         if fill.pending is None:
             return
         finish_strips(fill.pending)
-        for run in fill.runs:
-            fill_ghosts_from_ranks_where(field[:, run], mesh.neighbor, mesh.neighbor_level, fill.axis,
-                                         int(mesh.ghost[fill.axis]), self.field_overlap[1], self.lo, self.hi,
-                                         fill.wanted, fill.layers)
+        for axis in fill.axes:
+            g = int(mesh.ghost[axis])
+            for run in fill.runs:
+                fill_ghosts_from_ranks_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g,
+                                             self.field_overlap[1], self.lo, self.hi, fill.wanted,
+                                             g if fill.layers is None else fill.layers)
 
     def field_groups(self, mesh) -> tuple[np.ndarray, np.ndarray]:
         """(early, late): the owned blocks none of whose faces has another rank's block beside

@@ -26,6 +26,9 @@ NEIGHBOURHOOD_TAG = 200
 RESTRICT_TAG = 300
 PROLONG_TAG = 400
 FLUX_TAG = 500
+#: Message tag of the strips along every axis before a derived field's ghost fills along every
+#: axis (the stress step's work arrays), one message per peer.
+FIELD_TAG = 600
 
 
 @dataclass

@@ -20,13 +20,14 @@ The work arrays' ghosts are filled after each of steps 1 to 3, for the slots tha
 and a kernel reads in a ghost, one layer deep unless the hourglass viscosity reads two
 (:meth:`MaterialStrength._ghost_reads`; reflecting walls mirror them: the normal velocity and
 the shear components with one index normal to the wall change sign).  Across MPI ranks a
-fill sends all its slots in one message per neighbouring rank; on a uniform mesh it only
-starts there: the next kernel (the kick's stress divergence, or the stress update) runs on
-the blocks with no face towards another rank's block while the strips travel, and on the
-others once they have arrived (:meth:`MaterialStrength._around_ghosts`).  The state's
-ghosts are not used.  Updating the stress between two
-half kicks is neutral for elastic waves up to the CFL limit; updating it before one full kick
-(the scheme this replaced) amplified them by 2 % per step at cfl 0.4 (docs/strength.md).
+fill sends all its slots along every axis in one message per neighbouring rank on a uniform
+mesh (along each axis in turn on an adaptive one), and on a uniform mesh it only starts
+there: the next kernel (the kick's stress divergence, or the stress update) runs on the
+blocks with no face towards another rank's block while the strips travel, and on the others
+once they have arrived (:meth:`MaterialStrength._around_ghosts`).  The state's ghosts are
+not used.  Updating the stress between two half kicks is neutral for elastic waves up to the
+CFL limit; updating it before one full kick (the scheme this replaced) amplified them by 2 %
+per step at cfl 0.4 (docs/strength.md).
 
 It exists only when some material has a yield model; a strengthless scene allocates none
 of its arrays and runs none of its kernels.
@@ -484,14 +485,33 @@ class MaterialStrength:
                                 self.hourglass[0] > 0.0 or self.face is not None)
 
     def _start_work_ghosts(self, partition, slots: slice, level: LevelBlocks | None = None) -> list[FieldFill]:
-        """Start the ghost fills of the work arrays' ``slots`` along every axis
-        (:meth:`_fill_work_ghosts`); the fills whose strips from other MPI ranks still travel
-        are returned, for :meth:`_finish_work_ghosts` (after :meth:`_around_ghosts` ran the
-        kernels that need none of them)."""
-        fills = []
+        """Start the ghost fills of the work arrays' ``slots`` along every axis, for the slots'
+        runs that some kernel reads in a ghost (:meth:`_ghost_reads`, :func:`slot_runs`), then
+        the wall sign flips.  A copied velocity or fill equals the one computed from copied
+        conserved ghosts, so the work arrays never need the state's ghosts.
+
+        On a uniform mesh the axes are one fill (``partition.start_field_ghosts``): copies of
+        the neighbours' cells, and across MPI ranks the strips of every axis and run in one
+        message per peer rank.  The strips are interior cells and each axis's copies and
+        flips write only its own ghost slabs (corners excepted, which no kernel reads: every
+        stencil steps along one axis), so no axis waits for another's.  Only the blocks
+        holding material get ghosts (:attr:`holds`), and of those only the layers the kernels
+        read: the stress step reads none of a void block's (every kernel skips its void cells),
+        and half of an impact's blocks are void.  The ghosts left stale may be flipped at a
+        wall; nothing reads them.  The fill is returned while strips from other ranks may still
+        travel, for :meth:`_finish_work_ghosts` (after :meth:`_around_ghosts` ran the kernels
+        that need none of them).  An adaptive mesh fills the axes one after another, completely
+        (:meth:`_fill_work_ghosts`), and returns no fill."""
+        layers, skipped = self._ghost_reads()
+        runs = slot_runs(slots, skipped)
+        if self.mesh.adaptive:
+            for axis in range(self.mesh.ndim):
+                self._fill_work_ghosts(partition, axis, runs, level)
+            return []
+        fill = partition.start_field_ghosts(self.work, self.mesh, runs, self.holds, layers)
         for axis in range(self.mesh.ndim):
-            fills += self._fill_work_ghosts(partition, axis, slots, level)
-        return fills
+            self._flip_work_walls(axis, runs, layers)
+        return [fill]
 
     def _finish_work_ghosts(self, partition, fills: list[FieldFill]) -> None:
         """Complete the ghost ``fills`` of :meth:`_start_work_ghosts`: the slabs facing other
@@ -516,43 +536,39 @@ class MaterialStrength:
         self._finish_work_ghosts(partition, fills)
         kernel(late)
 
-    def _fill_work_ghosts(self, partition, axis: int, slots: slice, level: LevelBlocks | None = None
-                          ) -> list[FieldFill]:
-        """Ghosts of the work arrays' ``slots`` along ``axis`` that some kernel reads
-        (:meth:`_ghost_reads`): copies of the neighbours' cells (coarse/fine faces: restriction
-        and copies; neighbours of another MPI rank: received strips, every run of the slots in
-        one message per peer rank; ``partition.start_field_ghosts``, whose unfinished fills are
-        returned: they complete the slabs facing other ranks' blocks), then the wall sign flips.
-        A copied velocity or fill equals the one computed from copied conserved ghosts, so the
-        work arrays never need the state's ghosts.  On a uniform mesh only the blocks holding
-        material get ghosts (:attr:`holds`), and of those only the layers the kernels read: the
-        stress step reads none of a void block's (every kernel skips its void cells), and half
-        of an impact's blocks are void.  The ghosts left stale may be flipped at a wall; nothing
-        reads them.  An adaptive mesh fills every layer of every block (its prolongation reads
-        the coarse blocks' ghosts); with a ``level`` (:class:`LevelBlocks`) on an adaptive mesh,
+    def _fill_work_ghosts(self, partition, axis: int, runs: tuple[slice, ...], level: LevelBlocks | None = None
+                          ) -> None:
+        """Ghosts along ``axis`` of the work arrays' ``runs`` of slots on an adaptive mesh, then
+        the wall sign flips: every layer of every block (the prolongation reads the coarse
+        blocks' ghosts, those of the axes filled before included;
+        ``partition.fill_field_ghosts``: same-level copies, across MPI ranks received strips,
+        restriction and copies at coarse/fine faces).  With a ``level`` (:class:`LevelBlocks`),
         the level's blocks only: the same-level copies of the layers the kernels read into the
         blocks holding material, as on a uniform mesh, then every layer at the level's
         coarse/fine faces (restriction from the finer level, copies of the coarser level's
         interior cells: :func:`_fill_level_work_ghosts`, which read no ghost), and the wall sign
         flips of the level's blocks."""
-        layers, skipped = self._ghost_reads()
-        by_level = level is not None and self.mesh.adaptive
-        if self.mesh.adaptive and not by_level:
-            layers = GHOST
-        wanted = level.mask & self.holds if by_level else None
-        runs = slot_runs(slots, skipped)
-        fills = []
-        if by_level:
-            for run in runs:
-                _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, wanted, layers)
-        else:
-            fills.append(partition.start_field_ghosts(self.work, self.mesh, axis, runs, self.holds, layers))
+        if level is None:
+            partition.fill_field_ghosts(self.work, self.mesh, axis, runs, self.holds, GHOST)
+            self._flip_work_walls(axis, runs, GHOST)
+            return
+        layers = self._ghost_reads()[0]
+        for run in runs:
+            _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, level.mask & self.holds, layers)
+        self._flip_work_walls(axis, runs, layers, level)
+
+    def _flip_work_walls(self, axis: int, runs: tuple[slice, ...], layers: int, level: LevelBlocks | None = None
+                         ) -> None:
+        """Negate, in the ``layers`` ghost layers of the reflecting faces along ``axis`` (of the
+        ``level``'s blocks when given), the work slots of the ``runs`` whose sign flips there:
+        the normal velocity and the shear stress with one index normal to the wall (at a rough
+        wall, :meth:`set_rough_wall`, every velocity component and no stress), and the velocity
+        gradients along the wall."""
         for side in (0, 1):
             flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
             flips += _GRADIENT_FLIP[axis]
             self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if _in_runs(c, runs)], layers,
-                                   level.walls[axis, side] if by_level else None)
-        return fills
+                                   None if level is None else level.walls[axis, side])
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
                           blocks: np.ndarray | None = None) -> None:
