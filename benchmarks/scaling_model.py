@@ -17,15 +17,16 @@ The model follows what the code does in this version (:mod:`impactpipe.hydro.par
 * Exchange.  Before every ghost fill along axis d, each block face whose neighbour another
   rank owns costs one strip each way (:func:`~impactpipe.hydro.parallel.decomposition.exchange_routes`):
   GHOST = 2 layers of B^(d-1) interior cells of c float64 components,
-  s = 8 GHOST B^(d-1) c bytes; one message per peer rank, axis and fill.  A step fills the
-  state's ghosts once per axis (c = 3M + 4 + M NQ, M materials, NQ transported scalars per
-  material: 0 without strength, NS + 2 with it, NS = 4 stress components in 2D and 6 in
-  3D).  With strength the step fills the work arrays' ghosts three more times per axis
+  s = 8 GHOST B^(d-1) c bytes.  A step fills the state's ghosts once per axis (c = 3M + 4 +
+  M NQ, M materials, NQ transported scalars per material: 0 without strength, NS + 2 with
+  it, NS = 4 stress components in 2D and 6 in 3D), one message per peer rank and axis.  With
+  strength the step fills the work arrays' ghosts three more times
   (:mod:`impactpipe.hydro.strength.model`): after loading the stress, the velocities, fill
   and stress; after the half kick, the velocities; after the stress update, the stress;
   each without the slots no kernel reads in a ghost (in 2D S_zz, in r-z v_theta too), its
-  runs of consecutive slots packed into one message per peer rank (:func:`exchange_components`:
-  in r-z 6 of 8 slots, 2 of 3 and 3 of 4; in 3D 10, 3 and 6).  The code overlaps the
+  runs of consecutive slots along every axis packed into one message per peer rank
+  (:func:`exchange_components`: in r-z 6 of 8 slots, 2 of 3 and 3 of 4; in 3D 10, 3 and 6;
+  the peers of a rank along any axis, :func:`fill_peers`).  The code overlaps the
   exchanges of a uniform mesh with the kernels of the blocks that need no other rank's
   strips; the model gives the step with the exchanges blocking and the bound an overlap
   can reach (below).
@@ -41,14 +42,17 @@ The model follows what the code does in this version (:mod:`impactpipe.hydro.par
 Time of one step on P ranks (s), the slowest rank setting each phase:
 
     t_compute  = max_r W_r n_b c_cell
-    t_exchange = sum over fills k and axes d of
-                 max_r [ m_rd (alpha + c_msg) + 2 f_rd s_kd c_pack + f_on_rd s_kd / beta_shm ]
-                 + max_n f_off_nd s_kd / beta_link
+    t_exchange = sum over the axes d of the state's fill
+                 max_r [ m_rd (alpha + c_msg) + 2 f_rd s_0d c_pack + f_on_rd s_0d / beta_shm ]
+                 + max_n f_off_nd s_0d / beta_link
+               + sum over the work arrays' fills k of
+                 max_r [ m_r (alpha + c_msg) + sum_d (2 f_rd s_kd c_pack + f_on_rd s_kd / beta_shm) ]
+                 + max_n sum_d f_off_nd s_kd / beta_link
     t_reduce   = R alpha ceil(log2 P)
 
 with f_rd the rank's block faces along d whose neighbour another rank owns (f_on_rd of them
 to ranks on its own node, f_off_nd the faces of node n's ranks to other nodes), m_rd its
-peers along d, c_cell (s) the measured compute cost of a cell-update on one core, c_pack
+peers along d, m_r its peers along any axis, c_cell (s) the measured compute cost of a cell-update on one core, c_pack
 (s/B) the measured cost of packing and unpacking a byte of strips, c_msg (s) the measured
 fixed cost of one message (posting, the packing call, the unpacking of the reply), alpha (s) the latency,
 beta_shm (B/s) the on-node bandwidth of one rank and beta_link (B/s) the bandwidth of one
@@ -160,12 +164,13 @@ def padded_state_bytes(mesh: BlockMesh, components: int) -> int:
 
 
 def exchange_components(ndim: int, geometry_code: int, nmat: int, strength: bool) -> list[int]:
-    """Float64 components per cell of each message of one step's ghost fills along one axis (per
-    peer rank): the state's (3M + 4 + M NQ, NQ = NS + 2 with strength) and, with strength, the
-    three fills of the work arrays (:mod:`impactpipe.hydro.strength.model`): velocities, fill and
-    stress (slots WK_V .. WK_S + NS - 1), velocities (WK_V .. WK_V + 2) and stress (WK_S ..
-    WK_S + NS - 1), each without the slots no kernel reads in a ghost, its runs of consecutive
-    slots in one message (:func:`~impactpipe.hydro.strength.model.work_ghost_reads`,
+    """Float64 components per strip cell of each of one step's ghost fills: first the state's
+    (3M + 4 + M NQ, NQ = NS + 2 with strength; one message per peer rank and axis), then, with
+    strength, the three fills of the work arrays (:mod:`impactpipe.hydro.strength.model`):
+    velocities, fill and stress (slots WK_V .. WK_S + NS - 1), velocities (WK_V .. WK_V + 2)
+    and stress (WK_S .. WK_S + NS - 1), each without the slots no kernel reads in a ghost, its
+    runs of consecutive slots along every axis in one message per peer rank
+    (:func:`~impactpipe.hydro.strength.model.work_ghost_reads`,
     :func:`~impactpipe.hydro.strength.model.slot_runs`)."""
     if not strength:
         return [3 * nmat + 4]
@@ -221,25 +226,59 @@ def face_counts(mesh: BlockMesh, cuts: np.ndarray, ranks_per_node: int) -> list[
     return out
 
 
+def fill_peers(mesh: BlockMesh, cuts: np.ndarray) -> np.ndarray:
+    """(P,) m_r: the ranks that share a block face with rank r along some axis, the peers of a
+    fill along every axis in one message per peer (the work arrays' fills,
+    :func:`~impactpipe.hydro.parallel.decomposition.every_axis_routes`).  Vectorised over the blocks."""
+    nranks = len(cuts) - 1
+    owner = owners(cuts)
+    neighbour = mesh.neighbor[:, :mesh.ndim, :].ravel()
+    block = np.repeat(np.arange(mesh.nblocks), 2 * mesh.ndim)
+    inside = neighbour >= 0
+    sender, receiver = owner[block[inside]], owner[neighbour[inside]]
+    apart = sender != receiver
+    pairs = np.unique(np.minimum(sender[apart], receiver[apart]) * nranks + np.maximum(sender[apart], receiver[apart]))
+    return np.bincount(np.concatenate([pairs // nranks, pairs % nranks]), minlength=nranks)
+
+
 def step_time(mesh: BlockMesh, components: list[int], reductions: int, costs: Costs, net: Interconnect,
               cuts: np.ndarray) -> dict:
     """The terms of one step's time (s) on the ranks of ``cuts`` (module docstring):
     ``compute``, ``pack``, ``network`` (latency and transfer of the strips), ``reduce``
-    (``reductions`` allreduces)."""
+    (``reductions`` allreduces).  ``components``: the state's fill (a message per peer and
+    axis), then the work arrays' (a message per peer for every axis), :func:`exchange_components`."""
     nranks = len(cuts) - 1
     compute = int(np.diff(cuts).max()) * block_cells_of(mesh) * costs.cell_update_s
     pack = network = 0.0
     if nranks > 1:
-        for axis, faces in enumerate(face_counts(mesh, cuts, net.ranks_per_node)):
-            for c in components:
-                strip = WORD * strip_values(mesh, axis, c)
-                packing = 2 * faces["faces"] * strip * costs.pack_s_per_byte + faces["peers"] * costs.message_s
-                moving = faces["peers"] * net.latency_s + faces["on_node"] * strip / net.shm_bytes_per_s
-                slowest = int(np.argmax(packing + moving))
-                pack += packing[slowest]
-                network += moving[slowest] + faces["node_off"].max() * strip / net.link_bytes_per_s
+        faces = list(enumerate(face_counts(mesh, cuts, net.ranks_per_node)))
+        state, *work = components
+        messages = [(state, [axis_faces], axis_faces[1]["peers"]) for axis_faces in faces]
+        messages += [(c, faces, fill_peers(mesh, cuts)) for c in work]
+        for c, axes, peers in messages:
+            packing, moving = message_time(mesh, c, axes, peers, costs, net)
+            pack += packing
+            network += moving
     reduce = reductions * tree_latency(net, nranks)
     return {"compute": compute, "pack": pack, "network": network, "reduce": reduce}
+
+
+def message_time(mesh: BlockMesh, components: int, axes: list[tuple[int, dict]], peers: np.ndarray, costs: Costs,
+                 net: Interconnect) -> tuple[float, float]:
+    """(packing, network) (s) of a fill whose strips of ``components`` values per cell along the
+    ``axes`` ((axis, :func:`face_counts` of it) pairs) travel in one message to each of a rank's
+    ``peers`` (P,): the slowest rank's packing and fixed message costs, and its latency and
+    on-node transfer plus the busiest node link's transfer."""
+    packing = peers * costs.message_s
+    moving = peers * net.latency_s
+    link = 0.0
+    for axis, faces in axes:
+        strip = WORD * strip_values(mesh, axis, components)
+        packing = packing + 2 * faces["faces"] * strip * costs.pack_s_per_byte
+        moving = moving + faces["on_node"] * strip / net.shm_bytes_per_s
+        link = link + faces["node_off"] * strip / net.link_bytes_per_s
+    slowest = int(np.argmax(packing + moving))
+    return float(packing[slowest]), float(moving[slowest] + np.max(link))
 
 
 def tree_latency(net: Interconnect, nranks: int) -> float:
@@ -391,8 +430,9 @@ def project(measured: list[dict], steps: dict[str, dict], net: Interconnect) -> 
 
 def check_measured(measured: list[dict]) -> list[dict]:
     """The model's bytes and messages sent per step and rank for every measured multi-rank case
-    (the case's mesh and cut, its messages per axis and peer, :func:`exchange_components`), and
-    its allreduces, beside the counted ones: the formulas against the code."""
+    (the case's mesh and cut; the state's fill a message per axis and peer, each work-array fill
+    a message per peer, :func:`exchange_components`, :func:`fill_peers`), and its allreduces,
+    beside the counted ones: the formulas against the code."""
     rows = []
     for document in measured:
         for r in document["results"]:
@@ -414,7 +454,8 @@ def check_measured(measured: list[dict]) -> list[dict]:
                          "exchange_components": components,
                          "model_bytes_sent": model.tolist(),
                          "measured_bytes_sent": [rank["bytes_sent"] for rank in r["ranks"]],
-                         "model_messages_sent": sum(len(components) * f["peers"] for f in faces).tolist(),
+                         "model_messages_sent": (sum(f["peers"] for f in faces)
+                                                 + (len(components) - 1) * fill_peers(mesh, cuts)).tolist(),
                          "measured_messages_sent": [rank["messages_sent"] for rank in r["ranks"]],
                          "model_allreduces": reductions_per_step(ndim, r["strength"]),
                          "measured_allreduces": [rank["allreduces"] for rank in r["ranks"]]})

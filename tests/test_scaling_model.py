@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro.mesh.blocks import GEOMETRY_CODES, GHOST, BlockMesh
-from impactpipe.hydro.parallel.decomposition import exchange_routes
+from impactpipe.hydro.parallel.decomposition import every_axis_routes, exchange_routes
 from impactpipe.hydro.strength.model import slot_runs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,14 +89,18 @@ def as_lists(counts):
 def test_face_counts_of_the_real_cut_match_a_brute_force_count_and_the_exchange_plan(blocks, periodic, nranks,
                                                                                         per_node):
     """The vectorised count over mesh.neighbor equals a loop over block positions, and its faces
-    and peers are the strips and routes of the code's exchange plan, rank by rank."""
+    and peers are the strips and routes of the code's exchange plan, rank by rank; the peers
+    along any axis are the routes of a fill along every axis in one message per peer."""
     mesh = box(blocks, 4, periodic)
     cuts = sm.cuts_for(mesh, nranks)
     counts = sm.face_counts(mesh, cuts, per_node)
     assert as_lists(counts) == brute_force_faces(mesh, cuts, per_node)
     strip_cells = {axis: sm.strip_values(mesh, axis, 1) for axis in range(mesh.ndim)}
+    peers = sm.fill_peers(mesh, cuts)
     for rank in range(nranks):
         routes = exchange_routes(mesh, cuts, rank)
+        assert len(every_axis_routes(routes)) == peers[rank]
+        assert peers[rank] == len({route.peer for axis_routes in routes for route in axis_routes})
         for axis in range(mesh.ndim):
             sent = sum(len(route.send.cells) for route in routes[axis])
             assert sent == counts[axis]["faces"][rank] * strip_cells[axis]
@@ -169,8 +173,8 @@ def test_load_imbalance_follows_whole_blocks():
 
 def test_exchange_components_count_the_state_and_the_three_strength_fills_one_message_each():
     """State 3M + 4 + M (NS + 2) = 22 values per strip cell in 2D; the work arrays' fills of
-    velocities + fill + stress, velocities, stress, each one message of the slots a kernel
-    reads in a ghost: in r-z without v_theta and S_zz (runs 2, 3, 1; 2; 2, 1 packed: 6; 2; 3),
+    velocities + fill + stress, velocities, stress, each one message (for every axis) of the
+    slots a kernel reads in a ghost: in r-z without v_theta and S_zz (runs 2, 3, 1; 2; 2, 1 packed: 6; 2; 3),
     in plane 2D without S_zz (7; 3; 3), in 3D every slot (10; 3; 6)."""
     rz, planar, cube = GEOMETRY_CODES["2d-cylindrical"], GEOMETRY_CODES["2d-planar"], GEOMETRY_CODES["3d"]
     assert sm.exchange_components(3, cube, 2, strength=False) == [10]
@@ -181,16 +185,16 @@ def test_exchange_components_count_the_state_and_the_three_strength_fills_one_me
 
 def test_the_check_counts_the_bytes_and_messages_the_r_z_impact_with_strength_sends_on_two_ranks():
     """benchmarks/mpi_scaling.py's 2d-cyl-strength on two ranks (32 x 75 blocks of 16^2, 1104 and
-    1296 blocks) counts 337 920 B in 8 messages per step and rank: one message per axis for the
-    state's fill and for each of the three work-array fills."""
-    ranks = [{"blocks": blocks, "bytes_sent": 337920, "messages_sent": 8, "allreduces": 4} for blocks in (1104, 1296)]
+    1296 blocks) counts 337 920 B in 5 messages per step and rank: one message per axis for the
+    state's fill (2) and one for both axes for each of the three work-array fills (3)."""
+    ranks = [{"blocks": blocks, "bytes_sent": 337920, "messages_sent": 5, "allreduces": 4} for blocks in (1104, 1296)]
     document = {"ranks": 2, "results": [{"case": "2d-cyl-strength", "block_cells": 16, "blocks_per_axis": [32, 75],
                                          "periodic": [False, False], "materials": 2, "strength": True,
                                          "ranks": ranks}]}
     (row,) = sm.check_measured([document])
     assert row["exchange_components"] == [22, 6, 2, 3]
     assert row["model_bytes_sent"] == row["measured_bytes_sent"] == [337920, 337920]
-    assert row["model_messages_sent"] == row["measured_messages_sent"] == [8, 8]
+    assert row["model_messages_sent"] == row["measured_messages_sent"] == [5, 5]
     assert row["model_allreduces"] == 4
 
 
@@ -222,6 +226,20 @@ def test_each_message_costs_its_fixed_share_of_the_packing():
     one = sm.step_time(mesh, [10], 4, COSTS, NET, cuts)["pack"]
     two = sm.step_time(mesh, [5, 5], 4, COSTS, NET, cuts)["pack"]
     assert two - one == pytest.approx(COSTS.message_s)
+
+
+def test_a_work_array_fill_sends_every_axis_in_one_message_per_peer():
+    """Two ranks of a 4 x 4-block box cut after 5 blocks border each other along x and y: the
+    state's fill sends a message per axis, a work-array fill (the second component) the same
+    strips in one: one c_msg less than a second state-like fill."""
+    mesh = box((4, 4), 8, (False, False))
+    cuts = np.array([0, 5, 16])
+    counts = sm.face_counts(mesh, cuts, 2)
+    assert [axis["peers"].tolist() for axis in counts] == [[1, 1], [1, 1]]
+    assert sm.fill_peers(mesh, cuts).tolist() == [1, 1]
+    one = sm.step_time(mesh, [10], 3, COSTS, NET, cuts)["pack"]
+    two = sm.step_time(mesh, [10, 10], 3, COSTS, NET, cuts)["pack"]
+    assert two - 2 * one == pytest.approx(-COSTS.message_s)
 
 
 def test_reductions_are_the_time_step_the_sweeps_and_the_strength_check():
