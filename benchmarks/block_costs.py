@@ -72,16 +72,21 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
             a = strength.arrays
             rho0 = strength._reference_densities(eos)
             face = strength.face_flux[:, blocks].copy() if strength.face_flux.shape[1] else strength.face_flux
-            cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, a.model, strength.ns, work, 0, len(blocks),
-                                     np.zeros(len(blocks), dtype=np.uint8), np.zeros(len(blocks), dtype=np.uint8))
+            gravity = np.zeros(0) if strength.surface_gravity is None else strength.surface_gravity
+            copies = np.arange(len(blocks), dtype=np.int64)
+            holds, has_mass, stressed = (np.zeros(len(blocks), dtype=np.uint8) for _ in range(3))
+            cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, a.model, strength.ns, work, copies, holds,
+                                     has_mass, stressed)
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
-                                    counters[0], face, 3 * strength.nmat, 0, len(blocks))
-            cell_velocities(arho, mom, work, 0, len(blocks))
+                                    counters[0], face, 3 * strength.nmat, copies, stressed)
+            cell_velocities(arho, mom, work, copies)
             update_stress(dt, mesh.geometry_code, mesh.ndim, alpha, arho, arhoe, arhoq, lo, dx, eos.kind, eos.params,
                           eos.table, rho0, a.model, a.params, a.shear, a.tensile_strength, work,
-                          strength.counts[blocks].copy(), strength.amounts[blocks].copy(), 0, len(blocks))
+                          strength.counts[blocks].copy(), strength.amounts[blocks].copy(), copies,
+                          strength.damage.model, strength.damage.params, gravity, strength._porosity_rows, has_mass,
+                          stressed, strength.face is not None)
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
-                                    counters[0], face, 3 * strength.nmat, 0, len(blocks))
+                                    counters[0], face, 3 * strength.nmat, copies, stressed)
         best = min(best, time.perf_counter() - started)
     return best
 

@@ -10,15 +10,14 @@ import pytest
 from scipy.optimize import brentq
 
 from impactpipe.hydro import BlockMesh, HydroState, Simulation
-from impactpipe.hydro.eos import (energy_from_pressure, pack_eos, pressure_sound_speed, reference_densities,
-                                  temperature)
+from impactpipe.hydro.eos import energy_from_pressure, pack_eos, pressure_sound_speed, temperature
 from impactpipe.hydro.eos.porosity import pack_porosity, wave_speed_ratio
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.problems.impact import sphere_fraction
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.parameters import GEO
-from impactpipe.hydro.strength.update import CNT_TENSILE_FAILURE, CNT_YIELD, WK_PHI, update_stress
+from impactpipe.hydro.strength.update import CNT_TENSILE_FAILURE, CNT_YIELD, WK_PHI
 from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
 from impactpipe.pipeline.presets import resolve_strength
 
@@ -53,18 +52,15 @@ def shear_cell_run(matrix_pressure, shear_rate, steps, dt=1.0e-6, chi=0.5):
     strength.prepare_state(state)
     nq = strength.nq
     state.arhoq[:, nq - 2] = ALPHA0 * state.arho[:, 0]
-    arrays = strength.arrays
     xs = (np.arange(16 + 2 * GHOST) - GHOST + 0.5) * 0.125 - 1.0
     first = last_energy = None
+    strength.has_mass[:] = 1
     for _ in range(steps):
         last_energy = mesh.interior(state.arhoe)[0, 0, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
         strength.work[:] = 0.0
         strength.work[0, 0, :, :, 0] = shear_rate * xs[None, :]
         strength.work[0, WK_PHI] = 1.0
-        update_stress(dt, mesh.geometry_code, 2, state.alpha, state.arho, state.arhoe, state.arhoq, mesh.block_lo,
-                      mesh.block_dx, eos.kind, eos.params, eos.table, reference_densities(eos), arrays.model,
-                      arrays.params, arrays.shear, arrays.tensile_strength, strength.work, strength.counts,
-                      strength.amounts, 0, mesh.nblocks, porosity=rows)
+        strength.stress_step(state, dt, eos, np.arange(mesh.nblocks))
         if first is None:
             first = mesh.interior(state.arhoq)[0, 3, 8, 8, 0] / mesh.interior(state.arho)[0, 0, 8, 8, 0]
     return mesh, state, strength, eos, rows, first, last_energy

@@ -38,7 +38,7 @@ from __future__ import annotations
 from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
-from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V, block_at, block_count
+from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 
 
@@ -181,31 +181,29 @@ def _ghosts_carry_stress(work, b, ns, nx, ny, nz):
 
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
-                            boundary, face_flux, col0, lo, hi, blocks=None, stressed_blocks=None):
+                            boundary, face_flux, col0, blocks, stressed_blocks):
     """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the
-    blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64, when given: one refinement
-    level's); see the module docstring.  A cell sums its faces low then high along axis 0,
-    then along 1 and 2, one call of :func:`_face_stress` and :func:`_add_face` per face with
-    the axis and side as constants.
+    ``blocks`` listed (int64: a process's range, or one refinement level's); see the module
+    docstring.  A cell sums its faces low then high along axis 0, then along 1 and 2, one call
+    of :func:`_face_stress` and :func:`_add_face` per face with the axis and side as constants.
 
     ``stressed_blocks[NB]`` (uint8, from :func:`impactpipe.hydro.strength.update.cell_velocity_and_stress`
-    or :func:`impactpipe.hydro.strength.update.update_stress`) or None: a block whose interior
+    or :func:`impactpipe.hydro.strength.update.update_stress`): a block whose interior
     cells carry no stress (``stressed_blocks[b] == 0``) and whose first ghost layer carries none
     either (:func:`_ghosts_carry_stress`) is skipped.  Every face stress of its cells is then
     +-0, so the kick would add dt A S = +0.0 to their momentum and energy: skipping it leaves
     them as they are, bit for bit (but for a momentum of -0.0, which the addition would
-    turn into +0.0).  None: every block is kicked."""
+    turn into +0.0)."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     ns = 3 if ndim == 1 else (4 if ndim == 2 else 6)
     cylindrical = geometry == CYLINDRICAL
-    for i in prange(block_count(lo, hi, blocks)):
-        b = block_at(i, lo, blocks)
-        if stressed_blocks is not None:
-            if stressed_blocks[b] == 0 and not _ghosts_carry_stress(work, b, ns, nx, ny, nz):
-                continue
+    for i in prange(blocks.shape[0]):
+        b = blocks[i]
+        if stressed_blocks[b] == 0 and not _ghosts_carry_stress(work, b, ns, nx, ny, nz):
+            continue
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0
         dx2 = block_dx[b, 2] if ndim > 2 else 1.0

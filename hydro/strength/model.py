@@ -77,7 +77,7 @@ from typing import NamedTuple
 import numpy as np
 
 from impactpipe.hydro.eos import reference_densities
-from impactpipe.hydro.eos.porosity import ALPHA0
+from impactpipe.hydro.eos.porosity import ALPHA0, NPOROSITY
 from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import allocate_face_flux, prolong_field_ghosts, reflux, restrict_ghosts
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
@@ -103,6 +103,8 @@ _ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
 #: Work slots of the face shear stress whose sign flips in a wall's ghost, reflecting or rough, per
 #: wall-normal axis a: the velocity gradients L_ai along the wall (the face across the wall reads them).
 _GRADIENT_FLIP = {a: tuple(WK_L + gradient_slot(a, i) for i in range(3) if i != a) for a in range(3)}
+#: The surface gravity :func:`update_stress` gets without a surface-layer pressure: none (empty).
+_NO_GRAVITY = np.zeros(0)
 
 
 def work_ghost_reads(ndim: int, geometry_code: int, wide: bool) -> tuple[int, frozenset]:
@@ -175,6 +177,8 @@ class MaterialStrength:
         #: or None: a porous material's strength is its matrix's, scaled (:func:`update_stress`).
         self.porosity = porosity
         porous = porosity is not None
+        #: the porosity rows :func:`update_stress` gets: ``porosity``, or rows of ones (no porous material)
+        self._porosity_rows = porosity if porous else np.ones((nmat, NPOROSITY))
         self.mesh = mesh
         self.nmat = nmat
         self.damage = damage if damage is not None else pack_damage([None] * nmat)
@@ -339,10 +343,9 @@ class MaterialStrength:
         refinement ``level``'s blocks, :class:`LevelBlocks`) into the work arrays, then their
         ghosts: what the first half kick (:meth:`kick`) uses.  The ghost fills are only started
         here (:meth:`_start_work_ghosts`); the kick completes them."""
-        lo, hi = self._range(partition)
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
-                                 self.arrays.model, self.ns, self.work, lo, hi, self.holds, self.has_mass,
-                                 None if level is None else level.blocks, self.stressed)
+                                 self.arrays.model, self.ns, self.work, self._blocks(partition, level), self.holds,
+                                 self.has_mass, self.stressed)
         self._incoming = self._start_work_ghosts(partition, slice(WK_V, WK_S + self.ns), level)
 
     def load_work(self, state: HydroState, eos, blocks: np.ndarray) -> None:
@@ -351,7 +354,7 @@ class MaterialStrength:
         (:mod:`impactpipe.hydro.amr.subcycle`), which its ghosts are filled from."""
         if blocks.size:
             cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
-                                     self.arrays.model, self.ns, self.work, 0, 0, self.holds, self.has_mass, blocks,
+                                     self.arrays.model, self.ns, self.work, blocks, self.holds, self.has_mass,
                                      self.stressed)
 
     def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None) -> None:
@@ -362,36 +365,29 @@ class MaterialStrength:
         fill only started, :meth:`_start_work_ghosts`: the second kick completes it).  While the
         velocities' strips travel, the update runs on the blocks that need none of them
         (:meth:`_around_ghosts`)."""
-        a = self.arrays
-        mesh = self.mesh
-        lo, hi = self._range(partition)
-        cell_velocities(state.arho, state.momentum, self.work, lo, hi, None if level is None else level.blocks)
+        cell_velocities(state.arho, state.momentum, self.work, self._blocks(partition, level))
         fills = self._start_work_ghosts(partition, slice(WK_V, WK_V + 3), level)
-
-        def update_blocks(blocks):
-            """The stress update of ``blocks`` (int64; None: the range ``lo .. hi - 1``)."""
-            if self.fracture:
-                update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
-                              mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
-                              self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength,
-                              self.work, self.counts, self.amounts, lo, hi, self.damage.model, self.damage.params,
-                              self.surface_gravity, porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
-                              stressed_blocks=self.stressed, store_strength=self.face is not None)
-            else:
-                update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
-                              mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table,
-                              self._reference_densities(eos), a.model, a.params, a.shear, a.tensile_strength,
-                              self.work, self.counts, self.amounts, lo, hi, surface_gravity=self.surface_gravity,
-                              porosity=self.porosity, has_mass=self.has_mass, blocks=blocks,
-                              stressed_blocks=self.stressed, store_strength=self.face is not None)
-
-        self._around_ghosts(partition, fills, update_blocks, level)
+        self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks), level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
         if self.face is not None:
             if not isinstance(partition, WholeMesh):
                 raise ValueError("the face shear stress runs on one process; several MPI ranks are not supported yet")
             self._incoming += self._start_work_ghosts(partition, slice(WK_Y, NWORK_FACE), level)
             self._face_dt = dt
+
+    def stress_step(self, state: HydroState, dt: float, eos, blocks: np.ndarray) -> None:
+        """The stress update of :meth:`update` over ``dt`` (s) on the ``blocks`` listed (int64)
+        alone (:func:`update_stress`), from the velocities and fills in the work arrays (their
+        ghosts filled) and the blocks with mass in :attr:`has_mass`: no velocities computed, no
+        ghosts filled."""
+        a = self.arrays
+        mesh = self.mesh
+        update_stress(dt, mesh.geometry_code, mesh.ndim, state.alpha, state.arho, state.arhoe, state.arhoq,
+                      mesh.block_lo, mesh.block_dx, eos.kind, eos.params, eos.table, self._reference_densities(eos),
+                      a.model, a.params, a.shear, a.tensile_strength, self.work, self.counts, self.amounts, blocks,
+                      self.damage.model, self.damage.params,
+                      _NO_GRAVITY if self.surface_gravity is None else self.surface_gravity, self._porosity_rows,
+                      self.has_mass, self.stressed, self.face is not None)
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
              amounts: np.ndarray, partition, level: LevelBlocks | None = None) -> None:
@@ -427,15 +423,15 @@ class MaterialStrength:
                 self.face_flux[:mesh.ndim, level.blocks, :, col0:col0 + 4] = 0.0
             apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                    self.face_flux, 3 * self.nmat, lo, hi, level.blocks, self.stressed)
+                                    self.face_flux, 3 * self.nmat, level.blocks, self.stressed)
             return
         self.face_flux[...] = 0.0
 
         def kick_blocks(blocks):
-            """The stress divergence of ``blocks`` (int64; None: the range ``lo .. hi - 1``)."""
+            """The stress divergence of ``blocks`` (int64)."""
             apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                    self.face_flux, 3 * self.nmat, lo, hi, blocks, self.stressed)
+                                    self.face_flux, 3 * self.nmat, blocks, self.stressed)
 
         self._around_ghosts(partition, fills, kick_blocks)
         if self.hourglass[0] > 0.0:
@@ -462,6 +458,12 @@ class MaterialStrength:
         if step != 1:
             raise ValueError("the strength kernels take a contiguous range of blocks")
         return lo, hi
+
+    def _blocks(self, partition, level: LevelBlocks | None = None) -> np.ndarray:
+        """The blocks (int64) the kernels visit: the ``level``'s, or the ``partition``'s range (:meth:`_range`)."""
+        if level is not None:
+            return level.blocks
+        return np.arange(*self._range(partition), dtype=np.int64)
 
     def _reference_densities(self, eos) -> np.ndarray:
         """The materials' reference densities (kg/m^3) of the packed EOS ``eos``, computed once per EOS."""
@@ -520,9 +522,9 @@ class MaterialStrength:
             partition.finish_field_ghosts(fill, self.work, self.mesh)
 
     def _around_ghosts(self, partition, fills: list[FieldFill], kernel, level: LevelBlocks | None = None) -> None:
-        """Run ``kernel(blocks)`` (a stress-step kernel on the int64 ``blocks``, None for the
-        partition's whole range) on every block the ``partition`` advances (or on the
-        ``level``'s), the ghost ``fills`` completed first where the kernel reads them: the
+        """Run ``kernel(blocks)`` (a stress-step kernel on the int64 ``blocks``) on every block the
+        ``partition`` advances (or on the ``level``'s), the ghost ``fills`` completed first where
+        the kernel reads them: the
         blocks none of whose neighbours another MPI rank owns (``partition.field_groups``)
         run while the strips travel, the others after :meth:`_finish_work_ghosts`.  Every
         block runs the same arithmetic either way, and each writes only its own cells and
@@ -530,7 +532,7 @@ class MaterialStrength:
         early, late = partition.field_groups(self.mesh)
         if level is not None or early.size == 0:
             self._finish_work_ghosts(partition, fills)
-            kernel(None if level is None else level.blocks)
+            kernel(self._blocks(partition, level))
             return
         kernel(early)
         self._finish_work_ghosts(partition, fills)

@@ -149,37 +149,19 @@ def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
     return stress_slots(ndim) + 2 + (NFLAW if fracture else 0) + (1 if porous else 0)
 
 
-@njit(inline="always")
-def block_count(lo, hi, blocks):
-    """How many blocks a strength kernel visits: the range ``lo .. hi - 1``, or the ``blocks``
-    listed (int64, one refinement level's) when not None (numba compiles each case apart)."""
-    if blocks is None:
-        return hi - lo
-    return blocks.shape[0]
-
-
-@njit(inline="always")
-def block_at(i, lo, blocks):
-    """The ``i``-th block a strength kernel visits (:func:`block_count`): lo + i or blocks[i]."""
-    if blocks is None:
-        return lo + i
-    return blocks[i]
-
-
 @njit(cache=True, parallel=True)
-def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo, hi, holds, has_mass, blocks=None,
-                             stressed_blocks=None):
+def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blocks, holds, has_mass,
+                             stressed_blocks):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
-    blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64, when given) into ``work``
-    (ghosts are filled from them afterwards), into ``holds[b]`` whether block b has a cell
-    that holds material (1) or not (0): the kernels of the stress step read no ghost of a
-    block without one, so its ghosts need no filling;
+    ``blocks`` listed (int64) into ``work`` (ghosts are filled from them afterwards), into
+    ``holds[b]`` whether block b has a cell that holds material (1) or not (0): the kernels of
+    the stress step read no ghost of a block without one, so its ghosts need no filling;
     and into ``has_mass[b]`` whether some cell of block b has mass, rho > 0 (1) or not (0):
     a cell without mass holds no transported scalars (every kernel that removes a material's
     last mass zeroes them), so :func:`update_stress` has nothing to do in a block without;
-    and, when ``stressed_blocks`` (uint8, NB) is given, into ``stressed_blocks[b]`` whether some interior
-    cell of block b has a mixture stress component other than 0 (1) or not (0): the stress
-    divergence skips a block without one when its ghosts carry none either
+    and into ``stressed_blocks[b]`` whether some interior cell of block b has a mixture stress
+    component other than 0 (1) or not (0): the stress divergence skips a block without one
+    when its ghosts carry none either
     (:func:`impactpipe.hydro.strength.divergence.apply_stress_divergence`).
 
     A cell's fill is min(phi, sum_k alpha_k rho_k / rho0_k), phi = sum_k alpha_k
@@ -207,8 +189,8 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
-    for i in prange(block_count(lo, hi, blocks)):
-        b = block_at(i, lo, blocks)
+    for i in prange(blocks.shape[0]):
+        b = blocks[i]
         held = 0
         massive = 0
         carries = False
@@ -259,8 +241,7 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, lo,
                     carries = carries or _nonzero(s0, s1, s2, s3, s4, s5)
         holds[b] = held
         has_mass[b] = massive
-        if stressed_blocks is not None:
-            stressed_blocks[b] = 1 if carries else 0
+        stressed_blocks[b] = 1 if carries else 0
 
 
 @njit(cache=True, inline="always")
@@ -306,17 +287,17 @@ def _clear_strength_scalars(arhoq, b, first, nq, porous, ix, iy, iz):
 
 
 @njit(cache=True, parallel=True)
-def cell_velocities(arho, mom, work, lo, hi, blocks=None):
+def cell_velocities(arho, mom, work, blocks):
     """New velocities v = (rho v) / rho (m/s), rho = sum_k alpha_k rho_k, of the interior cells
-    of the blocks ``lo .. hi - 1`` (or the ``blocks`` listed, int64) that hold material
+    of the ``blocks`` listed (int64) that hold material
     (``work`` fill > 0, set by :func:`cell_velocity_and_stress`; the momentum kicks move no
     mass, so the fills stay)."""
     nb, nmat, nx, ny, nz = arho.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
-    for i in prange(block_count(lo, hi, blocks)):
-        b = block_at(i, lo, blocks)
+    for i in prange(blocks.shape[0]):
+        b = blocks[i]
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -396,17 +377,18 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
 
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
-                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, lo, hi,
-                  damage_model=None, damage_params=None, surface_gravity=None, porosity=None, has_mass=None,
-                  blocks=None, stressed_blocks=None, store_strength=False):
-    """One strength step of ``dt`` (s) for every interior cell of the blocks ``lo .. hi - 1``
-    (or the ``blocks`` listed, int64, when given: one refinement level's); see the module docstring.
-    ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`)
-    or None.  A porous material k (alpha_0 > 1, distension alpha from the second-to-last of its
-    scalars) is its matrix's strength carried by the bulk: its EOS pressure p_k = P_s / alpha
-    and temperature at the matrix density alpha rho_k, its shear modulus from the porous bulk
-    modulus G = G_0 + (G/K) rho_k c_s^2(alpha rho_k) h(alpha)^2 (h the elastic wave-speed ratio,
-    :func:`impactpipe.hydro.eos.porosity.wave_speed_ratio`; 1 without ``chi``), its tensile limit
+                  eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, blocks,
+                  damage_model, damage_params, surface_gravity, porosity, has_mass, stressed_blocks, store_strength):
+    """One strength step of ``dt`` (s) for every interior cell of the ``blocks`` listed (int64:
+    a process's range, or one refinement level's); see the module docstring.
+    ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`);
+    a material whose alpha_0 is not above 1 is not porous (a scene without porosity passes
+    rows of ones, as the sweeps get them).  A porous material k (alpha_0 > 1, distension alpha
+    from the second-to-last of its scalars) is its matrix's strength carried by the bulk: its
+    EOS pressure p_k = P_s / alpha and temperature at the matrix density alpha rho_k, its shear
+    modulus from the porous bulk modulus G = G_0 + (G/K) rho_k c_s^2(alpha rho_k) h(alpha)^2
+    (h the elastic wave-speed ratio, :func:`impactpipe.hydro.eos.porosity.wave_speed_ratio`; 1
+    without ``chi``), its tensile limit
     -Y_T (1 - D) / alpha (the matrix's P_s >= -Y_T (1 - D)) and its yield strength
     Y = Y_s(alpha p_held, T, D) / alpha (the matrix's yield curve at the matrix pressure, spread
     over the bulk); the low-density cut compares the matrix density alpha rho_k with rho0_k.
@@ -416,14 +398,16 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     ``rho0[M]``: the materials' reference densities (kg/m^3, :func:`impactpipe.hydro.eos.
     reference_densities`).  ``damage_model[M]``, ``damage_params[M, NDAMAGE]``: the tensile
     damage models and their Weibull parameters (:func:`impactpipe.hydro.strength.parameters.
-    pack_damage`); None where every material fails instantly (then ``arhoq`` has no flaw slots).
-    ``surface_gravity[3]``: the gravity g (m/s^2) of the surface-layer pressure (step 4); None: none.
-    ``has_mass[NB]``: the blocks with mass (:func:`cell_velocity_and_stress`); the others are
-    skipped (their cells hold no scalars to clear).  None: every block is visited.
-    ``stressed_blocks[NB]`` (uint8) or None: when given, whether block b's new mixture stress has a
+    pack_damage`); where no material fractures by Grady-Kipp (every one fails instantly),
+    ``arhoq`` has no flaw slots.
+    ``surface_gravity``: the gravity g (m/s^2, three components) of the surface-layer pressure
+    (step 4), or an empty array: none.
+    ``has_mass[NB]`` (uint8): the blocks with mass (:func:`cell_velocity_and_stress`); the others are
+    skipped (their cells hold no scalars to clear).
+    ``stressed_blocks[NB]`` (uint8): written, whether block b's new mixture stress has a
     component other than 0 in some interior cell (1) or not (0), as
     :func:`cell_velocity_and_stress` records it for the first half kick.
-    ``store_strength``: also write each cell's shear strength, the sqrt(J2) yield limit
+    ``store_strength`` (bool): also write each cell's shear strength, the sqrt(J2) yield limit
     k = sum_k alpha_k Y_eq,k / sqrt(3) (Pa, fill-weighted like S; Y_eq the sqrt(3 J2) bound of
     step 4, evaluated then in every material, stressed or not) into ``work[:, WK_Y]`` and the
     off-diagonal velocity gradients L_di (1/s) into ``work[:, WK_L + gradient_slot(d, i)]``, for
@@ -443,13 +427,16 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     cylindrical = geometry == CYLINDRICAL
-    for i in prange(block_count(lo, hi, blocks)):
-        b = block_at(i, lo, blocks)
-        if has_mass is not None:
-            if has_mass[b] == 0:
-                if stressed_blocks is not None:
-                    stressed_blocks[b] = 0
-                continue
+    # without a porous material a void cell's scalars are cleared in one loop
+    porous_scene = False
+    for m in range(nmat):
+        porous_scene = porous_scene or porosity[m, ALPHA0] > 1.0
+    with_gravity = surface_gravity.shape[0] > 0
+    for i in prange(blocks.shape[0]):
+        b = blocks[i]
+        if has_mass[b] == 0:
+            stressed_blocks[b] = 0
+            continue
         carries = False
         dxs = (block_dx[b, 0], block_dx[b, 1], block_dx[b, 2])
         for ix in range(gx, nx - gx):
@@ -457,7 +444,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                 for iz in range(gz, nz - gz):
                     if work[b, WK_PHI, ix, iy, iz] <= 0.0:
                         # void: its stress in work is zero already (cell_velocity_and_stress)
-                        if porosity is None:
+                        if not porous_scene:
                             _clear_scalars(arhoq, b, 0, nmat * nq, ix, iy, iz)
                         else:
                             for k in range(nmat):
@@ -492,10 +479,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         a = alpha[b, k, ix, iy, iz]
                         ar = arho[b, k, ix, iy, iz]
                         if not (a > ALPHA_MIN and ar > 0.0):
-                            if porosity is None:
-                                _clear_scalars(arhoq, b, base, nq, ix, iy, iz)
-                            else:
-                                _clear_strength_scalars(arhoq, b, base, nq, porosity[k, ALPHA0] > 1.0, ix, iy, iz)
+                            _clear_strength_scalars(arhoq, b, base, nq, porosity[k, ALPHA0] > 1.0, ix, iy, iz)
                             continue
                         inv = 1.0 / ar
                         sxx = arhoq[b, base, ix, iy, iz] * inv
@@ -510,19 +494,16 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         ek = arhoe[b, k, ix, iy, iz] * inv
                         dist = 1.0
                         stiffness = 1.0
-                        if porosity is not None:
-                            if porosity[k, ALPHA0] > 1.0:
-                                dist = arhoq[b, base + nq - 2, ix, iy, iz] * inv
-                                h = wave_speed_ratio(porosity[k], dist)
-                                stiffness = h * h
+                        if porosity[k, ALPHA0] > 1.0:
+                            dist = arhoq[b, base + nq - 2, ix, iy, iz] * inv
+                            h = wave_speed_ratio(porosity[k], dist)
+                            stiffness = h * h
                         pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk,
                                                                      ek)
                         pk /= dist
                         g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0) * stiffness
                         y_t = tensile_strength[k] / dist
-                        gradual = False
-                        if damage_model is not None:
-                            gradual = damage_model[k] == GRADY_KIPP
+                        gradual = damage_model[k] == GRADY_KIPP
                         p_matrix = pk
                         if gradual:
                             # Grady-Kipp: damage grows from the active flaws; S and G soften with it.
@@ -574,7 +555,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                     model[k], yield_strength(model[k], params[k], dist * p_matrix, tk, 0.0)) / dist
                         else:
                             p_held = damaged_pressure(p_matrix, dmg) if gradual else max(pk, -y_t * (1.0 - dmg))
-                            if surface_gravity is not None and work[b, WK_PHI, ix, iy, iz] < 1.0:
+                            if with_gravity and work[b, WK_PHI, ix, iy, iz] < 1.0:
                                 layer = _surface_layer_pressure(rk, work[b, WK_PHI, ix, iy, iz], surface_gravity, dxs)
                                 if layer > p_held:
                                     p_held = layer
@@ -626,5 +607,4 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         work[b, WK_L + gradient_slot(1, 2), ix, iy, iz] = lyz
                         work[b, WK_L + gradient_slot(2, 1), ix, iy, iz] = lzy
                     carries = carries or _nonzero(s0, s1, s2, s3, s4, s5)
-        if stressed_blocks is not None:
-            stressed_blocks[b] = 1 if carries else 0
+        stressed_blocks[b] = 1 if carries else 0
