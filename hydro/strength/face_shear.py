@@ -60,7 +60,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
-from impactpipe.hydro.strength.hourglass import shifted_cell
+from impactpipe.hydro.strength.hourglass import at_block_edge, face_area, face_weights, kick_cell, shifted_cell
 from impactpipe.hydro.strength.update import WK_L, WK_PHI, WK_S, WK_V, WK_Y, gradient_slot
 
 
@@ -175,8 +175,7 @@ def apply_face_shear(dt, ndim, mom, energy, block_dx, neighbor, neighbor_level, 
                     d_e = 0.0
                     for d in range(ndim):
                         h = block_dx[b, d]
-                        area = block_dx[b, 0] * (block_dx[b, 1] if ndim > 1 else 1.0) * (
-                            block_dx[b, 2] if ndim > 2 else 1.0) / h
+                        area = face_area(ndim, block_dx, b, d)
                         i_face = ix if d == 0 else (iy if d == 1 else iz)
                         for side in range(2):
                             # the face j + 1/2 is stored at cell j: this cell (side 1) or the one below (side 0)
@@ -185,8 +184,8 @@ def apply_face_shear(dt, ndim, mom, energy, block_dx, neighbor, neighbor_level, 
                             fill = min(work[b, WK_PHI, ax, ay, az], work[b, WK_PHI, bx, by, bz])
                             if fill <= 0.0:
                                 continue
-                            w = dt / h if side == 1 else -dt / h
-                            at_edge = (side == 0 and i_face == GHOST) or (side == 1 and i_face == shape[d] - GHOST - 1)
+                            w, wa = face_weights(dt, h, area, side)
+                            at_edge = at_block_edge(i_face, shape[d], side)
                             for i in range(ndim):
                                 if i == d:
                                     continue
@@ -203,10 +202,6 @@ def apply_face_shear(dt, ndim, mom, energy, block_dx, neighbor, neighbor_level, 
                                     d_mom2 += w * traction
                                 d_e += w * power
                                 if at_edge and neighbor[b, d, side] < 0:
-                                    wa = -dt * area if side == 1 else dt * area
                                     boundary[b, BND_MOMENTUM + i] += wa * traction
                                     boundary[b, BND_ENERGY] += wa * power
-                    mom[b, 0, ix, iy, iz] += d_mom0
-                    mom[b, 1, ix, iy, iz] += d_mom1
-                    mom[b, 2, ix, iy, iz] += d_mom2
-                    energy[b, 0, ix, iy, iz] += d_e
+                    kick_cell(mom, energy, b, ix, iy, iz, d_mom0, d_mom1, d_mom2, d_e)

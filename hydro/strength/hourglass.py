@@ -52,6 +52,41 @@ def shifted_cell(ix, iy, iz, d, k):
 
 
 @njit(cache=True, inline="always")
+def at_block_edge(i_face, n, side):
+    """Whether the face on ``side`` (0 low, 1 high) of the cell at index ``i_face`` along an axis of
+    ``n`` cells (ghosts included) is a face of its block."""
+    return (side == 0 and i_face == GHOST) or (side == 1 and i_face == n - GHOST - 1)
+
+
+@njit(cache=True, inline="always")
+def face_area(ndim, block_dx, b, d):
+    """Area (m^2) of a cell face along ``d`` in block ``b`` (the product of the other used axes' widths)."""
+    return block_dx[b, 0] * (block_dx[b, 1] if ndim > 1 else 1.0) * (
+        block_dx[b, 2] if ndim > 2 else 1.0) / block_dx[b, d]
+
+
+@njit(cache=True, inline="always")
+def face_weights(dt, h, area, side):
+    """(w, wa) of the face on ``side`` (0 low, 1 high) of a cell ``h`` wide (m) along the face's
+    axis, of ``area`` (m^2): a traction t on it (Pa) adds w t = n dt / h t to the cell's momentum
+    (energy) density and, on a domain face, wa t = -n dt area t to what crossed it (n = -1, +1 on
+    the low, high face)."""
+    if side == 1:
+        return dt / h, -dt * area
+    return -dt / h, dt * area
+
+
+@njit(cache=True, inline="always")
+def kick_cell(mom, energy, b, ix, iy, iz, d_mom0, d_mom1, d_mom2, d_e):
+    """Add the changes ``d_mom0 .. d_mom2`` (kg/(m^2 s)) and ``d_e`` (J/m^3) to the momentum and total
+    energy densities of a cell."""
+    mom[b, 0, ix, iy, iz] += d_mom0
+    mom[b, 1, ix, iy, iz] += d_mom1
+    mom[b, 2, ix, iy, iz] += d_mom2
+    energy[b, 0, ix, iy, iz] += d_e
+
+
+@njit(cache=True, inline="always")
 def _shear_stress(work, b, ix, iy, iz):
     """sqrt(J2) (Pa) of the material's deviatoric stress S / phi in a cell holding material."""
     s = work[b, WK_S:WK_S + 6, ix, iy, iz]
@@ -68,6 +103,7 @@ def apply_hourglass_viscosity(dt, ndim, coefficient, impedance, mom, energy, blo
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
+    shape = (nx, ny, nz)
     for b in prange(lo, hi):
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
@@ -80,14 +116,12 @@ def apply_hourglass_viscosity(dt, ndim, coefficient, impedance, mom, energy, blo
                     d_e = 0.0
                     for d in range(ndim):
                         h = block_dx[b, d]
-                        area = block_dx[b, 0] * (block_dx[b, 1] if ndim > 1 else 1.0) * (
-                            block_dx[b, 2] if ndim > 2 else 1.0) / h
+                        area = face_area(ndim, block_dx, b, d)
                         i_face = ix if d == 0 else (iy if d == 1 else iz)
-                        n_used = nx if d == 0 else (ny if d == 1 else nz)
                         for side in range(2):
                             # the face between cells j and j + 1 along d; this cell is j (side 1) or j + 1 (side 0)
                             first = 0 if side == 1 else -1
-                            at_edge = (side == 0 and i_face == GHOST) or (side == 1 and i_face == n_used - GHOST - 1)
+                            at_edge = at_block_edge(i_face, shape[d], side)
                             if at_edge and neighbor[b, d, side] >= 0 and neighbor_level[b, d, side] != 0:
                                 continue
                             phi_min = 1.0e300
@@ -128,18 +162,14 @@ def apply_hourglass_viscosity(dt, ndim, coefficient, impedance, mom, energy, blo
                                 t1 *= scale
                                 t2 *= scale
                                 power *= scale
-                            w = dt / h if side == 1 else -dt / h
+                            w, wa = face_weights(dt, h, area, side)
                             d_mom0 += w * t0
                             d_mom1 += w * t1
                             d_mom2 += w * t2
                             d_e += w * power
                             if at_edge and neighbor[b, d, side] < 0:
-                                wa = -dt * area if side == 1 else dt * area
                                 boundary[b, BND_MOMENTUM] += wa * t0
                                 boundary[b, BND_MOMENTUM + 1] += wa * t1
                                 boundary[b, BND_MOMENTUM + 2] += wa * t2
                                 boundary[b, BND_ENERGY] += wa * power
-                    mom[b, 0, ix, iy, iz] += d_mom0
-                    mom[b, 1, ix, iy, iz] += d_mom1
-                    mom[b, 2, ix, iy, iz] += d_mom2
-                    energy[b, 0, ix, iy, iz] += d_e
+                    kick_cell(mom, energy, b, ix, iy, iz, d_mom0, d_mom1, d_mom2, d_e)
