@@ -37,8 +37,8 @@ from impactpipe.hydro.mesh.boundary import (
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
                             neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
 from .exchange import (FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
-                       Traffic, broadcast_arrays, exchange_strips, finish_strips, gather_owned_blocks, gather_rows,
-                       post_strips, share_owned_blocks)
+                       StripExchange, Traffic, broadcast_arrays, finish_strips, gather_owned_blocks, gather_rows,
+                       share_owned_blocks)
 
 log = logging.getLogger(__name__)
 
@@ -229,10 +229,15 @@ class BlockRanges(WholeMesh):
         self.field_overlap = field_overlap_groups(mesh, cuts, comm.rank)
         #: The strips along every axis by peer, one message each (:func:`~.decomposition.every_axis_routes`).
         self.field_routes = every_axis_routes(self.routes)
-        #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their routes.
+        #: The exchanges (:class:`~.exchange.StripExchange`) of the strips before a ghost fill
+        #: along each axis, of the strips along every axis, of the tracers' neighbourhood.
+        self.strips = [StripExchange(comm, routes, STRIP_TAG + axis) for axis, routes in enumerate(self.routes)]
+        self.field_strips = StripExchange(comm, self.field_routes, FIELD_TAG)
+        self.neighbourhood_strips = StripExchange(comm, self.neighbourhood, NEIGHBOURHOOD_TAG)
+        #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their exchanges.
         self._plans: dict[int, dict] = {}
-        #: The routes of the face fluxes per (axis, row length), built on first use.
-        self._flux_routes: dict[tuple[int, int], list] = {}
+        #: The exchanges of the face fluxes per (axis, row length), built on first use.
+        self._flux_strips: dict[tuple[int, int], StripExchange] = {}
 
     def fill_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> None:
         """Receive the neighbours' strips along ``axis`` from their owners, then fill the owned
@@ -244,16 +249,15 @@ class BlockRanges(WholeMesh):
         if q_layers is None or mesh.adaptive:
             q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        exchange_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
+        self.strips[axis].exchange(fields, self.traffic)
         if mesh.adaptive:
-            exchange_strips(self.comm, self.plans(mesh, axis)["restrict_routes"], fields, RESTRICT_TAG + axis,
-                            self.traffic)
+            self.plans(mesh, axis)["restrict_strips"].exchange(fields, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
         if mesh.adaptive:
             self._fill_level_ghosts(fields, mesh, axis)
 
     def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> GhostFill:
-        """Post the strips along ``axis`` (:func:`~.exchange.post_strips`) and fill every owned
+        """Post the strips along ``axis`` (:meth:`~.exchange.StripExchange.post`) and fill every owned
         block's ghosts from what this rank holds, then return while the strips travel: the
         fill's ``early`` blocks (the inner blocks of :func:`~.decomposition.overlap_groups`,
         whose ghosts along ``axis`` are now complete) can be swept meanwhile.  The slabs of the
@@ -269,11 +273,10 @@ class BlockRanges(WholeMesh):
         if q_layers is None or mesh.adaptive:
             q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        pending = post_strips(self.comm, self.routes[axis], fields, STRIP_TAG + axis, self.traffic)
+        pending = self.strips[axis].post(fields, self.traffic)
         restricting = None
         if mesh.adaptive:
-            restricting = post_strips(self.comm, self.plans(mesh, axis)["restrict_routes"], fields,
-                                      RESTRICT_TAG + axis, self.traffic)
+            restricting = self.plans(mesh, axis)["restrict_strips"].post(fields, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
         return GhostFill(inner, edge, pending, restricting)
 
@@ -303,7 +306,7 @@ class BlockRanges(WholeMesh):
         plans = self.plans(mesh, axis)
         for arr in fields:
             restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
-        exchange_strips(self.comm, plans["prolong_routes"], fields, PROLONG_TAG + axis, self.traffic)
+        plans["prolong_strips"].exchange(fields, self.traffic)
         prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 
     def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
@@ -317,10 +320,9 @@ class BlockRanges(WholeMesh):
         g = int(mesh.ghost[axis])
         if g == 0:
             return
-        exchange_strips(self.comm, self.routes[axis], (field,), STRIP_TAG + axis, self.traffic, runs)
+        self.strips[axis].exchange((field,), self.traffic, runs)
         if mesh.adaptive:
-            exchange_strips(self.comm, self.plans(mesh, axis)["restrict_routes"], (field,), RESTRICT_TAG + axis,
-                            self.traffic, runs)
+            self.plans(mesh, axis)["restrict_strips"].exchange((field,), self.traffic, runs)
         for run in runs:
             if wanted is not None and not mesh.adaptive:
                 fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
@@ -338,7 +340,7 @@ class BlockRanges(WholeMesh):
         plans = self.plans(mesh, axis)
         for run in runs:
             restrict_ghosts(field[:, run], plans["restrict"], plans["restrict_weight"])
-        exchange_strips(self.comm, plans["prolong_routes"], (field,), PROLONG_TAG + axis, self.traffic, runs)
+        plans["prolong_strips"].exchange((field,), self.traffic, runs)
         for run in runs:
             prolong_field_ghosts(field[:, run], plans["prolong"])
 
@@ -346,7 +348,7 @@ class BlockRanges(WholeMesh):
                            layers: int | None = None) -> FieldFill:
         """Post the strips of the components of ``field`` that the ``runs`` (slices of its
         component axis) select along every used axis of a uniform mesh, every axis and run in one
-        message per peer (:attr:`field_routes`, :func:`~.exchange.post_strips`), and fill the
+        message per peer (:attr:`field_routes`, :meth:`~.exchange.StripExchange.post`), and fill the
         ghosts of those components of the owned blocks where ``wanted[b]`` is not 0 (their
         ``layers`` layers next to the interior) from what this rank holds, axis by axis, then
         return while the strips travel: the inner blocks of :meth:`field_groups` have their
@@ -358,7 +360,7 @@ class BlockRanges(WholeMesh):
         if mesh.adaptive:
             raise ValueError("an adaptive mesh fills a field's ghosts axis by axis (fill_field_ghosts)")
         axes = used_axes(mesh)
-        pending = post_strips(self.comm, self.field_routes, (field,), FIELD_TAG, self.traffic, runs)
+        pending = self.field_strips.post((field,), self.traffic, runs)
         for axis in axes:
             g = int(mesh.ghost[axis])
             for run in runs:
@@ -388,7 +390,7 @@ class BlockRanges(WholeMesh):
 
     def plans(self, mesh, axis: int) -> dict:
         """This rank's rows of the coarse/fine plans of ``axis`` (destination blocks it owns) and
-        the routes that bring the cells they read from other ranks' blocks: the 2^ndim fine
+        the exchanges that bring the cells they read from other ranks' blocks: the 2^ndim fine
         cells of a restriction (before the fill), the coarse cell and its neighbours along
         every used axis of a prolongation (after the restriction, ghosts included)."""
         if axis not in self._plans:
@@ -404,8 +406,10 @@ class BlockRanges(WholeMesh):
             corner = np.array([[a, j, k] for a in (0, 1) for j in (0, 1) for k in (0, 1)
                                if (a == 0 or 0 in used) and (j == 0 or 1 in used) and (k == 0 or 2 in used)])
             star = np.array([np.zeros(3, int)] + [sign * np.eye(3, dtype=int)[d] for d in used for sign in (-1, 1)])
-            mine["restrict_routes"] = plan_routes(mesh, self.cuts, self.rank, whole["restrict"], corner)
-            mine["prolong_routes"] = plan_routes(mesh, self.cuts, self.rank, whole["prolong"], star)
+            mine["restrict_strips"] = StripExchange(
+                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["restrict"], corner), RESTRICT_TAG + axis)
+            mine["prolong_strips"] = StripExchange(
+                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["prolong"], star), PROLONG_TAG + axis)
             mine["reflux_pairs"] = (whole["reflux"][:, 0], whole["reflux"][:, 5])
             self._plans[axis] = mine
         return self._plans[axis]
@@ -415,10 +419,11 @@ class BlockRanges(WholeMesh):
         coarse blocks (whole rows of ``face_flux`` (NB, 2, NQ, N1, N2))."""
         row = int(np.prod(face_flux.shape[2:]))
         key = (axis, row)
-        if key not in self._flux_routes:
+        if key not in self._flux_strips:
             coarse, fine = self._plans[axis]["reflux_pairs"]
-            self._flux_routes[key] = block_routes(self.cuts, self.rank, coarse, fine, row)
-        exchange_strips(self.comm, self._flux_routes[key], (face_flux,), FLUX_TAG + axis, self.traffic)
+            self._flux_strips[key] = StripExchange(self.comm, block_routes(self.cuts, self.rank, coarse, fine, row),
+                                                   FLUX_TAG + axis)
+        self._flux_strips[key].exchange((face_flux,), self.traffic)
 
     def remeshed(self, sim) -> "BlockRanges":
         """A new cut of ``sim``'s blocks after a regrid (every rank regridded the same way from
@@ -509,8 +514,7 @@ class BlockRanges(WholeMesh):
         """Receive the interior cells of other ranks' blocks within TRACER_REACH of this rank's
         blocks (faces, edges, corners; :func:`~.decomposition.neighbourhood_routes`): the fields
         the tracers read (volume fractions, partial densities and internal energies, momentum)."""
-        exchange_strips(self.comm, self.neighbourhood, (state.alpha, state.arho, state.arhoe, state.momentum),
-                        NEIGHBOURHOOD_TAG, self.traffic)
+        self.neighbourhood_strips.exchange((state.alpha, state.arho, state.arhoe, state.momentum), self.traffic)
 
     def gather_tracers(self, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
         """Row t of each of ``arrays`` from rank ``owner[t]`` on every rank (one Allgatherv,

@@ -3,6 +3,8 @@ before an output, tracer rows after a tracer sample.
 
 All fields are float64 arrays (NB, C, NX, NY, NZ), C-contiguous, so a block's values are one
 contiguous run and a strip is a fixed set of flat indices (:class:`~.decomposition.Strips`).
+The strips of one call site (:class:`StripExchange`) are planned once per partition: their
+flat indices, buffers and persistent requests (:class:`StripPlan`).
 Each exchange adds what it moved and how long it took to a :class:`Traffic` (a few integer
 additions and two clock reads per ghost fill, nothing per cell).
 """
@@ -10,12 +12,13 @@ additions and two clock reads per ghost fill, nothing per cell).
 from __future__ import annotations
 
 import time
+import weakref
 from dataclasses import asdict, dataclass
 
 import numpy as np
 from numba import njit
 
-from .decomposition import Route
+from .decomposition import Route, Strips, run_bounds
 
 #: Message tag of the strips before a ghost fill along axis d: STRIP_TAG + d.
 STRIP_TAG = 100
@@ -36,7 +39,7 @@ class Traffic:
     """What one rank exchanged with the others since the last :meth:`reset` (cumulative).
 
     ``bytes_sent`` / ``bytes_received`` (B) and ``messages_sent`` / ``messages_received``:
-    the strips of the ghost fills (:func:`exchange_strips`); ``exchanges``: the ghost fills
+    the strips of the ghost fills (:class:`StripExchange`); ``exchanges``: the ghost fills
     (one exchange each, without messages where no other rank owns a neighbour);
     ``exchange_seconds`` (s): wall time inside them (packing, waiting and unpacking);
     ``wait_seconds`` (s): the part spent in ``Waitall``, waiting for the
@@ -68,88 +71,182 @@ class Traffic:
         return asdict(self)
 
 
-def exchange_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int, traffic: Traffic,
-                    runs: tuple[slice, ...] = (slice(None),)) -> None:
-    """Send this rank's strips and receive its peers' into the components of ``fields`` that the
-    ``runs`` (slices of the component axis) select, one message per peer (every field's runs
-    packed one after another into one float64 buffer, message tag ``tag``), non-blocking both
-    ways, then unpack; the bytes, messages and seconds go to ``traffic``.  The buffers are kept
-    on the routes' strips and reused (:meth:`Strips.buffer`); packing and unpacking are numba
-    loops over the strips' flat indices."""
-    finish_strips(post_strips(comm, routes, fields, tag, traffic, runs))
+class StripExchange:
+    """The strips of one list of routes (one peer each) under one message tag: for each set of
+    field shapes and runs of components, a :class:`StripPlan` built on first use and kept, so
+    that an exchange before a ghost fill does no per-call planning (one plan per call site:
+    the state's fill along an axis, the stress step's fills of the work arrays, ...).
+
+    :meth:`post` starts the receives, packs every strip of every field for every peer in one
+    numba call and starts the sends; :func:`finish_strips` waits and unpacks in one call.  The
+    messages are the same as one ``Irecv``/``Isend`` per peer of every field's strips packed
+    one after another (tag ``tag``), sent through persistent requests
+    (``Recv_init``/``Send_init``) on fixed buffers, freed with the plan
+    (:func:`free_requests`).  A plan's buffers and requests serve one exchange at a time: each
+    :meth:`post` is finished before the same plan posts again."""
+
+    def __init__(self, comm, routes: list[Route], tag: int):
+        self.comm = comm
+        self.routes = routes
+        self.tag = tag
+        self._plans: dict = {}
+
+    def plan(self, fields: tuple[np.ndarray, ...], runs: tuple[slice, ...] = (slice(None),)) -> "StripPlan":
+        """The plan of the components of ``fields`` that the ``runs`` (slices of the component
+        axis) select, built once per set of field shapes and runs."""
+        key = (tuple(f.shape for f in fields), run_bounds(runs, fields[0].shape[1]))
+        plan = self._plans.get(key)
+        if plan is None:
+            plan = self._plans[key] = StripPlan.build(self.comm, self.routes, fields, runs, self.tag)
+        return plan
+
+    def post(self, fields: tuple[np.ndarray, ...], traffic: Traffic,
+             runs: tuple[slice, ...] = (slice(None),)) -> "PendingStrips":
+        """Start this rank's receives, pack its strips of the components of ``fields`` that the
+        ``runs`` select and start its sends, then return without waiting, so that work which
+        needs none of the peers' strips can run while they travel; :func:`finish_strips` waits
+        and unpacks.  The sent strips are packed here, from the fields as they are now."""
+        started = time.perf_counter()
+        plan = self.plan(fields, runs)
+        flats = tuple(_flat(field) for field in fields)
+        plan.start(flats)
+        traffic.messages_sent += plan.messages
+        traffic.exchange_seconds += time.perf_counter() - started
+        return PendingStrips(plan, flats, traffic)
+
+    def exchange(self, fields: tuple[np.ndarray, ...], traffic: Traffic,
+                 runs: tuple[slice, ...] = (slice(None),)) -> None:
+        """Send this rank's strips and receive its peers' into the components of ``fields`` that
+        the ``runs`` select (:meth:`post`, then :func:`finish_strips`); the bytes, messages and
+        seconds go to ``traffic``."""
+        finish_strips(self.post(fields, traffic, runs))
+
+
+@dataclass
+class StripPlan:
+    """One exchange of strips, fixed for a set of routes, field shapes, runs of components and
+    tag: every message's values lie in one send and one receive buffer (float64), peer after
+    peer (each peer's message a slice of the buffer), each message field after field, each
+    field's values as :meth:`~.decomposition.Strips.indices` orders them.  Value ``i`` of the
+    send buffer is ``flats[send_field[s]][send_index[i]]`` for ``i`` in the segment ``s``
+    (``send_starts[s] .. send_starts[s + 1] - 1``, one per peer and field); likewise the
+    receive buffer into the fields."""
+
+    send_buffer: np.ndarray
+    receive_buffer: np.ndarray
+    send_index: np.ndarray
+    send_starts: np.ndarray
+    send_field: np.ndarray
+    receive_index: np.ndarray
+    receive_starts: np.ndarray
+    receive_field: np.ndarray
+    #: Persistent requests: the receives (one per peer), the sends, and both (the receives first).
+    receives: list
+    sends: list
+    requests: list
+    messages: int
+    sent_bytes: int
+    received_bytes: int
+
+    @classmethod
+    def build(cls, comm, routes: list[Route], fields: tuple[np.ndarray, ...], runs: tuple[slice, ...],
+              tag: int) -> "StripPlan":
+        """The plan of ``routes`` for the components of ``fields`` that the ``runs`` select."""
+        send = _segments([route.send for route in routes], fields, runs)
+        receive = _segments([route.receive for route in routes], fields, runs)
+        send_buffer, receive_buffer = np.empty(send[0].size), np.empty(receive[0].size)
+        receives = [comm.Recv_init(receive_buffer[lo:hi], source=route.peer, tag=tag)
+                    for route, lo, hi in zip(routes, receive[3][:-1], receive[3][1:])]
+        sends = [comm.Send_init(send_buffer[lo:hi], dest=route.peer, tag=tag)
+                 for route, lo, hi in zip(routes, send[3][:-1], send[3][1:])]
+        plan = cls(send_buffer, receive_buffer, *send[:3], *receive[:3], receives, sends, receives + sends,
+                   len(routes), send_buffer.nbytes, receive_buffer.nbytes)
+        weakref.finalize(plan, free_requests, plan.requests)
+        return plan
+
+    def start(self, flats: tuple[np.ndarray, ...]) -> None:
+        """Start the receives, pack the strips of the flat fields ``flats`` and start the sends."""
+        if not self.messages:
+            return
+        from mpi4py import MPI
+
+        MPI.Prequest.Startall(self.receives)
+        pack_strips(flats, self.send_field, self.send_starts, self.send_index, self.send_buffer)
+        MPI.Prequest.Startall(self.sends)
+
+
+def free_requests(requests: list) -> None:
+    """Free the persistent ``requests`` of a plan when it is dropped (a regrid's new partition
+    replaced it) or at exit, before MPI is finalized."""
+    for request in requests:
+        request.Free()
+
+
+def _segments(strips: list[Strips], fields: tuple[np.ndarray, ...], runs: tuple[slice, ...]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(flat indices, segment starts, field of each segment, message offsets) of the values of
+    the ``strips`` (one per message) of every field of ``fields``, message after message, field
+    after field (int64 arrays; the offsets are positions in the buffer, one more than the
+    messages)."""
+    indices, field_of, sizes, offsets = [], [], [], [0]
+    for part in strips:
+        for number, values in enumerate(fields):
+            indices.append(part.indices(values, runs))
+            field_of.append(number)
+            sizes.append(indices[-1].size)
+        offsets.append(offsets[-1] + sum(sizes[len(sizes) - len(fields):]))
+    index = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)]).astype(np.int64)
+    return (np.ascontiguousarray(index, dtype=np.int64), starts, np.array(field_of, dtype=np.int64),
+            np.array(offsets, dtype=np.int64))
 
 
 @dataclass
 class PendingStrips:
-    """An exchange of :func:`post_strips` whose messages may still be in flight."""
+    """An exchange of :meth:`StripExchange.post` whose messages may still be in flight."""
 
-    requests: list
-    received: list
-    fields: tuple
-    runs: tuple
+    plan: StripPlan
+    flats: tuple
     traffic: Traffic
-    sent_bytes: int
-
-
-def post_strips(comm, routes: list[Route], fields: tuple[np.ndarray, ...], tag: int, traffic: Traffic,
-                runs: tuple[slice, ...] = (slice(None),)) -> PendingStrips:
-    """The first half of :func:`exchange_strips`: post the receives, pack and post the sends,
-    and return without waiting, so that work which needs none of the peers' strips can run
-    while they travel; :func:`finish_strips` waits and unpacks.  The sent strips are packed
-    here, from the fields as they are now."""
-    started = time.perf_counter()
-    requests, received, sent_bytes = [], [], 0
-    for route in routes:
-        buffer = route.receive.buffer(fields, runs)
-        requests.append(comm.Irecv(buffer, source=route.peer, tag=tag))
-        received.append((buffer, route.receive))
-    flats = [_flat(field) for field in fields]
-    for route in routes:
-        buffer = route.send.buffer(fields, runs)
-        start = 0
-        for flat, field in zip(flats, fields):
-            start = pack_values(flat, route.send.indices(field, runs), buffer, start)
-        requests.append(comm.Isend(buffer, dest=route.peer, tag=tag))
-        sent_bytes += buffer.nbytes
-    traffic.messages_sent += len(routes)
-    traffic.exchange_seconds += time.perf_counter() - started
-    return PendingStrips(requests, received, fields, runs, traffic, sent_bytes)
 
 
 def finish_strips(pending: PendingStrips) -> None:
-    """Wait for the messages of :func:`post_strips` and unpack the received strips."""
+    """Wait for the messages of :meth:`StripExchange.post` and unpack the received strips (every
+    peer's, every field's, in one numba call)."""
     from mpi4py import MPI
 
-    traffic = pending.traffic
+    plan, traffic = pending.plan, pending.traffic
     waiting = time.perf_counter()
-    MPI.Request.Waitall(pending.requests)
+    if plan.messages:
+        MPI.Request.Waitall(plan.requests)
     traffic.wait_seconds += time.perf_counter() - waiting
-    flats = [_flat(field) for field in pending.fields]
-    for buffer, strips in pending.received:
-        start = 0
-        for flat, field in zip(flats, pending.fields):
-            start = unpack_values(buffer, start, strips.indices(field, pending.runs), flat)
-    traffic.bytes_sent += pending.sent_bytes
-    traffic.bytes_received += sum(buffer.nbytes for buffer, _ in pending.received)
-    traffic.messages_received += len(pending.received)
+    if plan.messages:
+        unpack_strips(plan.receive_buffer, plan.receive_field, plan.receive_starts, plan.receive_index, pending.flats)
+    traffic.bytes_sent += plan.sent_bytes
+    traffic.bytes_received += plan.received_bytes
+    traffic.messages_received += plan.messages
     traffic.exchanges += 1
     traffic.exchange_seconds += time.perf_counter() - waiting
 
 
 @njit(cache=True)
-def pack_values(flat, indices, buffer, start):
-    """buffer[start + i] = flat[indices[i]]; returns the next free position of ``buffer``."""
-    for i in range(indices.size):
-        buffer[start + i] = flat[indices[i]]
-    return start + indices.size
+def pack_strips(flats, field_of, starts, indices, buffer):
+    """buffer[i] = flats[field_of[s]][indices[i]] for i in starts[s] .. starts[s + 1] - 1, for
+    every segment s (a tuple of flat float64 fields, int64 segment fields, starts and indices)."""
+    for s in range(field_of.size):
+        flat = flats[field_of[s]]
+        for i in range(starts[s], starts[s + 1]):
+            buffer[i] = flat[indices[i]]
 
 
 @njit(cache=True)
-def unpack_values(buffer, start, indices, flat):
-    """flat[indices[i]] = buffer[start + i]; returns the position after the values read."""
-    for i in range(indices.size):
-        flat[indices[i]] = buffer[start + i]
-    return start + indices.size
+def unpack_strips(buffer, field_of, starts, indices, flats):
+    """flats[field_of[s]][indices[i]] = buffer[i] for i in starts[s] .. starts[s + 1] - 1, for
+    every segment s."""
+    for s in range(field_of.size):
+        flat = flats[field_of[s]]
+        for i in range(starts[s], starts[s + 1]):
+            flat[indices[i]] = buffer[i]
 
 
 def share_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray, traffic: Traffic) -> None:
