@@ -11,6 +11,7 @@ additions and two clock reads per ghost fill, nothing per cell).
 
 from __future__ import annotations
 
+import operator
 import time
 import weakref
 from dataclasses import asdict, dataclass
@@ -90,6 +91,9 @@ class StripExchange:
         self.routes = routes
         self.tag = tag
         self._plans: dict = {}
+        #: The plans bound to the arrays of recent calls, one per runs of components
+        #: (:meth:`bound`).
+        self._bindings: list[Binding] = []
 
     def plan(self, fields: tuple[np.ndarray, ...], runs: tuple[slice, ...] = (slice(None),)) -> "StripPlan":
         """The plan of the components of ``fields`` that the ``runs`` (slices of the component
@@ -100,6 +104,18 @@ class StripExchange:
             plan = self._plans[key] = StripPlan.build(self.comm, self.routes, fields, runs, self.tag)
         return plan
 
+    def bound(self, fields: tuple[np.ndarray, ...], runs: tuple[slice, ...]) -> "Binding":
+        """The plan of ``fields`` and ``runs`` with the fields' flat views: those of an earlier
+        call with the same runs while the same arrays come back (every step until a regrid
+        replaces them), so that a call builds no key and no view; otherwise bound anew, in
+        place of the earlier call's binding with these runs."""
+        for binding in self._bindings:
+            if binding.runs == runs and all(map(operator.is_, binding.fields, fields)):
+                return binding
+        binding = Binding(tuple(fields), runs, tuple(_flat(field) for field in fields), self.plan(fields, runs))
+        self._bindings = [kept for kept in self._bindings if kept.runs != runs] + [binding]
+        return binding
+
     def post(self, fields: tuple[np.ndarray, ...], traffic: Traffic,
              runs: tuple[slice, ...] = (slice(None),)) -> "PendingStrips":
         """Start this rank's receives, pack its strips of the components of ``fields`` that the
@@ -107,12 +123,11 @@ class StripExchange:
         needs none of the peers' strips can run while they travel; :func:`finish_strips` waits
         and unpacks.  The sent strips are packed here, from the fields as they are now."""
         started = time.perf_counter()
-        plan = self.plan(fields, runs)
-        flats = tuple(_flat(field) for field in fields)
-        plan.start(flats)
-        traffic.messages_sent += plan.messages
+        binding = self.bound(fields, runs)
+        binding.plan.start(binding.flats)
+        traffic.messages_sent += binding.plan.messages
         traffic.exchange_seconds += time.perf_counter() - started
-        return PendingStrips(plan, flats, traffic)
+        return PendingStrips(binding.plan, binding.flats, traffic)
 
     def exchange(self, fields: tuple[np.ndarray, ...], traffic: Traffic,
                  runs: tuple[slice, ...] = (slice(None),)) -> None:
@@ -120,6 +135,17 @@ class StripExchange:
         the ``runs`` select (:meth:`post`, then :func:`finish_strips`); the bytes, messages and
         seconds go to ``traffic``."""
         finish_strips(self.post(fields, traffic, runs))
+
+
+@dataclass
+class Binding:
+    """A :class:`StripPlan` bound to the arrays of a call: the ``fields``, the ``runs`` of
+    components and the fields' flat views (no copies)."""
+
+    fields: tuple
+    runs: tuple
+    flats: tuple
+    plan: StripPlan
 
 
 @dataclass
