@@ -93,7 +93,7 @@ from impactpipe.hydro.strength.parameters import (
 )
 from impactpipe.hydro.strength.update import (
     AMOUNT_NAMES, COUNT_NAMES, NCOUNT, NFLAW, NSAMOUNT, NWORK, NWORK_FACE, WK_L, WK_S, WK_V, WK_Y, cell_velocities,
-    cell_velocity_and_stress, gradient_slot, scalar_slots, stress_slots, update_stress,
+    cell_velocity_and_stress, gradient_slot, scalar_slots, snapshot_stress_fields, stress_slots, update_stress,
 )
 
 #: Work slots whose sign flips in a reflecting ghost, per wall-normal axis (velocity and shear stress).
@@ -609,36 +609,11 @@ class MaterialStrength:
         sqrt(3/2 S:S) of the mixture (Pa); ``plastic_strain``, ``damage``: mass-weighted
         means over the materials with strength (-).
         """
-        mesh = self.mesh
-        alpha = mesh.interior(state.alpha)[blocks]
-        arho = mesh.interior(state.arho)[blocks]
-        arhoq = mesh.interior(state.arhoq)[blocks]
-        names = ("xx", "yy", "zz", "xy", "xz", "yz")[: self.ns]
-        stress = np.zeros((len(names),) + alpha[:, 0].shape)
-        eps = np.zeros(alpha[:, 0].shape)
-        dmg = np.zeros_like(eps)
-        mass = np.zeros_like(eps)
-        for k in range(self.nmat):
-            if self.arrays.model[k] == 0:
-                continue
-            ar = arho[:, k]
-            safe = np.where(ar > 0.0, ar, 1.0)
-            for j in range(self.ns):
-                stress[j] += np.where(ar > 0.0, alpha[:, k] * arhoq[:, k * self.nq + j] / safe, 0.0)
-            eps += arhoq[:, k * self.nq + self.ns]
-            dmg += arhoq[:, k * self.nq + self.nq - 1]
-            mass += ar
-        safe = np.where(mass > 0.0, mass, 1.0)
-        out = {f"deviatoric_stress_{n}": stress[j] for j, n in enumerate(names)}
-        ss = (stress[:3] ** 2).sum(axis=0) + 2.0 * (stress[3:] ** 2).sum(axis=0)
-        out["von_mises_stress"] = np.sqrt(1.5 * ss)
-        out["plastic_strain"] = np.where(mass > 0.0, eps / safe, 0.0)
-        out["damage"] = np.where(mass > 0.0, dmg / safe, 0.0)
-        whole = {}
-        for name, values in out.items():
-            whole[name] = np.zeros((mesh.nblocks,) + values.shape[1:])
-            whole[name][blocks] = values
-        return whole
+        lo, hi, _ = blocks.indices(self.mesh.nblocks)
+        out = np.zeros((self.ns + 3, self.mesh.nblocks) + self.mesh.interior_shape)
+        snapshot_stress_fields(state.alpha, state.arho, state.arhoq, self.arrays.model, self.ns, self.nq, lo, hi, out)
+        names = [f"deviatoric_stress_{n}" for n in ("xx", "yy", "zz", "xy", "xz", "yz")[: self.ns]]
+        return dict(zip(names + ["von_mises_stress", "plastic_strain", "damage"], out))
 
 
 def _fill_level_work_ghosts(field: np.ndarray, mesh: BlockMesh, axis: int, level: LevelBlocks, wanted: np.ndarray,

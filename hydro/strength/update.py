@@ -310,6 +310,47 @@ def cell_velocities(arho, mom, work, blocks):
                         work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
 
 
+@njit(cache=True, parallel=True)
+def snapshot_stress_fields(alpha, arho, arhoq, model, ns, nq, lo, hi, out):
+    """The strength fields of a snapshot for the interior cells of blocks ``lo .. hi - 1`` into
+    ``out`` (ns + 3, NB, nx, ny, nz), zeros on entry: ``out[j]``, j < ``ns``, the mixture's
+    deviatoric stress sum_k alpha_k S_k,j (Pa), ``out[ns]`` its von Mises stress sqrt(3/2 S:S)
+    (Pa), ``out[ns + 1]`` and ``out[ns + 2]`` the plastic strain and the damage (-), means over
+    the materials with a yield model (``model[k]`` not 0) weighted by their partial densities
+    (0 where they have none), each sum taken material after material."""
+    nb, nmat, nx, ny, nz = alpha.shape
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    for b in prange(lo, hi):
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    jx, jy, jz = ix - gx, iy - gy, iz - gz
+                    eps = 0.0
+                    dmg = 0.0
+                    mass = 0.0
+                    for k in range(nmat):
+                        if model[k] == 0:
+                            continue
+                        ar = arho[b, k, ix, iy, iz]
+                        if ar > 0.0:
+                            for j in range(ns):
+                                out[j, b, jx, jy, jz] += alpha[b, k, ix, iy, iz] * arhoq[b, k * nq + j, ix, iy, iz] / ar
+                        eps += arhoq[b, k * nq + ns, ix, iy, iz]
+                        dmg += arhoq[b, k * nq + nq - 1, ix, iy, iz]
+                        mass += ar
+                    normal = 0.0
+                    for j in range(3):
+                        normal += out[j, b, jx, jy, jz] * out[j, b, jx, jy, jz]
+                    shear = 0.0
+                    for j in range(3, ns):
+                        shear += out[j, b, jx, jy, jz] * out[j, b, jx, jy, jz]
+                    out[ns, b, jx, jy, jz] = math.sqrt(1.5 * (normal + 2.0 * shear))
+                    out[ns + 1, b, jx, jy, jz] = eps / mass if mass > 0.0 else 0.0
+                    out[ns + 2, b, jx, jy, jz] = dmg / mass if mass > 0.0 else 0.0
+
+
 @njit(cache=True, inline="always")
 def _derivative(work, b, comp, ix, iy, iz, axis, dx):
     """d v_comp / d x_axis at a cell: central, one-sided next to void, 0 between void cells (1/s)."""
