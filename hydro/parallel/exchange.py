@@ -110,7 +110,8 @@ class StripExchange:
         replaces them), so that a call builds no key and no view; otherwise bound anew, in
         place of the earlier call's binding with these runs."""
         for binding in self._bindings:
-            if binding.runs == runs and all(map(operator.is_, binding.fields, fields)):
+            if binding.runs == runs and len(binding.fields) == len(fields) and all(
+                    map(operator.is_, binding.fields, fields)):
                 return binding
         binding = Binding(tuple(fields), runs, tuple(_flat(field) for field in fields), self.plan(fields, runs))
         self._bindings = [kept for kept in self._bindings if kept.runs != runs] + [binding]
