@@ -95,8 +95,6 @@ class Strips:
     #: The flat indices of :meth:`indices` per field shape and runs of components, computed once
     #: (an exchange runs before every ghost fill).
     _indices: dict = field(default_factory=dict, compare=False, repr=False)
-    #: The message buffers of :meth:`buffer` per set of field shapes and runs of components.
-    _buffers: dict = field(default_factory=dict, compare=False, repr=False)
 
     def indices(self, values: np.ndarray, runs: tuple[slice, ...] = (slice(None),)) -> np.ndarray:
         """Flat indices into ``values.reshape(-1)`` (a field (NB, C, NX, NY, NZ)) of every cell of
@@ -110,14 +108,6 @@ class Strips:
             chosen = np.concatenate([np.arange(*bounds) for bounds in key[1]])
             self._indices[key] = (base[None, :] + (chosen * per_block)[:, None]).ravel()
         return self._indices[key]
-
-    def buffer(self, fields: tuple[np.ndarray, ...], runs: tuple[slice, ...] = (slice(None),)) -> np.ndarray:
-        """A float64 buffer for the strips' values of the components of the ``runs`` of every field
-        in ``fields`` (one message), allocated once per set of field shapes and runs and reused."""
-        key = (tuple(f.shape for f in fields), run_bounds(runs, fields[0].shape[1]) if fields else ())
-        if key not in self._buffers:
-            self._buffers[key] = np.empty(sum(self.values(f, runs) for f in fields))
-        return self._buffers[key]
 
     def values(self, values: np.ndarray, runs: tuple[slice, ...] = (slice(None),)) -> int:
         """Number of values of the components of the ``runs`` of the field ``values`` the strips hold."""
