@@ -20,6 +20,13 @@ below DILATED_FILL) and the share at a pressure below rho0 |g| dx / 2 (the surfa
 of a full surface cell, Pa): material that holds void or next to no pressure, which a
 cohesionless material's strength does not hold beyond its surface-layer pressure
 (docs/validation.md, "Why the run-out grows with resolution").
+``--fronts`` adds the run-out (L_f - L0) / L0 with L_f where the thickness falls below
+0.01, 0.02, 0.05 and 0.1 H0 (a threshold fixed in physical units, not in cells) and where the
+cumulative volume from the wall reaches 90 %, 95 % and 99 % of the deposit's
+(``column_collapse.front_at_thickness``, ``front_by_volume``; docs/validation.md, "The front
+against a threshold fixed in H0").  ``--save DIR`` writes, per run,
+DIR/profiles_a<a>_phi<phi>_cfl<cfl>_n<cells>.npz: the thickness profiles h(x) (m) at every
+tau / 4 (``time`` in tau, ``x``, ``thickness``, ``dx``, ``height`` H0, ``width`` L0).
 ``--plot DIR`` writes, per run, DIR/profile_a<a>_phi<phi>_cfl<cfl>_n<cells>.png: the deposit's
 thickness h(x) / L0 at t = tau and at the end against x / L0, with the laws' run-out L_f and
 height H_f marked.
@@ -33,6 +40,7 @@ import time
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -48,7 +56,7 @@ DILATED_FILL = 0.99
 
 def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
         surface_layer: bool, plot: Path | None = None, room: float | None = None, settling: bool = False,
-        face_shear: bool = False) -> dict:
+        face_shear: bool = False, save: Path | None = None) -> dict:
     """One collapse; returns the row's numbers (lengths in units of L0, times in tau)."""
     config = load_config(CONFIG)
     scene = config.scene.model_dump(exclude={"problem", "geometry"})
@@ -67,6 +75,7 @@ def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion:
     height, width = scene["height"], scene["width"]
     tau = math.sqrt(height / scene["gravity"])
     peak, front, still_since, started, profiles = 0.0, None, 0.0, time.perf_counter(), {}
+    times, thicknesses = [], []
     for k in range(1, int(round(4 * end)) + 1):
         sim.run(k * tau / 4)
         snap = sim.snapshot()
@@ -75,11 +84,22 @@ def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion:
         deposit = column_collapse.deposit(snap)
         if k == 4:
             profiles["t = tau"] = deposit
+        times.append(sim.time / tau)
+        thicknesses.append(deposit["thickness"])
         if deposit["runout"] != front:
             front, still_since = deposit["runout"], sim.time / tau
     if plot is not None:
         profiles[f"t = {sim.time / tau:g} tau"] = deposit
         _plot_profiles(plot / f"profile_a{aspect:g}_phi{phi:g}_cfl{cfl:g}_n{cells}.png", profiles, width, aspect)
+    if save is not None:
+        save.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(save / f"profiles_a{aspect:g}_phi{phi:g}_cfl{cfl:g}_n{cells}.npz",
+                            time=np.asarray(times), x=deposit["x"], thickness=np.asarray(thicknesses),
+                            dx=deposit["dx"], height=height, width=width)
+    fronts = {f"h{share:g}H0": (column_collapse.front_at_thickness(deposit, share * height) - width) / width
+              for share in column_collapse.FRONT_THICKNESS_H0}
+    fronts.update({f"v{share:g}": (column_collapse.front_by_volume(deposit, share) - width) / width
+                   for share in column_collapse.FRONT_VOLUME_SHARES})
     mass = snap.partial_density.sum(axis=1)
     fill = snap.volume_fraction.sum(axis=1)
     rho0 = float(mass.max())  # the densest cell, within 1e-3 of the reference density (kg/m^3)
@@ -90,7 +110,7 @@ def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion:
             "still": sim.time / tau - still_since, "runout": (deposit["runout"] - width) / width,
             "height": deposit["height"] / width, "centroid": deposit["centroid"] / width,
             "law_runout": column_collapse.scaling_runout(aspect), "law_height": column_collapse.scaling_height(aspect),
-            "wall": time.perf_counter() - started}
+            "fronts": fronts, "wall": time.perf_counter() - started}
 
 
 def _plot_profiles(path: Path, profiles: dict, width: float, aspect: float) -> None:
@@ -130,22 +150,32 @@ def main() -> None:
                         help="scene.room: mesh length beyond the column in run-outs of the law (the config's if omitted)")
     parser.add_argument("--dilation", action="store_true",
                         help="add the mass shares in partly filled cells and at a pressure below rho0 |g| dx / 2")
+    parser.add_argument("--fronts", action="store_true",
+                        help="add the run-out at thicknesses fixed as fractions of H0 and at shares of the volume")
+    parser.add_argument("--save", type=Path, default=None,
+                        help="folder for the thickness profiles h(x) at every tau / 4 (one .npz per run)")
     args = parser.parse_args()
     extra = " partly filled | p < rho0 g dx / 2 |" if args.dilation else ""
+    names = ([f"run-out h >= {share:g} H0" for share in column_collapse.FRONT_THICKNESS_H0]
+             + [f"run-out {share:.0%} of volume" for share in column_collapse.FRONT_VOLUME_SHARES])
+    if args.fronts:
+        extra += "".join(f" {name} |" for name in names)
     print("| a | phi | cfl | cells/H0 | KE/peak at end | front still for | run-out (law) | height (law) | centroid |" + extra)
-    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|" if args.dilation else ""))
+    print("|---|---|---|---|---|---|---|---|---|" + "---|" * extra.count("|"))
     for aspect in args.aspect:
         for phi in args.phi:
             for cfl in args.cfl:
                 for cells in args.cells:
                     r = run(aspect, phi, cfl, cells, args.end, args.cohesion, args.hourglass,
                             not args.no_surface_layer, args.plot, args.room, args.settling,
-                            args.face_shear)
+                            args.face_shear, args.save)
                     print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
                           f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
                           f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "
                           f"{r['height'] / r['law_height'] - 1:+.0%}) | {r['centroid']:.4f} |"
-                          + (f" {r['partly_filled']:.3f} | {r['unloaded']:.3f} |" if args.dilation else ""), flush=True)
+                          + (f" {r['partly_filled']:.3f} | {r['unloaded']:.3f} |" if args.dilation else "")
+                          + ("".join(f" {value:.3f} |" for value in r["fronts"].values()) if args.fronts else ""),
+                          flush=True)
 
 
 if __name__ == "__main__":

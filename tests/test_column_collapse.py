@@ -103,6 +103,22 @@ def test_config_accepts_the_scene_and_refuses_a_large_courant_number_and_an_unkn
         parse_config(scene_yaml().replace("width: 500.0", "width: 500.0\n  cells_per_height: 2"))
 
 
+def test_the_front_at_a_thickness_fixed_in_length_and_at_a_share_of_the_volume():
+    """A block 1000 m thick to x = 1000 m and a sheet 30 m thick to x = 2000 m (dx = 62.5 m)."""
+    dx = 62.5
+    x = (np.arange(48) + 0.5) * dx
+    thickness = np.where(x < 1000.0, 1000.0, np.where(x < 2000.0, 30.0, 0.0))
+    deposit = {"x": x, "thickness": thickness, "dx": dx}
+    # half a cell (31.25 m) and 0.05 H0 (50 m) end the deposit at the block, plus dx h / threshold
+    # for the sheet's first column; 0.02 H0 (20 m) counts the sheet
+    assert column_collapse.front_at_thickness(deposit, 0.5 * dx) == pytest.approx(1000.0 + dx * 30.0 / 31.25)
+    assert column_collapse.front_at_thickness(deposit, 50.0) == pytest.approx(1000.0 + dx * 30.0 / 50.0)
+    assert column_collapse.front_at_thickness(deposit, 20.0) == pytest.approx(2000.0)
+    # volume 1.03e6 m^2: 95 % lies inside the block, 99 % reaches 19 700 m^2 / 30 m into the sheet
+    assert column_collapse.front_by_volume(deposit, 0.95) == pytest.approx(978.5)
+    assert column_collapse.front_by_volume(deposit, 0.99) == pytest.approx(1000.0 + 19700.0 / 30.0)
+
+
 def test_setup_starts_in_hydrostatic_equilibrium_with_the_column_in_place():
     sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": 500.0, "cells_per_height": 8},
                                 {"sand": granular()}, cfl=0.2)
@@ -111,6 +127,8 @@ def test_setup_starts_in_hydrostatic_equilibrium_with_the_column_in_place():
     assert deposit["runout"] == pytest.approx(500.0, abs=1e-9)
     assert deposit["height"] == pytest.approx(HEIGHT, rel=1e-12)
     assert deposit["centroid"] == pytest.approx(250.0, rel=1e-12)
+    assert column_collapse.front_at_thickness(deposit, 0.02 * HEIGHT) == pytest.approx(500.0, abs=1e-9)
+    assert column_collapse.front_by_volume(deposit, 0.95) == pytest.approx(475.0, rel=1e-12)
     z = sim.mesh.cell_centers()[:, 1]
     inside = snap.volume_fraction[:, 0] == 1.0
     np.testing.assert_allclose(snap.pressure[inside], 2700.0 * G * (HEIGHT - z[inside]), rtol=1e-9)

@@ -90,6 +90,13 @@ EDGE_FILL = 1.0e-3
 #: The deposit ends where its thickness falls below this fraction of a cell (:func:`deposit`).
 FRONT_THICKNESS_CELLS = 0.5
 
+#: Thresholds of :func:`front_at_thickness` fixed in physical units, as fractions of H0 (the
+#: benchmark's columns; docs/validation.md, "The front against a threshold fixed in H0").
+FRONT_THICKNESS_H0 = (0.01, 0.02, 0.05, 0.1)
+
+#: Shares of the deposit's volume for :func:`front_by_volume` (the benchmark's columns).
+FRONT_VOLUME_SHARES = (0.9, 0.95, 0.99)
+
 PARAMETERS = {
     "material": Parameter(kind=str, description="material name", example="sand"),
     "height": Parameter(1000.0, gt=0, units="m", description="initial column height H0"),
@@ -274,7 +281,8 @@ def deposit(snapshot) -> dict:
     h(x) (at the wall in a deposit).  ``centroid``: the distance of the material's centre
     from the wall, sum_x x h(x) / sum_x h(x) (m), a measure of how far the bulk has moved that,
     unlike the front, does not jump by a cell when the thinnest column crosses the threshold.
-    Also ``x`` (cell centres, m) and ``thickness`` h (m), arrays over the cell columns.
+    Also ``x`` (cell centres, m) and ``thickness`` h (m), arrays over the cell columns, and ``dx``
+    (m); :func:`front_at_thickness` and :func:`front_by_volume` take other fronts from them.
     """
     lo = snapshot.block_lo
     nx = snapshot.volume_fraction.shape[2]
@@ -297,4 +305,37 @@ def deposit(snapshot) -> dict:
         runout += dx * min(thickness[edge] / threshold, 1.0)
     centroid = float((x * thickness).sum() / thickness.sum()) if thickness.sum() > 0.0 else float("nan")
     return {"runout": runout, "height": float(thickness.max()), "centroid": centroid, "x": x,
-            "thickness": thickness}
+            "thickness": thickness, "dx": dx}
+
+
+def front_at_thickness(deposit: dict, threshold: float) -> float:
+    """The front of ``deposit`` (:func:`deposit`) where its thickness falls below ``threshold`` (m).
+
+    As ``deposit``'s ``runout``, with a threshold fixed in length instead of half a cell: going out
+    from the wall, the right edge of the last cell column of the continuous deposit
+    (h >= ``threshold``) plus dx min(h_next / threshold, 1) for the column beyond it (m).
+    """
+    x, thickness, dx = deposit["x"], deposit["thickness"], deposit["dx"]
+    thin = np.nonzero(thickness < threshold)[0]
+    edge = int(thin[0]) if thin.size else thickness.size
+    front = float(x[0] - 0.5 * dx + edge * dx)
+    if edge < thickness.size:
+        front += dx * min(thickness[edge] / threshold, 1.0)
+    return front
+
+
+def front_by_volume(deposit: dict, share: float) -> float:
+    """The position from the wall that encloses ``share`` of the deposit's volume (m).
+
+    The cumulative volume per unit depth sum h dx from the wall, interpolated linearly across
+    the cell column where it reaches ``share`` of the total (all the material, detached spray
+    included).
+    """
+    x, thickness, dx = deposit["x"], deposit["thickness"], deposit["dx"]
+    cumulative = np.cumsum(thickness) * dx
+    if cumulative.size == 0 or cumulative[-1] <= 0.0:
+        return float("nan")
+    target = share * cumulative[-1]
+    k = int(np.searchsorted(cumulative, target))
+    before = cumulative[k - 1] if k > 0 else 0.0
+    return float(x[k] - 0.5 * dx + dx * (target - before) / (thickness[k] * dx))
