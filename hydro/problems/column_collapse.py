@@ -297,15 +297,9 @@ def deposit(snapshot) -> dict:
     for b in range(lo.shape[0]):
         thickness[column[b]:column[b] + nx * span[b]] += np.repeat(fill[b].sum(axis=1) * widths[b], span[b])
     x = first + (np.arange(ncols) + 0.5) * dx
-    threshold = FRONT_THICKNESS_CELLS * dx
-    thin = np.nonzero(thickness < threshold)[0]
-    edge = int(thin[0]) if thin.size else ncols
-    runout = first + edge * dx
-    if edge < ncols:
-        runout += dx * min(thickness[edge] / threshold, 1.0)
     centroid = float((x * thickness).sum() / thickness.sum()) if thickness.sum() > 0.0 else float("nan")
-    return {"runout": runout, "height": float(thickness.max()), "centroid": centroid, "x": x,
-            "thickness": thickness, "dx": dx}
+    profile = {"height": float(thickness.max()), "centroid": centroid, "x": x, "thickness": thickness, "dx": dx}
+    return {"runout": front_at_thickness(profile, FRONT_THICKNESS_CELLS * dx), **profile}
 
 
 def front_at_thickness(deposit: dict, threshold: float) -> float:
