@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from impactpipe.hydro.amr.regrid import RefinementRule
 from impactpipe.hydro.problems import PROBLEMS, column_collapse
 from impactpipe.hydro.problems.parameters import Parameter, Record
-from impactpipe.hydro.strength.parameters import has_yield
+from impactpipe.hydro.strength.parameters import check_inertial_friction, has_yield
 
 from . import presets
 
@@ -151,6 +151,12 @@ class StrengthSpec(Strict):
     P_bd: float | None = Field(None, ge=0, description="brittle-ductile transition pressure (Pa)")
     P_bp: float | None = Field(None, ge=0, description="brittle-plastic transition pressure (Pa)")
     initial_damage: float | None = Field(None, ge=0, le=1, description="damage D at t = 0 (rock model)")
+    mu_2: float | None = Field(None, ge=0, description="mu(I) friction (geo model): the friction coefficient "
+                                                     "as I -> infinity, >= mu_i (mu_s)")
+    inertial_number_I0: float | None = Field(None, gt=0, description="mu(I) friction (geo model): the inertial "
+                                                                     "number I0 of mu = (mu_s + mu_2) / 2")
+    grain_diameter: float | None = Field(None, gt=0, description="mu(I) friction (geo model): the grain "
+                                                                 "diameter d of I = gamma_dot d / sqrt(P / rho_s) (m)")
     damage: DamageSpec | None = Field(None, description="tensile damage: a grady_kipp block, or the name of a "
                                                         "grady_kipp preset; instant failure at Y_T if absent")
 
@@ -159,6 +165,12 @@ class StrengthSpec(Strict):
     def _damage_preset_name(cls, value: Any) -> Any:
         """``damage: basalt`` stands for ``{model: grady_kipp, preset: basalt}``."""
         return _damage_block(value) if isinstance(value, str) else value
+
+    @model_validator(mode="after")
+    def _inertial_friction(self) -> "StrengthSpec":
+        """The mu(I) keys: all three or none, for the geo model only, mu_2 >= mu_i where both are given."""
+        check_inertial_friction(self.model_dump(), "strength")
+        return self
 
 
 class PorositySpec(Strict):

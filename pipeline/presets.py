@@ -27,7 +27,7 @@ DEFAULT_CV = {"ideal_gas": 718.0, "tillotson": 840.0, "mie_gruneisen": 900.0}
 GEO_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi")
 ROCK_KEYS = ("Y0", "Y_M", "Y_T", "mu_i", "Y_c", "mu_d", "T_melt", "xi", "P_bd", "P_bp", "poisson")
 VON_MISES_KEYS = ("yield_strength", "poisson")
-OPTIONAL_STRENGTH_KEYS = ("shear_modulus", "Y_T", "initial_damage")
+OPTIONAL_STRENGTH_KEYS = ("shear_modulus", "Y_T", "initial_damage", "mu_2", "inertial_number_I0", "grain_diameter")
 GRADY_KIPP_KEYS = ("weibull_m", "weibull_k")
 OPTIONAL_GRADY_KIPP_KEYS = ("young_modulus", "flaw_cross_section")
 #: Integer keys of a Grady-Kipp block: the seed and the number of flaws of each material's draw.

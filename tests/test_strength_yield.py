@@ -117,3 +117,56 @@ def test_packing_shear_table_and_strengthless_materials():
     assert arrays.shear[3, 1] == pytest.approx(3 * (1 - 0.6) / (2 * 1.3))
     assert shear_ratio(0.25) == pytest.approx(0.6)
     assert not pack_strength([None, {"model": "none"}]).enabled
+
+
+def test_inertial_friction_mu_of_I():
+    """mu(I) = mu_s + (mu_2 - mu_s) / (I0 / I + 1), I = gamma_dot d / sqrt(P / rho_s) (Jop et al. 2006)."""
+    from impactpipe.hydro.strength.update import _shear_rate
+    from impactpipe.hydro.strength.yield_strength import inertial_friction
+
+    mu_s, mu_2, i0, d = math.tan(math.radians(20.9)), math.tan(math.radians(32.76)), 0.279, 0.53e-3
+    rho, p = 2500.0, 1000.0
+    for inertial in (1e-3, 0.1, 0.279, 1.0, 10.0):
+        gamma_dot = inertial / d * math.sqrt(p / rho)
+        expect = mu_s + (mu_2 - mu_s) / (i0 / inertial + 1.0)
+        assert inertial_friction(mu_s, mu_2, i0, d, gamma_dot, p, rho) == pytest.approx(expect, rel=1e-12)
+    assert inertial_friction(mu_s, mu_2, i0, d, 0.0, p, rho) == mu_s
+    assert inertial_friction(mu_s, mu_2, i0, d, 1.0, 0.0, rho) == mu_s
+    assert inertial_friction(mu_s, mu_2, i0, d, 1e12, p, rho) == pytest.approx(mu_2, rel=1e-9)
+    gamma_dot = i0 / d * math.sqrt(p / rho)
+    assert inertial_friction(mu_s, mu_2, i0, d, gamma_dot, p, rho) == pytest.approx(0.5 * (mu_s + mu_2), rel=1e-12)
+    # the shear rate convention: simple shear v_x = gamma_dot y gives gamma_dot = sqrt(2 D_dev:D_dev)
+    assert _shear_rate(0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) == pytest.approx(3.0, rel=1e-14)
+    # uniaxial strain rate eps: D_dev = eps diag(2, -1, -1) / 3, sqrt(2 D_dev:D_dev) = 2 eps / sqrt(3)
+    assert _shear_rate(1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) == pytest.approx(3.0 / math.sqrt(3.0), rel=1e-14)
+    # an isotropic expansion has no shear
+    assert _shear_rate(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0) == pytest.approx(0.0, abs=1e-15)
+
+
+def test_mu_of_I_keys_packed_and_validated():
+    """The mu(I) keys are packed into the GEO row; absent, the row and the yield strength are the constant friction's."""
+    from impactpipe.hydro.strength.parameters import GRAIN_D, I0, MU_2, MU_I
+    from impactpipe.hydro.strength.yield_strength import yield_strength_friction
+    from impactpipe.pipeline.config import StrengthSpec
+
+    base = resolve_strength("geo", None, {"Y0": 0.0, "Y_M": 1e12, "Y_T": 0.0, "mu_i": 0.4663, "poisson": 0.25})
+    plain = pack_strength([base])
+    assert plain.params[0, GRAIN_D] == 0.0 and plain.params[0, MU_2] == 0.0
+    extra = {"mu_2": 0.7277, "inertial_number_I0": 0.279, "grain_diameter": 10.0}
+    spec = resolve_strength("geo", None, {**base, **extra})
+    packed = pack_strength([spec])
+    assert (packed.params[0, MU_2], packed.params[0, I0], packed.params[0, GRAIN_D]) == (0.7277, 0.279, 10.0)
+    for p in (-1e5, 0.0, 1e3, 1e7):
+        assert yield_strength_friction(GEO, plain.params[0], p, 300.0, 0.0, plain.params[0, MU_I]) == \
+            yield_strength(GEO, plain.params[0], p, 300.0, 0.0)
+    for bad, message in (({"mu_2": 0.7}, "needs all of"), ({**extra, "mu_2": 0.3}, "must be >= mu_i"),
+                         ({**extra, "grain_diameter": 0.0}, "grain_diameter must be > 0")):
+        with pytest.raises(ValueError, match=message):
+            pack_strength([{**base, **bad}])
+    with pytest.raises(ValueError, match="GEO strength option"):
+        pack_strength([{"model": "von_mises", "yield_strength": 1e6, "poisson": 0.25, **extra}])
+    StrengthSpec(model="geo", mu_i=0.4663, **extra)
+    with pytest.raises(ValueError, match="needs all of"):
+        StrengthSpec(model="geo", mu_i=0.4663, mu_2=0.7)
+    with pytest.raises(ValueError, match="GEO strength option"):
+        StrengthSpec(model="rock", **extra)

@@ -5,7 +5,8 @@ A material's strength is a *resolved* spec dict (presets expanded by the config 
 
     {"model": "none"}                                   (optional "Y_T")
     {"model": "von_mises", "yield_strength", "poisson", optional "shear_modulus", "Y_T"}
-    {"model": "geo", "Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi", optional "shear_modulus"}
+    {"model": "geo", "Y0", "Y_M", "Y_T", "mu_i", "poisson", "T_melt", "xi", optional "shear_modulus",
+     optional "mu_2", "inertial_number_I0", "grain_diameter" (the mu(I) friction, all three or none)}
     {"model": "rock", "Y0", "Y_M", "Y_T", "mu_i", "Y_c", "mu_d", "T_melt", "xi", "P_bd", "P_bp",
      "poisson", optional "shear_modulus", "initial_damage"}
 
@@ -34,11 +35,39 @@ ROCK = 3
 MODEL_CODES = {"none": NONE, "von_mises": VON_MISES, "geo": GEO, "rock": ROCK}
 
 # parameter row slots
-Y0, Y_M, MU_I, Y_C, MU_D, Y_T, T_MELT, XI, P_BD, P_BP, POISSON, YIELD_VM, DAMAGE0 = range(13)
-NPAR = 13
+# (MU_2, I0, GRAIN_D: the GEO model's optional mu(I) friction; GRAIN_D = 0, the default, is the
+# constant friction mu_i, :func:`impactpipe.hydro.strength.yield_strength.inertial_friction`)
+Y0, Y_M, MU_I, Y_C, MU_D, Y_T, T_MELT, XI, P_BD, P_BP, POISSON, YIELD_VM, DAMAGE0, MU_2, I0, GRAIN_D = range(16)
+NPAR = 16
 _KEYS = {Y0: "Y0", Y_M: "Y_M", MU_I: "mu_i", Y_C: "Y_c", MU_D: "mu_d", Y_T: "Y_T", T_MELT: "T_melt",
          XI: "xi", P_BD: "P_bd", P_BP: "P_bp", POISSON: "poisson", YIELD_VM: "yield_strength",
-         DAMAGE0: "initial_damage"}
+         DAMAGE0: "initial_damage", MU_2: "mu_2", I0: "inertial_number_I0", GRAIN_D: "grain_diameter"}
+#: The keys of the GEO model's mu(I) friction (given all together, or none of them).
+MU_I_RHEOLOGY_KEYS = ("mu_2", "inertial_number_I0", "grain_diameter")
+
+
+def check_inertial_friction(spec: dict, label: str = "strength") -> None:
+    """Raise ValueError unless the mu(I) keys of ``spec`` are all absent or all given with
+    mu_2 >= mu_i, I0 > 0 and grain_diameter > 0, and only for the GEO model."""
+    given = [key for key in MU_I_RHEOLOGY_KEYS if spec.get(key) is not None]
+    if not given:
+        return
+    model = spec.get("model", "none")
+    if model != "geo":
+        raise ValueError(f"{label}: the mu(I) friction ({', '.join(given)}) is a GEO strength option "
+                         f"(model {model!r})")
+    missing = [key for key in MU_I_RHEOLOGY_KEYS if key not in given]
+    if missing:
+        raise ValueError(f"{label}: the mu(I) friction needs all of {', '.join(MU_I_RHEOLOGY_KEYS)} "
+                         f"(missing {', '.join(missing)})")
+    if not float(spec["inertial_number_I0"]) > 0.0:
+        raise ValueError(f"{label}: inertial_number_I0 must be > 0 (got {spec['inertial_number_I0']:g})")
+    if not float(spec["grain_diameter"]) > 0.0:
+        raise ValueError(f"{label}: grain_diameter must be > 0 m (got {spec['grain_diameter']:g})")
+    mu_s = spec.get("mu_i")
+    if mu_s is not None and float(spec["mu_2"]) < float(mu_s):
+        raise ValueError(f"{label}: mu_2 ({spec['mu_2']:g}) must be >= mu_i ({mu_s:g}), the friction "
+                         f"at I = 0 (mu_s)")
 
 
 class StrengthArrays(NamedTuple):
@@ -92,6 +121,7 @@ def pack_strength(specs: list[dict | None]) -> StrengthArrays:
         for slot, key in _KEYS.items():
             if key in spec:
                 params[k, slot] = float(spec[key])
+        check_inertial_friction(spec, f"material {k}")
         if not has_yield(spec):
             continue
         model[k] = MODEL_CODES[name]

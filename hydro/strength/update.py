@@ -62,7 +62,12 @@ rate L_thth = v_r / r at the cell centre.  Per material k present in the cell:
    MaterialStrength.set_surface_layer_pressure`) p_held in a cell with void (fill phi < 1) is
    at least rho_k |g| h / 2, h = phi times the cell's extent along g: the pressure at mid-depth
    of the layer the cell holds, which the free-surface closure relaxes to zero (counted as
-   ``surface_layer_pressure``); radial return to sqrt(3 J2) <= Y (``yield_return``), equivalent
+   ``surface_layer_pressure``); a GEO material with a ``grain_diameter`` takes its friction
+   mu(I) = mu_s + (mu_2 - mu_s) / (I0 / I + 1) at the inertial number
+   I = gamma_dot d / sqrt(alpha p_held / (alpha rho_k)) of the cell's shear rate
+   gamma_dot = sqrt(2 D_dev:D_dev) (1/s, D = (L + L^T) / 2) instead of mu_i = mu_s
+   (:func:`impactpipe.hydro.strength.yield_strength.inertial_friction`);
+   radial return to sqrt(3 J2) <= Y (``yield_return``), equivalent
    plastic strain += d eps_p; ROCK: D += d eps_p / eps_f(p_held);
 5. internal energy alpha_k rho_k e_k += dt alpha_k (S_k,old + S_k,new) / 2 : D_rate (stress
    power; elastic and plastic work).  The momentum kicks around this update use S_old for the
@@ -91,9 +96,11 @@ from impactpipe.hydro.strength.fracture import (
     largest_principal_stress, tensile_strain, young_modulus,
 )
 from impactpipe.hydro.strength.parameters import (
-    ACTIVE_LIMIT, FLAW_NODES, GRADY_KIPP, NODE0, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG,
+    ACTIVE_LIMIT, FLAW_NODES, GRAIN_D, GRADY_KIPP, I0, MU_2, MU_I, NODE0, NONE, P_BD, P_BP, ROCK, WEIBULL_M, YOUNG,
 )
-from impactpipe.hydro.strength.yield_strength import SQRT3, equivalent_yield_stress, yield_strength
+from impactpipe.hydro.strength.yield_strength import (
+    SQRT3, equivalent_yield_stress, inertial_friction, yield_strength_friction,
+)
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 # work array slots (``work[NB, NWORK, NX, NY, NZ]``)
@@ -377,6 +384,31 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
 
 
 @njit(cache=True, inline="always")
+def _shear_rate(lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz):
+    """The shear rate gamma_dot = sqrt(2 D_dev:D_dev) = 2 sqrt(J2(D_dev)) (1/s) of the velocity
+    gradient L (D = (L + L^T) / 2; in 2d-cylindrical lzz is the hoop rate v_r / r)."""
+    third = (lxx + lyy + lzz) / 3.0
+    dxx = lxx - third
+    dyy = lyy - third
+    dzz = lzz - third
+    dxy = 0.5 * (lxy + lyx)
+    dxz = 0.5 * (lxz + lzx)
+    dyz = 0.5 * (lyz + lzy)
+    return math.sqrt(2.0 * (dxx * dxx + dyy * dyy + dzz * dzz + 2.0 * (dxy * dxy + dxz * dxz + dyz * dyz)))
+
+
+@njit(cache=True, inline="always")
+def _friction(params, pressure, density, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz):
+    """The intact friction coefficient of a material row: mu_i, or with a grain diameter (GEO's
+    mu(I) friction) mu(I) at the matrix pressure (Pa) and density (kg/m^3) and the cell's shear
+    rate (:func:`impactpipe.hydro.strength.yield_strength.inertial_friction`)."""
+    if params[GRAIN_D] <= 0.0:
+        return params[MU_I]
+    return inertial_friction(params[MU_I], params[MU_2], params[I0], params[GRAIN_D],
+                             _shear_rate(lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz), pressure, density)
+
+
+@njit(cache=True, inline="always")
 def _surface_layer_pressure(rho, fill, gravity, dxs):
     """Pressure (Pa) at mid-depth of the layer a cell with void holds: rho |g| h / 2, h = fill times
     the cell's extent along g, sum_d |g_d| dx_d / |g| (m); rho (kg/m^3), ``gravity`` g (m/s^2)."""
@@ -592,8 +624,11 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             p_held = damaged_pressure(p_matrix, dmg)
                             if stressed or store_strength:
                                 tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
+                                mu = _friction(params[k], dist * p_matrix, dist * rk,
+                                               lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz)
                                 y = (1.0 - dmg) * equivalent_yield_stress(
-                                    model[k], yield_strength(model[k], params[k], dist * p_matrix, tk, 0.0)) / dist
+                                    model[k], yield_strength_friction(model[k], params[k], dist * p_matrix, tk, 0.0,
+                                                                      mu)) / dist
                         else:
                             p_held = damaged_pressure(p_matrix, dmg) if gradual else max(pk, -y_t * (1.0 - dmg))
                             if with_gravity and work[b, WK_PHI, ix, iy, iz] < 1.0:
@@ -603,8 +638,10 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                                     counts[b, CNT_SURFACE_LAYER] += 1
                             if stressed or store_strength:
                                 tk = temperature_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk, ek)
-                                y = equivalent_yield_stress(model[k], yield_strength(model[k], params[k],
-                                                                                     dist * p_held, tk, dmg)) / dist
+                                mu = _friction(params[k], dist * p_held, dist * rk,
+                                               lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz)
+                                y = equivalent_yield_stress(model[k], yield_strength_friction(
+                                    model[k], params[k], dist * p_held, tk, dmg, mu)) / dist
                         if dist * rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1

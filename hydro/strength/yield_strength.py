@@ -14,11 +14,18 @@ T its temperature (K), D its damage (0 intact, 1 fully damaged).
                           D = 1, has no strength in tension)
 - GEO:   Y = Y_i;  ROCK: Y = (1 - D) Y_i + D Y_d;  von Mises: Y = yield_strength
 - thermal softening (GEO, ROCK): Y -> Y tanh(xi (T_melt / T - 1)), zero at and above T_melt.
+- GEO with the optional mu(I) friction (``mu_2``, ``inertial_number_I0``, ``grain_diameter``;
+  Jop, Forterre & Pouliquen 2006, Nature 441, 727): mu_i in Y_i is replaced by
+  mu(I) = mu_s + (mu_2 - mu_s) / (I0 / I + 1), mu_s = mu_i, with the inertial number
+  I = gamma_dot d / sqrt(P / rho_s) (:func:`inertial_friction`, evaluated by the strength
+  update, which knows the strain rate; :func:`yield_strength_friction` takes the friction).
 
 The parameter row is :mod:`impactpipe.hydro.strength.parameters`' ``params[k]``.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -69,14 +76,40 @@ def thermal_softening(temperature, t_melt, xi):
     return np.tanh(xi * (t_melt / temperature - 1.0))
 
 
+@njit(cache=True, inline="always")
+def inertial_friction(mu_s, mu_2, i0, grain_diameter, shear_rate, pressure, density):
+    """The mu(I) friction coefficient (-) of a dense granular flow (Jop, Forterre & Pouliquen 2006):
+
+        mu(I) = mu_s + (mu_2 - mu_s) / (I0 / I + 1),    I = gamma_dot d / sqrt(P / rho_s)
+
+    ``shear_rate`` gamma_dot (1/s) = sqrt(2 D_dev:D_dev) = 2 sqrt(J2(D_dev)) (D the strain rate,
+    the convention under which sqrt(J2(S)) <= mu P is |tau| <= mu P in simple shear, where
+    gamma_dot = dv_x / dy), ``grain_diameter`` d (m), ``pressure`` P (Pa) and ``density`` rho_s
+    (kg/m^3) the grains' (the material's).  mu_s at rest (I = 0), mu_2 as I -> infinity,
+    (mu_s + mu_2) / 2 at I = I0.  P <= 0 gives mu_s (a cohesionless material has no strength
+    there whatever its friction).
+    """
+    if pressure <= 0.0 or shear_rate <= 0.0:
+        return mu_s
+    inertial = shear_rate * grain_diameter * math.sqrt(density / pressure)
+    return mu_s + (mu_2 - mu_s) / (i0 / inertial + 1.0)
+
+
 @njit(cache=True)
 def yield_strength(model, params, pressure, temperature, damage):
     """Yield strength Y(P, T, D) (Pa, von Mises equivalent stress) of one material; see the module docstring."""
+    return yield_strength_friction(model, params, pressure, temperature, damage, params[MU_I])
+
+
+@njit(cache=True)
+def yield_strength_friction(model, params, pressure, temperature, damage, mu_i):
+    """:func:`yield_strength` with the intact friction coefficient ``mu_i`` (-) given instead of
+    the row's (the GEO model's mu(I), :func:`inertial_friction`)."""
     if model == VON_MISES:
         return params[YIELD_VM]
     if model != GEO and model != ROCK:
         return 0.0
-    intact = lundborg_intact(pressure, params[Y0], params[Y_M], params[MU_I])
+    intact = lundborg_intact(pressure, params[Y0], params[Y_M], mu_i)
     if model == ROCK:
         damaged = damaged_friction(pressure, params[Y_C], params[MU_D], intact)
         d = min(max(damage, 0.0), 1.0)
