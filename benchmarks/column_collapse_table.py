@@ -13,6 +13,9 @@ has been still, the run-out (L_f - L0) / L0 and height H_f / L0 against the laws
 ``--hourglass 0`` and ``--no-surface-layer`` take the scene back to the scheme without them;
 ``--settling`` switches on the void settling (``scene.settling``, hydro/scheme/settling.py);
 ``--face-shear`` the face shear stress (``scene.face_shear``, hydro/strength/face_shear.py);
+``--mu-of-I MU_2 I0 D`` gives the material the GEO model's mu(I) friction (``mu_2``,
+``inertial_number_I0``, ``grain_diameter`` D in m; mu_s = tan(phi); docs/strength.md, "mu(I)
+friction").
 ``--room R`` lengthens the mesh to R run-outs of the law beyond the column (a deposit that
 reaches the far edge stops the run with an error).
 ``--dilation`` adds two columns at the end: the share of the mass in partly filled cells (fill
@@ -56,7 +59,7 @@ DILATED_FILL = 0.99
 
 def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion: float, hourglass: float,
         surface_layer: bool, plot: Path | None = None, room: float | None = None, settling: bool = False,
-        face_shear: bool = False, save: Path | None = None) -> dict:
+        face_shear: bool = False, save: Path | None = None, mu_of_i: list[float] | None = None) -> dict:
     """One collapse; returns the row's numbers (lengths in units of L0, times in tau)."""
     config = load_config(CONFIG)
     scene = config.scene.model_dump(exclude={"problem", "geometry"})
@@ -67,6 +70,8 @@ def run(aspect: float, phi: float, cfl: float, cells: int, end: float, cohesion:
     materials = config.resolved_materials()
     strength = materials[scene["material"]]["strength"]
     strength.update(Y0=cohesion, mu_i=math.tan(math.radians(phi)))
+    if mu_of_i is not None:
+        strength.update(mu_2=mu_of_i[0], inertial_number_I0=mu_of_i[1], grain_diameter=mu_of_i[2])
     sim = column_collapse.setup(scene, materials, block_cells=config.hydro.block_cells,
                                 cfl=min(cfl, column_collapse.MAX_CFL))
     sim.cfl = cfl
@@ -145,6 +150,8 @@ def main() -> None:
                         help="with the void settling (scene.settling: true, hydro/scheme/settling.py)")
     parser.add_argument("--face-shear", action="store_true",
                         help="with the face shear stress (scene.face_shear: true, hydro/strength/face_shear.py)")
+    parser.add_argument("--mu-of-I", type=float, nargs=3, default=None, metavar=("MU_2", "I0", "D"),
+                        help="the mu(I) friction: mu_2, inertial_number_I0 and grain_diameter (m); mu_s = tan(phi)")
     parser.add_argument("--plot", type=Path, default=None, help="folder for the thickness profile plots")
     parser.add_argument("--room", type=float, default=None,
                         help="scene.room: mesh length beyond the column in run-outs of the law (the config's if omitted)")
@@ -168,7 +175,7 @@ def main() -> None:
                 for cells in args.cells:
                     r = run(aspect, phi, cfl, cells, args.end, args.cohesion, args.hourglass,
                             not args.no_surface_layer, args.plot, args.room, args.settling,
-                            args.face_shear, args.save)
+                            args.face_shear, args.save, args.mu_of_I)
                     print(f"| {r['a']:g} | {r['phi']:g} | {r['cfl']:g} | {r['cells']} | {r['ke']:.1e} | "
                           f"{r['still']:.2f} tau | {r['runout']:.3f} ({r['law_runout']:.3g}, "
                           f"{r['runout'] / r['law_runout'] - 1:+.0%}) | {r['height']:.3f} ({r['law_height']:.3g}, "
