@@ -169,7 +169,7 @@ class StrengthSpec(Strict):
     @model_validator(mode="after")
     def _inertial_friction(self) -> "StrengthSpec":
         """The mu(I) keys: all three or none, for the geo model only, mu_2 >= mu_i where both are given."""
-        check_inertial_friction(self.model_dump(), "strength")
+        check_inertial_friction(self.model_dump())
         return self
 
 

@@ -46,27 +46,28 @@ _KEYS = {Y0: "Y0", Y_M: "Y_M", MU_I: "mu_i", Y_C: "Y_c", MU_D: "mu_d", Y_T: "Y_T
 MU_I_RHEOLOGY_KEYS = ("mu_2", "inertial_number_I0", "grain_diameter")
 
 
-def check_inertial_friction(spec: dict, label: str = "strength") -> None:
+def check_inertial_friction(spec: dict, label: str = "") -> None:
     """Raise ValueError unless the mu(I) keys of ``spec`` are all absent or all given with
     mu_2 >= mu_i, I0 > 0 and grain_diameter > 0, and only for the GEO model."""
     given = [key for key in MU_I_RHEOLOGY_KEYS if spec.get(key) is not None]
     if not given:
         return
+    where = f"{label}: " if label else ""
     model = spec.get("model", "none")
     if model != "geo":
-        raise ValueError(f"{label}: the mu(I) friction ({', '.join(given)}) is a GEO strength option "
+        raise ValueError(f"{where}the mu(I) friction ({', '.join(given)}) is a GEO strength option "
                          f"(model {model!r})")
     missing = [key for key in MU_I_RHEOLOGY_KEYS if key not in given]
     if missing:
-        raise ValueError(f"{label}: the mu(I) friction needs all of {', '.join(MU_I_RHEOLOGY_KEYS)} "
+        raise ValueError(f"{where}the mu(I) friction needs all of {', '.join(MU_I_RHEOLOGY_KEYS)} "
                          f"(missing {', '.join(missing)})")
     if not float(spec["inertial_number_I0"]) > 0.0:
-        raise ValueError(f"{label}: inertial_number_I0 must be > 0 (got {spec['inertial_number_I0']:g})")
+        raise ValueError(f"{where}inertial_number_I0 must be > 0 (got {spec['inertial_number_I0']:g})")
     if not float(spec["grain_diameter"]) > 0.0:
-        raise ValueError(f"{label}: grain_diameter must be > 0 m (got {spec['grain_diameter']:g})")
+        raise ValueError(f"{where}grain_diameter must be > 0 m (got {spec['grain_diameter']:g})")
     mu_s = spec.get("mu_i")
     if mu_s is not None and float(spec["mu_2"]) < float(mu_s):
-        raise ValueError(f"{label}: mu_2 ({spec['mu_2']:g}) must be >= mu_i ({mu_s:g}), the friction "
+        raise ValueError(f"{where}mu_2 ({spec['mu_2']:g}) must be >= mu_i ({mu_s:g}), the friction "
                          f"at I = 0 (mu_s)")
 
 
