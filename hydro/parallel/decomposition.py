@@ -29,7 +29,7 @@ of this rank's blocks within the reach of the peer's, in one order (by block, th
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -92,22 +92,17 @@ class Strips:
 
     blocks: np.ndarray
     cells: np.ndarray
-    #: The flat indices of :meth:`indices` per field shape and runs of components, computed once
-    #: (an exchange runs before every ghost fill).
-    _indices: dict = field(default_factory=dict, compare=False, repr=False)
 
     def indices(self, values: np.ndarray, runs: tuple[slice, ...] = (slice(None),)) -> np.ndarray:
         """Flat indices into ``values.reshape(-1)`` (a field (NB, C, NX, NY, NZ)) of every cell of
         the strips, for each component of the ``runs`` (slices of C, one after another) in turn:
-        (ncomponents, ncells) raveled."""
-        key = (values.shape, run_bounds(runs, values.shape[1]))
-        if key not in self._indices:
-            ncomp = values.shape[1]
-            per_block = int(np.prod(values.shape[2:]))
-            base = self.blocks * (ncomp * per_block) + self.cells
-            chosen = np.concatenate([np.arange(*bounds) for bounds in key[1]])
-            self._indices[key] = (base[None, :] + (chosen * per_block)[:, None]).ravel()
-        return self._indices[key]
+        (ncomponents, ncells) raveled.  Computed anew on each call: an exchange plan
+        (:class:`~impactpipe.hydro.parallel.exchange.StripPlan`) takes them once per call site."""
+        ncomp = values.shape[1]
+        per_block = int(np.prod(values.shape[2:]))
+        base = self.blocks * (ncomp * per_block) + self.cells
+        chosen = np.concatenate([np.arange(*bounds) for bounds in run_bounds(runs, ncomp)])
+        return (base[None, :] + (chosen * per_block)[:, None]).ravel()
 
     def values(self, values: np.ndarray, runs: tuple[slice, ...] = (slice(None),)) -> int:
         """Number of values of the components of the ``runs`` of the field ``values`` the strips hold."""
