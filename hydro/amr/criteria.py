@@ -38,6 +38,7 @@ import numpy as np
 from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.cells import shifted_cell
 from impactpipe.hydro.scheme.mixture import mixture_state
 from impactpipe.hydro.scheme.pencil_layout import PHI_SECOND_ORDER
 
@@ -75,15 +76,6 @@ def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table,
                     out[b, ix, iy, iz] = p
 
 
-@njit(cache=True, inline="always")
-def _neighbours(ix, iy, iz, d, step):
-    if d == 0:
-        return ix + step, iy, iz
-    if d == 1:
-        return ix, iy + step, iz
-    return ix, iy, iz + step
-
-
 @njit(cache=True, parallel=True)
 def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, margin, out, near, void=None):
     """Per block the largest interface, pressure-jump and density-jump indicators, |p| (Pa) and speed
@@ -118,8 +110,8 @@ def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, margin, out, nea
                     cell_p = 0.0
                     cell_r = 0.0
                     for d in range(ndim):
-                        lx, ly, lz = _neighbours(ix, iy, iz, d, -1)
-                        hx, hy, hz = _neighbours(ix, iy, iz, d, 1)
+                        lx, ly, lz = shifted_cell(ix, iy, iz, d, -1)
+                        hx, hy, hz = shifted_cell(ix, iy, iz, d, 1)
                         phi_l = 0.0
                         phi_h = 0.0
                         rho_l = 0.0

@@ -60,7 +60,8 @@ from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
-from impactpipe.hydro.strength.hourglass import at_block_edge, face_area, face_weights, kick_cell, shifted_cell
+from impactpipe.hydro.mesh.cells import shifted_cell
+from impactpipe.hydro.strength.hourglass import at_block_edge, face_area, face_weights, kick_cell
 from impactpipe.hydro.strength.update import WK_L, WK_PHI, WK_S, WK_V, WK_Y, gradient_slot
 
 

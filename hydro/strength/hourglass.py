@@ -37,18 +37,9 @@ from __future__ import annotations
 from numba import njit, prange
 
 from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.cells import shifted_cell
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
-
-
-@njit(cache=True, inline="always")
-def shifted_cell(ix, iy, iz, d, k):
-    """The cell ``k`` steps from (ix, iy, iz) along axis ``d``."""
-    if d == 0:
-        return ix + k, iy, iz
-    if d == 1:
-        return ix, iy + k, iz
-    return ix, iy, iz + k
 
 
 @njit(cache=True, inline="always")
