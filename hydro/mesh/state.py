@@ -86,8 +86,17 @@ class HydroState:
         distension itself is not stored here: the :class:`~impactpipe.hydro.solver.Simulation`
         starts every porous material at its alpha_0); ``velocity`` (m/s) is a (3,) vector or an
         array broadcastable to (NB, 3, nx, ny, nz).
-        Those cells are rebuilt: the material fills ``fraction`` of them, other materials keep
-        their partial amounts scaled by ``1 - fraction``, and the cell moves at ``velocity``.
+        Those cells are rebuilt: the material fills ``fraction`` of them and other materials keep
+        their partial amounts scaled by ``1 - fraction``.  A cell that held no other matter, or
+        held it at ``velocity`` already, moves at ``velocity``.  A cell whose other matter moves
+        otherwise (a projectile's cells that overlap the target it touches) takes the sum of the
+        two momenta, m = (1 - f) m_old + f rho v, and the kinetic energy that this merge loses,
+        (1 - f) K_old + f rho |v|^2 / 2 - |m|^2 / (2 rho_cell), heats the cell's materials by the
+        same specific energy, so that the momentum and the total energy of the placed body and
+        of what it overlaps are exactly those asked for: a cell moving wholly at ``velocity``
+        would give the overlapped matter the body's speed and add its momentum and kinetic
+        energy to the impact (a third of the projectile's at one cell per projectile radius in
+        the laboratory impact, docs/validation.md).
         ``eos`` is the packed :class:`impactpipe.hydro.eos.EOSArrays`.
         """
         shape = (mesh.nblocks,) + mesh.interior_shape
@@ -109,6 +118,11 @@ class HydroState:
         alpha = mesh.interior(self.alpha)
         arho = mesh.interior(self.arho)
         arhoe = mesh.interior(self.arhoe)
+        mom = mesh.interior(self.momentum)
+        rho_before = arho.sum(axis=1)
+        mom_before = mom.copy()
+        moving_apart = (sel & (fraction < 1.0) & (rho_before > 0.0)
+                        & (mom_before != rho_before[:, None] * velocity).any(axis=1))
         keep = np.where(sel, 1.0 - fraction, 1.0)
         for k in range(self.nmat):
             alpha[:, k] *= keep
@@ -120,9 +134,19 @@ class HydroState:
         arho[:, material] += fraction * density
         arhoe[:, material] += fraction * density * specific_energy
         rho = arho.sum(axis=1)
-        mom = mesh.interior(self.momentum)
+        placed = fraction * density
         for d in range(3):
-            mom[:, d] = np.where(sel, rho * velocity[:, d], mom[:, d])
+            merged = keep * mom_before[:, d] + placed * velocity[:, d]
+            mom[:, d] = np.where(moving_apart, merged, np.where(sel, rho * velocity[:, d], mom[:, d]))
         kinetic = 0.5 * rho * (velocity**2).sum(axis=1)
+        if moving_apart.any():
+            with np.errstate(invalid="ignore", divide="ignore"):
+                kinetic_before = 0.5 * (mom_before**2).sum(axis=1) / rho_before
+                merged_kinetic = 0.5 * (mom**2).sum(axis=1) / rho
+            parts = keep * kinetic_before + 0.5 * placed * (velocity**2).sum(axis=1)
+            heat = np.where(moving_apart, np.maximum(parts - merged_kinetic, 0.0), 0.0)
+            for k in range(self.nmat):
+                arhoe[:, k] += np.where(moving_apart, heat * arho[:, k] / np.where(moving_apart, rho, 1.0), 0.0)
+            kinetic = np.where(moving_apart, merged_kinetic, kinetic)
         energy = mesh.interior(self.energy)
         energy[:, 0] = np.where(sel, arhoe.sum(axis=1) + kinetic, energy[:, 0])

@@ -38,7 +38,10 @@ at its reference (bulk) density with the internal energy that gives the EOS the 
 alpha_0, its matrix carrying alpha_0 times that pressure); the projectile starts at p = 0.
 Volume fractions are set by ``subsamples`` point samples per cell and axis in the cells that
 the sphere's surface may cut (cells wholly inside or outside are set directly), weighted by
-the annular volume in 2d-cylindrical.
+the annular volume in 2d-cylindrical.  The cells both spheres cut near the contact point hold
+both materials; they take the sum of the two bodies' momenta and are heated by the kinetic
+energy that merge loses (:meth:`~impactpipe.hydro.mesh.state.HydroState.set_material`), so
+the state carries exactly the projectile's momentum m_P v_P and kinetic energy m_P V^2 / 2.
 """
 
 from __future__ import annotations
