@@ -38,8 +38,8 @@ surface-layer pressure, here of the normal component of gravity (a partly filled
 strength is taken at no less than rho |g| cos theta phi dx / 2, the pressure at mid-depth of a
 layer parallel to the plane), with ``hourglass`` viscosity or the ``face_shear`` stress against
 the odd-even velocity modes as asked (neither by default; without either an odd-even velocity
-mode across the layer grows unresisted).  The flow is uniform along x, so the layer's cells stay full and
-its free surface stays at z = h.
+mode across the layer grows unresisted).  The flow is uniform along x; the layer's free surface
+stays within its top row of cells.
 
 Not a config scene (it is not in :data:`impactpipe.hydro.problems.PROBLEMS`): tests and
 benchmarks build it from a material spec (:func:`granular_material`).
