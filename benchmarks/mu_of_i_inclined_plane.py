@@ -3,7 +3,8 @@
 Builds the scene of ``hydro/problems/inclined_plane.py``: a layer h = 10 d thick (d = 0.53 mm,
 the glass beads of Jop, Forterre & Pouliquen 2006: mu_s = tan 20.9 deg, mu_2 = tan 32.76 deg,
 I0 = 0.279) on a rough plane inclined at ``--slope`` (deg), periodic along the slope, with
-``--cells`` cells across h, its compressibility rho0 |g| h / K = ``--compressibility`` and the
+``--cells`` cells across h, its compressibility rho0 |g| h / K = ``--compressibility``, its
+Poisson ratio ``--poisson`` (the shear modulus G = 3 K (1 - 2 nu) / (2 (1 + nu))) and the
 hourglass viscosity ``--hourglass`` C (``--face-shear`` instead: the face shear stress).  It runs
 to ``--end`` tau (tau = sqrt(h / g)) and prints one row per resolution: the relative L2 error
 sqrt(sum (u - u_exact)^2 / sum u_exact^2) over the layer's cell rows of the velocity profile
@@ -40,12 +41,12 @@ GRAVITY = 9.81
 
 
 def run(slope_deg: float, cells: int, end: float, average: float, compressibility: float, hourglass: float,
-        face_shear: bool, cfl: float) -> dict:
+        face_shear: bool, cfl: float, poisson: float = 0.3) -> dict:
     """One layer to ``end`` tau; returns the row's numbers (velocities in m/s, times in tau)."""
     h = THICKNESS_GRAINS * GRAIN_DIAMETER
     slope = math.radians(slope_deg)
     material = inclined_plane.granular_material(math.sqrt(GRAVITY * h / compressibility), MU_S, MU_2, I0,
-                                                GRAIN_DIAMETER)
+                                                GRAIN_DIAMETER, poisson=poisson)
     sim = inclined_plane.setup(material, slope, h, cells, GRAVITY, cfl, hourglass, face_shear)
     tau = math.sqrt(h / GRAVITY)
     started = time.perf_counter()
@@ -67,7 +68,8 @@ def run(slope_deg: float, cells: int, end: float, average: float, compressibilit
     def l2(u):
         return float(np.sqrt(((u - exact) ** 2).sum() / (exact ** 2).sum()))
 
-    return {"slope_deg": slope_deg, "cells": cells, "compressibility": compressibility, "hourglass": hourglass,
+    return {"slope_deg": slope_deg, "cells": cells, "compressibility": compressibility, "poisson": poisson,
+            "hourglass": hourglass,
             "face_shear": face_shear, "cfl": cfl, "end_tau": end, "average_tau": average,
             "inertial_number": inclined_plane.slope_inertial_number(slope, MU_S, MU_2, I0),
             "l2_averaged": l2(steady), "l2_end": l2(profiles[-1]),
@@ -86,6 +88,7 @@ def main() -> None:
     parser.add_argument("--end", type=float, default=100.0, help="end time in tau = sqrt(h / g)")
     parser.add_argument("--average", type=float, default=20.0, help="the profile is averaged over the last AVERAGE tau")
     parser.add_argument("--compressibility", type=float, default=1.0e-2, help="rho0 |g| h / K (-)")
+    parser.add_argument("--poisson", type=float, default=0.3, help="Poisson ratio nu (-)")
     parser.add_argument("--hourglass", type=float, default=0.1, help="hourglass viscosity coefficient C (0: none)")
     parser.add_argument("--face-shear", action="store_true", help="with the face shear stress")
     parser.add_argument("--cfl", type=float, default=0.4)
@@ -97,7 +100,7 @@ def main() -> None:
     rows = []
     for cells in args.cells:
         r = run(args.slope, cells, args.end, args.average, args.compressibility, args.hourglass, args.face_shear,
-                args.cfl)
+                args.cfl, args.poisson)
         rows.append(r)
         print(f"| {cells} | {r['l2_averaged']:.4f} | {r['l2_end']:.4f} | {r['max_error_over_surface']:.4f} | "
               f"{r['mean_velocity']:.4f} ({r['mean_velocity_exact']:.4f}) | {r['top_row_velocity']:.4f} "
