@@ -57,6 +57,7 @@ from impactpipe.hydro.eos.table import (
 )
 from impactpipe.hydro.eos.tillotson import (
     tillotson_energy_from_pressure,
+    tillotson_pressure_not_negative,
     tillotson_pressure_sound_speed,
     tillotson_temperature,
 )
@@ -65,7 +66,7 @@ __all__ = [
     "IDEAL_GAS", "MIE_GRUNEISEN", "TILLOTSON", "TABLE", "NPARAM", "MODEL_CODES",
     "DEFAULT_T_REF", "SPECIFIC_HEAT_DEFAULTS", "EOSArrays", "pack_eos",
     "pressure_sound_speed", "temperature", "energy_from_pressure", "reference_density",
-    "pressure_sound_speed_in_line", "temperature_in_line", "reference_densities",
+    "pressure_sound_speed_in_line", "temperature_in_line", "pressure_not_negative", "reference_densities",
     "EOSTableError", "TabulatedEOS", "read_sesame_table", "write_sesame_table",
 ]
 
@@ -252,6 +253,19 @@ def pressure_sound_speed_in_line(kind, params_row, table, rho, e):
         p, c2 = tillotson_pressure_sound_speed(params_row, rho, e)
         return p, c2, 0
     return pressure_sound_speed(kind, params_row, table, rho, e)
+
+
+@njit(cache=True, inline="always")
+def pressure_not_negative(kind, params_row, rho, e):
+    """Whether the pressure at (rho kg/m^3, e J/kg) is certain to be >= 0 without evaluating the
+    EOS: an ideal gas with e >= 0 (P = (gamma - 1) rho e, gamma >= 1), Tillotson compressed
+    with e >= 0 (:func:`~impactpipe.hydro.eos.tillotson.tillotson_pressure_not_negative`); False
+    otherwise (the other models are not bounded here), so a caller then evaluates the EOS."""
+    if kind == IDEAL_GAS:
+        return e >= 0.0 and rho >= 0.0 and params_row[ideal_gas.GAMMA] >= 1.0
+    if kind == TILLOTSON:
+        return tillotson_pressure_not_negative(params_row, rho, e)
+    return False
 
 
 @njit(cache=True, inline="always")

@@ -197,6 +197,16 @@ def tillotson_pressure_sound_speed(params, rho, e):
     return p, c2
 
 
+@njit(cache=True, inline="always")
+def tillotson_pressure_not_negative(params, rho, e):
+    """Whether P(rho, e) >= 0 (Pa) is certain without evaluating it: at rho >= rho0 (kg/m^3) the
+    compressed branch P1 = (a + b/omega) rho E + A mu + B mu^2 applies, and with E >= 0 (J/kg),
+    E0 > 0 and a, b, A, B >= 0 each of its terms is >= 0 (omega >= 1, mu >= 0), in floating
+    point too (products and sums of numbers >= 0)."""
+    return (rho >= params[RHO0] and e >= 0.0 and params[E0] > 0.0 and params[A] >= 0.0 and params[B] >= 0.0
+            and params[A_SMALL] >= 0.0 and params[B_SMALL] >= 0.0)
+
+
 @njit(cache=True)
 def tillotson_cold_energy(params, rho):
     """Cold-compression energy e_cold(rho) (J/kg), zero at rho0.

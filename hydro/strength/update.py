@@ -85,7 +85,7 @@ import math
 
 from numba import njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed_in_line, temperature_in_line
+from impactpipe.hydro.eos import pressure_not_negative, pressure_sound_speed_in_line, temperature_in_line
 from impactpipe.hydro.eos.porosity import ALPHA0, wave_speed_ratio
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
@@ -255,6 +255,14 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blo
 def _nonzero(s0, s1, s2, s3, s4, s5):
     """Whether some of the stress components (xx, yy, zz, xy, xz, yz) (Pa) is not 0."""
     return s0 != 0.0 or s1 != 0.0 or s2 != 0.0 or s3 != 0.0 or s4 != 0.0 or s5 != 0.0
+
+
+@njit(cache=True, inline="always")
+def _positive_zeros(s0, s1, s2, s3, s4, s5):
+    """Whether each of the stress components (Pa) is +0.0 (its sign bit clear: -0.0 is not)."""
+    return (s0 == 0.0 and s1 == 0.0 and s2 == 0.0 and s3 == 0.0 and s4 == 0.0 and s5 == 0.0
+            and math.copysign(1.0, s0) > 0.0 and math.copysign(1.0, s1) > 0.0 and math.copysign(1.0, s2) > 0.0
+            and math.copysign(1.0, s3) > 0.0 and math.copysign(1.0, s4) > 0.0 and math.copysign(1.0, s5) > 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -487,6 +495,15 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     the face shear stress (:mod:`impactpipe.hydro.strength.face_shear`; the work arrays then have
     NWORK_FACE slots).
 
+    A material without deviatoric stress (each component +0.0), without Grady-Kipp, in a cell at
+    rest among its neighbours (every L_ij is 0), where the pressure is certain to be >= 0
+    without evaluating the EOS (:func:`impactpipe.hydro.eos.pressure_not_negative`: Tillotson at
+    rho >= rho0 with e >= 0), skips the EOS when neither the surface-layer pressure nor
+    ``store_strength`` needs it: it cannot fail in tension (p_k >= 0 >= -Y_T (1 - D)), and the
+    Jaumann update of S = +0.0 with L = 0 and a finite G is +0.0 whatever G, so the step leaves
+    the state bit for bit as the evaluation would.  Early in an impact most of the target is
+    such a cell.
+
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
     void cell's stay zero, as :func:`cell_velocity_and_stress` left them).  The scalars of
@@ -545,6 +562,11 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         # no theta velocity, no theta derivatives
                         lzx = lzy = lxz = lyz = 0.0
                         vol *= 2.0 * 3.141592653589793 * r
+                    # a cell at rest among its neighbours (every L_ij is 0) whose unstressed materials
+                    # may skip their EOS (no surface-layer pressure or stored strength needs it)
+                    at_rest = (not store_strength and not with_gravity and lxx == 0.0 and lxy == 0.0 and lxz == 0.0
+                               and lyx == 0.0 and lyy == 0.0 and lyz == 0.0 and lzx == 0.0 and lzy == 0.0
+                               and lzz == 0.0)
                     for k in range(nmat):
                         if model[k] == NONE:
                             continue
@@ -571,48 +593,58 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             dist = arhoq[b, base + nq - 2, ix, iy, iz] * inv
                             h = wave_speed_ratio(porosity[k], dist)
                             stiffness = h * h
-                        pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table, dist * rk,
-                                                                     ek)
-                        pk /= dist
-                        g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0) * stiffness
                         y_t = tensile_strength[k] / dist
                         gradual = damage_model[k] == GRADY_KIPP
-                        p_matrix = pk
-                        if gradual:
-                            # Grady-Kipp: damage grows from the active flaws; S and G soften with it.
-                            # A porous material: the matrix's tension cap spread over the bulk, and the
-                            # porous moduli (bulk rho c_s^2 h^2, the porous G, a given E times h^2 / alpha)
-                            if tensile_strength[k] > 0.0:
-                                p_matrix = max(pk, -y_t)
-                            d_new, flaw_limited = _grady_kipp_damage(
-                                dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy, sxz, syz, rk,
-                                c2b * stiffness, g, arhoq, b, base + ns + 1, ix, iy, iz, inv,
-                                damage_params[k, WEIBULL_M], damage_params[k, YOUNG] * stiffness / dist,
-                                damage_params[k, ACTIVE_LIMIT], damage_params[k, NODE0:], dt)
-                            if flaw_limited:
-                                counts[b, CNT_FLAW_LIMITED] += 1
-                            if d_new > dmg:
+                        if (at_rest and not gradual and y_t >= 0.0 and _positive_zeros(sxx, syy, szz, sxy, sxz, syz)
+                                and pressure_not_negative(eos_kind[k], eos_params[k], dist * rk, ek)):
+                            # at rest and unstressed, where the pressure is certain to be >= 0: the
+                            # EOS, which G, the tensile-failure test and the Jaumann update would take,
+                            # is not evaluated (update_stress docstring); S stays +0.0, as they leave it
+                            pk = 0.0
+                            g = 0.0
+                            p_matrix = pk
+                            sxx0, syy0, szz0, sxy0, sxz0, syz0 = sxx, syy, szz, sxy, sxz, syz
+                        else:
+                            pk, c2b, flag = pressure_sound_speed_in_line(eos_kind[k], eos_params[k], eos_table,
+                                                                         dist * rk, ek)
+                            pk /= dist
+                            g = shear[k, 0] + shear[k, 1] * rk * max(c2b, 0.0) * stiffness
+                            p_matrix = pk
+                            if gradual:
+                                # Grady-Kipp: damage grows from the active flaws; S and G soften with it.
+                                # A porous material: the matrix's tension cap spread over the bulk, and the
+                                # porous moduli (bulk rho c_s^2 h^2, the porous G, a given E times h^2 / alpha)
+                                if tensile_strength[k] > 0.0:
+                                    p_matrix = max(pk, -y_t)
+                                d_new, flaw_limited = _grady_kipp_damage(
+                                    dmg, damaged_pressure(p_matrix, dmg), sxx, syy, szz, sxy, sxz, syz, rk,
+                                    c2b * stiffness, g, arhoq, b, base + ns + 1, ix, iy, iz, inv,
+                                    damage_params[k, WEIBULL_M], damage_params[k, YOUNG] * stiffness / dist,
+                                    damage_params[k, ACTIVE_LIMIT], damage_params[k, NODE0:], dt)
+                                if flaw_limited:
+                                    counts[b, CNT_FLAW_LIMITED] += 1
+                                if d_new > dmg:
+                                    if model[k] != ROCK:
+                                        keep = (1.0 - d_new) / (1.0 - dmg)
+                                        sxx, syy, szz, sxy, sxz, syz = (sxx * keep, syy * keep, szz * keep, sxy * keep,
+                                                                        sxz * keep, syz * keep)
+                                    if d_new >= 1.0:
+                                        counts[b, CNT_FRACTURED] += 1
+                                    dmg = d_new
                                 if model[k] != ROCK:
-                                    keep = (1.0 - d_new) / (1.0 - dmg)
-                                    sxx, syy, szz, sxy, sxz, syz = (sxx * keep, syy * keep, szz * keep, sxy * keep,
-                                                                    sxz * keep, syz * keep)
-                                if d_new >= 1.0:
-                                    counts[b, CNT_FRACTURED] += 1
-                                dmg = d_new
-                            if model[k] != ROCK:
-                                g *= 1.0 - dmg
-                        elif pk < -y_t * (1.0 - dmg):
-                            # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
-                            if dmg < 1.0:
-                                counts[b, CNT_TENSILE_FAILURE] += 1
-                                dmg = 1.0
-                        sxx0, syy0, szz0, sxy0, sxz0, syz0 = sxx, syy, szz, sxy, sxz, syz
-                        sxx, syy, szz, sxy, sxz, syz = jaumann_update(
-                            sxx, syy, szz, sxy, sxz, syz, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz, dt, g)
-                        if ns < 6:
-                            sxz = syz = 0.0
-                        if ns < 4:
-                            sxy = 0.0
+                                    g *= 1.0 - dmg
+                            elif pk < -y_t * (1.0 - dmg):
+                                # tensile failure (the sweeps then hold its tension at -Y_T (1 - D))
+                                if dmg < 1.0:
+                                    counts[b, CNT_TENSILE_FAILURE] += 1
+                                    dmg = 1.0
+                            sxx0, syy0, szz0, sxy0, sxz0, syz0 = sxx, syy, szz, sxy, sxz, syz
+                            sxx, syy, szz, sxy, sxz, syz = jaumann_update(
+                                sxx, syy, szz, sxy, sxz, syz, lxx, lxy, lxz, lyx, lyy, lyz, lzx, lzy, lzz, dt, g)
+                            if ns < 6:
+                                sxz = syz = 0.0
+                            if ns < 4:
+                                sxy = 0.0
                         # a material without deviatoric stress does not yield whatever its yield
                         # strength (>= 0): its temperature and yield strength are not evaluated
                         stressed = (sxx != 0.0 or syy != 0.0 or szz != 0.0 or sxy != 0.0 or sxz != 0.0
