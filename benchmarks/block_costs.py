@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hydro_throughput import build  # noqa: E402
 
+from impactpipe.hydro.mesh.boundary import NO_RECORD  # noqa: E402
 from impactpipe.hydro.scheme.directional import sweep  # noqa: E402
 from impactpipe.hydro.scheme.timestep import PHI_VOID, max_signal_rate  # noqa: E402
 from impactpipe.hydro.strength.divergence import apply_stress_divergence  # noqa: E402
@@ -65,8 +66,8 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
         for axis in range(mesh.ndim):
             sweep(axis, dt, mesh.geometry_code, alpha, arho, arhoe, arhoq, mom, energy, lo, dx, nbr, nlev, eos.kind,
                   eos.params, eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch, *counters,
-                  sim.plain_pencils, np.arange(len(blocks)), sim._sweep_grady_kipp, sim._sweep_porosity,
-                  sim.bulk_pressure_predictor)
+                  sim.plain_pencils, np.arange(len(blocks)), NO_RECORD, NO_RECORD, sim._sweep_grady_kipp,
+                  sim._sweep_porosity, sim.bulk_pressure_predictor)
         if work is not None:
             strength = sim.strength
             a = strength.arrays

@@ -31,8 +31,8 @@ from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves
 from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, finite_blocks,
                                            level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.boundary import fill_state_ghosts
-from impactpipe.hydro.mesh.last_good import block_runs, void_blocks
+from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_state_ghosts
+from impactpipe.hydro.mesh.last_good import block_runs, scalar_clear_blocks, void_blocks
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
                                            distension_field, pack_porosity)
@@ -281,6 +281,12 @@ class Simulation:
         self._good_void = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, 1 where the block is void now (:func:`~impactpipe.hydro.mesh.last_good.void_blocks`)
         self._void_now = np.zeros(self.mesh.nblocks, dtype=np.uint8)
+        #: per block, 1 where the last-good copy's transported scalars are +0.0
+        self._good_clear = np.zeros(self.mesh.nblocks, dtype=np.uint8)
+        #: per block, 1 where its transported scalars are +0.0
+        #: (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`): row 0 at the start of a
+        #: step, then the rows take turns as each sweep writes the record after it (:meth:`step`)
+        self._scalars_clear = np.zeros((2, self.mesh.nblocks), dtype=np.uint8)
         self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
         self._good_gravity_work = None if self.gravity is None else self.gravity.work
@@ -377,12 +383,15 @@ class Simulation:
             axes.reverse()
         st = self.state
         own = self.partition.blocks
+        recorded = self._records_clear_scalars()
+        clear_now, clear_next = self._scalars_clear if recorded else (NO_RECORD, NO_RECORD)
         for axis in axes:
-            fill = self.partition.start_ghosts(st, self.mesh, axis, self._q_layers)
-            self._sweep(axis, dt, fill.early)
+            fill = self.partition.start_ghosts(st, self.mesh, axis, self._q_layers, clear_now if recorded else None)
+            self._sweep(axis, dt, fill.early, clear_now, clear_next)
             self.partition.finish_ghosts(fill, st, self.mesh, axis)
             self._observe("ghosts", axis)
-            self._sweep(axis, dt, fill.late)
+            self._sweep(axis, dt, fill.late, clear_now, clear_next)
+            clear_now, clear_next = clear_next, clear_now
             failed = self.partition.first_failure(self._failure)
             if failed >= 0:
                 self._raise_sweep_failure(failed)
@@ -414,9 +423,19 @@ class Simulation:
             self.tracers.after_step(self, dt)
         return dt
 
-    def _sweep(self, axis: int, dt: float, blocks: np.ndarray) -> None:
+    def _records_clear_scalars(self) -> bool:
+        """Whether a step keeps the record of the blocks whose transported scalars are +0.0
+        (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`), for the ghost fills,
+        the sweeps and the last-good copy to skip them: with scalars, on a uniform mesh in one
+        process (an adaptive mesh's coarse/fine ghosts and other ranks' strips are filled
+        otherwise)."""
+        return self.state.arhoq.shape[1] > 0 and not self.mesh.adaptive and self.partition.keeps_scalar_record
+
+    def _sweep(self, axis: int, dt: float, blocks: np.ndarray, scalars_clear: np.ndarray,
+               clear_after: np.ndarray) -> None:
         """Advance the partition's blocks listed in ``blocks`` (indices within ``partition.blocks``)
-        by ``dt`` (s) along ``axis`` (:func:`~impactpipe.hydro.scheme.directional.sweep`)."""
+        by ``dt`` (s) along ``axis`` (:func:`~impactpipe.hydro.scheme.directional.sweep`, with
+        its record of the blocks whose scalars are +0.0, or NO_RECORD)."""
         if blocks.size == 0:
             return
         st = self.state
@@ -426,7 +445,8 @@ class Simulation:
               self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
               self.eos.table, self.shear_modulus, self._sweep_tensile_strength(), self._scratch, self.boundary[own],
               self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-              blocks, self._sweep_grady_kipp, self._sweep_porosity, self.bulk_pressure_predictor)
+              blocks, scalars_clear, clear_after, self._sweep_grady_kipp, self._sweep_porosity,
+              self.bulk_pressure_predictor)
 
     def _settle_void(self) -> None:
         """Settle the void under resting material out of every column (:attr:`void_settling`,
@@ -641,17 +661,27 @@ class Simulation:
         void = self._void_now
         fields = [arr.view(np.int64) for arr in (st.alpha, st.arho, st.arhoe, st.momentum, st.energy)]
         void_blocks(*fields, lo, hi, void)
+        clear = self._scalars_clear[0]
+        if self._records_clear_scalars():
+            scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear)
+        else:
+            clear[lo:hi] = 0
         copy = np.zeros(self.mesh.nblocks, dtype=bool)
         copy[lo:hi] = (void[lo:hi] == 0) | (self._good_void[lo:hi] == 0)
+        # a block whose scalars are +0.0 now and were at the copy keeps its copy of them
+        copy_scalars = copy.copy()
+        copy_scalars[lo:hi] &= (clear[lo:hi] == 0) | (self._good_clear[lo:hi] == 0)
         runs = block_runs(copy)
+        scalar_runs = block_runs(copy_scalars)
         for name, arr in st.arrays().items():
             interior = self.mesh.interior(arr)
             if self._good[name].shape != interior.shape:
                 self._good[name] = interior.copy()
                 continue
-            for start, stop in runs:
+            for start, stop in (scalar_runs if name == "arhoq" else runs):
                 np.copyto(self._good[name][start:stop], interior[start:stop])
         self._good_void[lo:hi] = void[lo:hi]
+        self._good_clear[lo:hi] = clear[lo:hi]
         for dst, src in zip(self._good_counters, self._counter_arrays()):
             np.copyto(dst, src)
         self._good_clock = (self.time, self.step_count, self.cell_updates)

@@ -54,17 +54,27 @@ def fill_ghosts_where(field, neighbor, neighbor_level, axis, ghost, lo, hi, want
 
 @njit(cache=True, parallel=True)
 def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
-                           hi, q_layers):
+                           hi, q_layers, scalars_clear):
     """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the
     blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range,
     :mod:`impactpipe.hydro.parallel`); they read any block's interior cells.  Column c of
     ``arhoq`` gets its ``q_layers[c]`` (int64, 1 .. ``ghost``) ghost layers next to the
-    interior only (:func:`every_layer`: all of them), the other fields every layer."""
+    interior only (:func:`every_layer`: all of them), the other fields every layer.
+
+    ``scalars_clear`` (uint8, (NB,), or empty: no record): the blocks whose scalars are +0.0
+    in their interior and in those ghost layers
+    (:func:`impactpipe.hydro.mesh.last_good.scalar_clear_blocks`).  A slab of a clear block
+    whose source block is clear too already holds the +0.0 the copy would write, and its
+    scalars are not copied."""
+    tracked = scalars_clear.shape[0] > 0
     for b in prange(lo, hi):
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
-                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
+                src = nbr if nbr >= 0 else b
+                copy_scalars = not (tracked and scalars_clear[b] != 0 and scalars_clear[src] != 0)
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers,
+                                 copy_scalars)
 
 
 @njit(cache=True, parallel=True)
@@ -77,7 +87,7 @@ def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, 
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
-                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers, True)
 
 
 @njit(cache=True, parallel=True)
@@ -93,7 +103,7 @@ def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbo
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr >= 0 and neighbor_level[b, axis, side] == 0 and not (lo <= nbr < hi):
-                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers)
+                _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers, True)
 
 
 @njit(cache=True, parallel=True)
@@ -120,14 +130,16 @@ def every_layer(arhoq: np.ndarray, ghost: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers):
+def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers, copy_scalars):
     """:func:`_fill_block_side` for every conserved field, the normal momentum flipped at a
-    reflecting face, column c of ``arhoq`` ``q_layers[c]`` layers deep."""
+    reflecting face, column c of ``arhoq`` ``q_layers[c]`` layers deep (none without ``copy_scalars``)."""
     _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, ghost)
     _fill_block_side(arho, b, side, nbr, axis, ghost, -1, ghost)
     _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, ghost)
     _fill_block_side(mom, b, side, nbr, axis, ghost, axis, ghost)
     _fill_block_side(energy, b, side, nbr, axis, ghost, -1, ghost)
+    if not copy_scalars:
+        return
     n = (arhoq.shape[2], arhoq.shape[3], arhoq.shape[4])[axis] - 2 * ghost
     for j in range(ghost):
         dst, src = _slab_cells(side, nbr, ghost, n, j)
@@ -242,10 +254,17 @@ def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = 
         prolong_field_ghosts(field, plans["prolong"])
 
 
-def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None) -> None:
+#: ``scalars_clear`` of :func:`fill_state_ghost_slabs` without a record: every slab is copied.
+NO_RECORD = np.zeros(0, dtype=np.uint8)
+
+
+def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None,
+                      scalars_clear: np.ndarray | None = None) -> None:
     """Fill the ghosts of every conserved field of ``state`` along ``axis``; ``q_layers``:
     the ghost layers of each column of ``state.arhoq`` (:func:`fill_state_ghost_slabs`; None:
-    every layer, which an adaptive mesh needs, since its prolongation reads the coarse ghosts).
+    every layer, which an adaptive mesh needs, since its prolongation reads the coarse ghosts);
+    ``scalars_clear``: the blocks whose scalars are +0.0 (:func:`fill_state_ghost_slabs`; a
+    uniform mesh's only, with ``q_layers``), or None.
 
     Coarse/fine faces: restriction, then the conservative limited prolongation of
     :func:`impactpipe.hydro.amr.transfer.prolong_state_ghosts`.
@@ -256,7 +275,9 @@ def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None
     fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
     if q_layers is None or mesh.adaptive:
         q_layers = every_layer(state.arhoq, g)
-    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, q_layers)
+        scalars_clear = None
+    fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, q_layers,
+                           NO_RECORD if scalars_clear is None else scalars_clear)
     if not mesh.adaptive:
         return
     plans = axis_plans(mesh, axis)

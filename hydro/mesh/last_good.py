@@ -36,6 +36,26 @@ def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void):
         void[b] = 1 if empty else 0
 
 
+@njit(cache=True, parallel=True)
+def scalar_clear_blocks(arhoq, void, lo, hi, clear):
+    """``clear[b]`` = 1 where the transported scalars of block b of ``lo .. hi - 1`` are +0.0 in
+    its interior and in the ghost layers a step's ghost fill writes of them
+    (:func:`impactpipe.hydro.scheme.pencil_layout.transport_ghost_layers`), else 0; ``arhoq`` an
+    int64 view of the padded scalars ``(NB, M NQ, NX, NY, NZ)``, ``void`` from :func:`void_blocks`.
+
+    A void block is clear: its interior cells hold no mass, so no scalars, and each ghost layer
+    of its scalars was written with that of its partial densities, from a cell that held no
+    mass either.  Another block is clear when every scalar of it, ghosts included, is +0.0
+    (its bits: a -0.0 is not), tested like :func:`void_blocks` (a layer that no fill writes
+    counts too, so a block whose unread layer keeps an old value is not clear, which costs
+    only the skips).  Right after an impact's contact most of the target is clear; the ghost
+    fills, the sweeps and the last-good copy then need not move its scalars
+    (:meth:`impactpipe.hydro.solver.Simulation.step`).
+    """
+    for b in prange(lo, hi):
+        clear[b] = 1 if void[b] != 0 or _zero_run(arhoq, b) else 0
+
+
 @njit(cache=True, inline="always")
 def _zero_run(field, b):
     """Whether every cell of ``field[b]`` (int64 view, C-contiguous), ghosts included, is +0.0:

@@ -30,7 +30,7 @@ import numpy as np
 from impactpipe.hydro.amr.plans import axis_plans
 from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
 from impactpipe.hydro.mesh.boundary import (
-    every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_from_ranks_where, fill_ghosts_where,
+    NO_RECORD, every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_from_ranks_where, fill_ghosts_where,
     fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
 
@@ -83,6 +83,9 @@ class WholeMesh:
     blocks = slice(None)
     is_root = True
     rank = 0
+    #: Whether a step may keep the record of the blocks whose transported scalars are +0.0
+    #: (:meth:`start_ghosts`, :meth:`impactpipe.hydro.solver.Simulation.step`).
+    keeps_scalar_record = True
 
     def __init__(self):
         self.traffic = Traffic()
@@ -93,13 +96,16 @@ class WholeMesh:
         column of ``state.arhoq`` (None: every layer; :func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts`)."""
         fill_state_ghosts(state, mesh, axis, q_layers)
 
-    def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> GhostFill:
+    def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None,
+                     scalars_clear: np.ndarray | None = None) -> GhostFill:
         """Fill the ghosts along ``axis`` (``q_layers`` as in :meth:`fill_ghosts`) as far as this
         process can without waiting for another's strips; a sweep may then advance the returned
         fill's ``early`` blocks before :meth:`finish_ghosts` completes the rest.  One process
         fills every ghost here, and every block is ``late`` (swept after :meth:`finish_ghosts`,
-        as before the split)."""
-        self.fill_ghosts(state, mesh, axis, q_layers)
+        as before the split).  ``scalars_clear``: the blocks whose scalars are +0.0, whose
+        slabs from clear blocks need no copy of them
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts`), or None."""
+        fill_state_ghosts(state, mesh, axis, q_layers, scalars_clear)
         return GhostFill(np.zeros(0, dtype=np.int64), np.arange(mesh.nblocks, dtype=np.int64))
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
@@ -210,6 +216,8 @@ class WholeMesh:
 class BlockRanges(WholeMesh):
     """This rank advances the blocks ``cuts[rank] .. cuts[rank + 1] - 1`` (see :mod:`.decomposition`)."""
 
+    keeps_scalar_record = False
+
     def __init__(self, comm, mesh, cuts: np.ndarray):
         super().__init__()
         self.comm = comm
@@ -252,11 +260,13 @@ class BlockRanges(WholeMesh):
         self.strips[axis].exchange(fields, self.traffic)
         if mesh.adaptive:
             self.plans(mesh, axis)["restrict_strips"].exchange(fields, self.traffic)
-        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
+        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers,
+                               NO_RECORD)
         if mesh.adaptive:
             self._fill_level_ghosts(fields, mesh, axis)
 
-    def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None) -> GhostFill:
+    def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None,
+                     scalars_clear: np.ndarray | None = None) -> GhostFill:
         """Post the strips along ``axis`` (:meth:`~.exchange.StripExchange.post`) and fill every owned
         block's ghosts from what this rank holds, then return while the strips travel: the
         fill's ``early`` blocks (the inner blocks of :func:`~.decomposition.overlap_groups`,
@@ -265,7 +275,10 @@ class BlockRanges(WholeMesh):
         :meth:`finish_ghosts` (every layer).  On an adaptive mesh the fine cells that the
         restriction reads from other ranks' blocks are posted too, every layer is filled, and
         the coarse/fine ghosts are left to :meth:`finish_ghosts`.  ``q_layers`` as in
-        :meth:`fill_ghosts`."""
+        :meth:`fill_ghosts`.  ``scalars_clear`` must be None: the ranks keep no record of the
+        blocks whose scalars are +0.0, and every slab is copied."""
+        if scalars_clear is not None:
+            raise ValueError("several MPI ranks keep no record of the blocks whose scalars are +0.0")
         inner, edge = self.overlap[axis]
         g = int(mesh.ghost[axis])
         if g == 0:
@@ -277,7 +290,8 @@ class BlockRanges(WholeMesh):
         restricting = None
         if mesh.adaptive:
             restricting = self.plans(mesh, axis)["restrict_strips"].post(fields, self.traffic)
-        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers)
+        fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers,
+                               NO_RECORD)
         return GhostFill(inner, edge, pending, restricting)
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:

@@ -178,8 +178,8 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux, plain_pencils, blocks, grady_kipp=None, porosity=None,
-          bulk_predictor=False):
+          floors, amounts, failure, face_flux, plain_pencils, blocks, scalars_clear, clear_after, grady_kipp=None,
+          porosity=None, bulk_predictor=False):
     """Advance the blocks listed in ``blocks`` by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -192,6 +192,16 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     (:mod:`impactpipe.hydro.amr.subcycle`); the others are left as they are.
     With ``plain_pencils`` a pencil that one material fills alone takes the plain path
     (:mod:`impactpipe.hydro.scheme.plain_pencils`); without, every pencil takes the general path.
+    ``scalars_clear`` (uint8, (NB,), or empty: no record): the blocks whose transported scalars
+    are +0.0 in their interior and their filled ghost layers
+    (:func:`impactpipe.hydro.mesh.last_good.scalar_clear_blocks`; a uniform mesh's blocks on
+    one process, indexed like ``blocks``).  A clear block whose neighbours along ``axis`` (itself
+    at a domain face) are clear got +0.0 scalar ghosts from them: none of its plain pencils
+    carries scalars, which is then not scanned for
+    (:func:`impactpipe.hydro.scheme.plain_pencils.scalars_carried`).  When every pencil of such
+    a block is plain or empty and every cell takes the plain update, its scalars are still
+    +0.0 after the sweep: ``clear_after[b]`` (written with a record) is 1 for such a block,
+    else 0, the record for the sweep along the next axis.
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
     (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), or None.
     ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`;
@@ -232,9 +242,16 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     energy_f = energy.reshape(energy.size)
     cs = nx * ny * nz
     ncomp = mom.shape[1]
+    tracked = scalars_clear.shape[0] > 0
     for e in prange(blocks.shape[0]):
         b = blocks[e]
         sc = scratch[get_thread_id()]
+        # no plain pencil of a clear block between clear neighbours carries scalars
+        quiet = tracked and scalars_clear[b] != 0
+        for side in range(2):
+            src = neighbor[b, axis, side]
+            quiet = quiet and (src < 0 or (neighbor_level[b, axis, side] == 0 and scalars_clear[src] != 0))
+        stays_clear = quiet
         dx = block_dx[b, axis]
         dtdx = dt / dx
         half = 0.5 * dtdx
@@ -293,7 +310,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                             sc[f, r] = 0.0
                 elif m >= 0:
                     # material m's scalars move only where some donor cell holds one
-                    carried = nq > 0 and scalars_carried(arhoq_f, iq, stride, cs, nq, g - 1, g + n + 1)
+                    carried = nq > 0 and not quiet and scalars_carried(arhoq_f, iq, stride, cs, nq, g - 1,
+                                                                       g + n + 1)
                     # a strengthless material's signal speed is its bulk sound speed: its gather skips
                     # the shear term (which the compiler would evaluate, division included, either way)
                     shear_m = shear_modulus[m]
@@ -317,6 +335,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row,
                                         carried)
                 else:
+                    stays_clear = False
                     # 1. gather cell values
                     for i in range(ncell):
                         _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
@@ -364,10 +383,13 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                                                im1 + i * stride, im2 + i * stride, ie + i * stride, iq + i * stride,
                                                cs, floors, amounts, rho0_m, nq, fq_row, carried):
                         continue
+                    stays_clear = False
                     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
                                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
+        if tracked:
+            clear_after[b] = 1 if stays_clear else 0
 
 
 @njit(cache=True, inline="always")
