@@ -29,7 +29,7 @@ import numpy as np
 
 from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
 from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, finite_blocks,
-                                           level_time_step)
+                                           finite_run, level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_state_ghosts
 from impactpipe.hydro.mesh.last_good import block_runs, scalar_clear_blocks, void_blocks
@@ -558,7 +558,7 @@ class Simulation:
         after the strength and gravity step (on any process)."""
         momentum = self.state.momentum
         finite = (finite_blocks(momentum, blocks) if isinstance(blocks, np.ndarray)
-                  else np.isfinite(momentum[blocks]).all())
+                  else finite_run(momentum[blocks].view(np.int64)))
         if self.partition.any(not finite):
             raise HydroFailure("NaN in the momentum after the strength and gravity step", self._good_clock[0], -1,
                                None, {})
