@@ -264,3 +264,23 @@ def test_dispatcher_callable_from_njit_kernel():
     for n in range(5):
         expected = state(material[n], rho[n], e[n])
         assert (p[n], c2[n]) == (expected[0], expected[1])
+
+
+@pytest.mark.parametrize("spec", [BASALT, IRON, AIR], ids=["basalt", "iron", "gas"])
+def test_pressure_not_negative_never_claims_a_negative_pressure(spec):
+    """pressure_not_negative (the stress update skips the EOS where it holds) is True only where
+    the EOS's pressure is >= 0: over a grid of densities 0.5-3 rho_ref and energies -1e6 to 1e8 J/kg,
+    and it is True for the compressed, heated states it is meant for."""
+    from impactpipe.hydro.eos import pressure_not_negative
+    eos = pack_eos([spec])
+    kind, params = int(eos.kind[0]), eos.params[0]
+    rho_ref = spec.get("rho0", 1.0)
+    claimed = 0
+    for rho in rho_ref * np.linspace(0.5, 3.0, 26):
+        for e in np.concatenate([[-1.0e6, -1.0, 0.0], np.geomspace(1.0, 1.0e8, 15)]):
+            if pressure_not_negative(kind, params, rho, e):
+                claimed += 1
+                assert pressure_sound_speed(kind, params, eos.table, rho, e)[0] >= 0.0, (rho, e)
+            elif rho >= rho_ref and e >= 0.0:
+                pytest.fail(f"compressed and heated but not claimed: rho {rho}, e {e}")
+    assert claimed > 100
