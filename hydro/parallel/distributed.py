@@ -86,6 +86,8 @@ class WholeMesh:
     #: Whether a step may keep the record of the blocks whose transported scalars are +0.0
     #: (:meth:`start_ghosts`, :meth:`impactpipe.hydro.solver.Simulation.step`).
     keeps_scalar_record = True
+    #: Whether this process advances every block (no strips travel between ranks).
+    whole = True
 
     def __init__(self):
         self.traffic = Traffic()
@@ -217,6 +219,7 @@ class BlockRanges(WholeMesh):
     """This rank advances the blocks ``cuts[rank] .. cuts[rank + 1] - 1`` (see :mod:`.decomposition`)."""
 
     keeps_scalar_record = False
+    whole = False
 
     def __init__(self, comm, mesh, cuts: np.ndarray):
         super().__init__()

@@ -179,9 +179,33 @@ def _ghosts_carry_stress(work, b, ns, nx, ny, nz):
     return False
 
 
+@njit(cache=True)
+def quiet_blocks(stressed_blocks, holds, neighbor, neighbor_level, ndim, lo, hi, quiet, stress_ghosts):
+    """For the blocks b of ``lo .. hi - 1`` (a process's range), ``quiet[b]`` = 1 where no cell
+    whose stress the kick of block b reads carries one, else 0: block b carries none
+    (``stressed_blocks[b] == 0``, :func:`impactpipe.hydro.strength.update.cell_velocity_and_stress`
+    or :func:`impactpipe.hydro.strength.update.update_stress`), and along each of the ``ndim``
+    axes each side's first ghost layer is copied from a block that carries none: b itself at a
+    domain face (``neighbor`` < 0: a copy or a mirror of its own cells), or a same-level
+    neighbour in ``lo .. hi - 1`` with ``stressed_blocks`` 0.  A neighbour at another refinement
+    level or of another process counts as stressed.  ``stress_ghosts[b]``: ``holds[b]`` where b
+    is not quiet, else 0, the blocks whose stress ghosts :func:`apply_stress_divergence` reads
+    (it skips a quiet block before reading any)."""
+    for b in range(lo, hi):
+        calm = stressed_blocks[b] == 0
+        for d in range(ndim):
+            for side in range(2):
+                nbr = neighbor[b, d, side]
+                if nbr >= 0 and not (neighbor_level[b, d, side] == 0 and lo <= nbr < hi
+                                     and stressed_blocks[nbr] == 0):
+                    calm = False
+        quiet[b] = 1 if calm else 0
+        stress_ghosts[b] = 0 if calm else holds[b]
+
+
 @njit(cache=True, parallel=True)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
-                            boundary, face_flux, col0, blocks, stressed_blocks):
+                            boundary, face_flux, col0, blocks, stressed_blocks, quiet=None):
     """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the
     ``blocks`` listed (int64: a process's range, or one refinement level's); see the module
     docstring.  A cell sums its faces low then high along axis 0, then along 1 and 2, one call
@@ -193,7 +217,10 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
     either (:func:`_ghosts_carry_stress`) is skipped.  Every face stress of its cells is then
     +-0, so the kick would add dt A S = +0.0 to their momentum and energy: skipping it leaves
     them as they are, bit for bit (but for a momentum of -0.0, which the addition would
-    turn into +0.0)."""
+    turn into +0.0).  ``quiet[NB]`` (uint8, :func:`quiet_blocks`), when given: a block with
+    ``quiet[b]`` 1 is skipped without reading its ghosts, which need not be filled then.  The
+    flags say that its cells and the cells its first ghost layer copies carry no stress, so
+    the ghost test would skip it too."""
     nb, nw, nx, ny, nz = work.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
@@ -202,6 +229,8 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
     cylindrical = geometry == CYLINDRICAL
     for i in prange(blocks.shape[0]):
         b = blocks[i]
+        if quiet is not None and quiet[b] != 0:
+            continue
         if stressed_blocks[b] == 0 and not _ghosts_carry_stress(work, b, ns, nx, ny, nz):
             continue
         dx0 = block_dx[b, 0]

@@ -84,7 +84,7 @@ from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMe
 from impactpipe.hydro.mesh.boundary import fill_ghosts_where
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.distributed import FieldFill, WholeMesh
-from impactpipe.hydro.strength.divergence import apply_stress_divergence
+from impactpipe.hydro.strength.divergence import apply_stress_divergence, quiet_blocks
 from impactpipe.hydro.strength.face_shear import apply_face_shear, update_face_shear
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
 from impactpipe.hydro.strength.flaws import assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes
@@ -208,6 +208,10 @@ class MaterialStrength:
         #: not (0), from the last kernel that wrote them: :meth:`kick` skips a block without
         #: one whose ghosts carry none either
         self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
+        #: per block, whether the next :meth:`kick` skips it on the flags of :attr:`stressed` alone
+        #: (1) or not (0), and whether its stress slots' ghosts are filled for it (:meth:`_mark_quiet`)
+        self._quiet = np.zeros(mesh.nblocks, dtype=np.uint8)
+        self._stress_ghosts = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.counts = np.zeros((mesh.nblocks, NCOUNT), dtype=np.int64)
         self.amounts = np.zeros((mesh.nblocks, NSAMOUNT))
         self.face_flux = self._face_flux_arrays(mesh)
@@ -280,6 +284,8 @@ class MaterialStrength:
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
+        self._quiet = np.zeros(mesh.nblocks, dtype=np.uint8)
+        self._stress_ghosts = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.face_flux = self._face_flux_arrays(mesh)
         self.counts = summed_rows(self.counts, mesh.nblocks)
         self.amounts = summed_rows(self.amounts, mesh.nblocks)
@@ -346,6 +352,7 @@ class MaterialStrength:
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
                                  self.arrays.model, self.ns, self.work, self._blocks(partition, level), self.holds,
                                  self.has_mass, self.stressed)
+        self._mark_quiet(partition, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_V, WK_S + self.ns), level)
 
     def load_work(self, state: HydroState, eos, blocks: np.ndarray) -> None:
@@ -368,6 +375,7 @@ class MaterialStrength:
         cell_velocities(state.arho, state.momentum, self.work, self._blocks(partition, level))
         fills = self._start_work_ghosts(partition, slice(WK_V, WK_V + 3), level)
         self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks), level)
+        self._mark_quiet(partition, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
         if self.face is not None:
             if not isinstance(partition, WholeMesh):
@@ -431,7 +439,7 @@ class MaterialStrength:
             """The stress divergence of ``blocks`` (int64)."""
             apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
-                                    self.face_flux, 3 * self.nmat, blocks, self.stressed)
+                                    self.face_flux, 3 * self.nmat, blocks, self.stressed, self._quiet)
 
         self._around_ghosts(partition, fills, kick_blocks)
         if self.hourglass[0] > 0.0:
@@ -480,6 +488,24 @@ class MaterialStrength:
             return rho0
         return rho0 / self.porosity[:, ALPHA0]
 
+    def _mark_quiet(self, partition, level: LevelBlocks | None = None) -> None:
+        """Mark the blocks the next :meth:`kick` skips on the flags of :attr:`stressed` alone, just
+        written by the kernel whose stress it applies (:func:`impactpipe.hydro.strength.divergence.
+        quiet_blocks`), among the ``partition``'s blocks (a neighbour of another rank counts as
+        stressed), and those whose stress slots' ghosts are filled for it: of the blocks holding
+        material (:attr:`holds`), the others (on one process, :meth:`_start_work_ghosts`).  Only
+        a uniform mesh's kick uses them, without the hourglass viscosity and the face shear
+        stress (which read the stress ghosts of every block holding material); elsewhere no
+        block is quiet."""
+        mesh = self.mesh
+        if level is None and not mesh.adaptive and self.hourglass[0] == 0.0 and self.face is None:
+            lo, hi = self._range(partition)
+            quiet_blocks(self.stressed, self.holds, mesh.neighbor, mesh.neighbor_level, mesh.ndim, lo, hi,
+                         self._quiet, self._stress_ghosts)
+        else:
+            self._quiet[:] = 0
+            self._stress_ghosts[:] = self.holds
+
     def _ghost_reads(self) -> tuple[int, frozenset]:
         """(layers, slots) of :func:`work_ghost_reads` for this mesh, the hourglass viscosity and the
         face shear stress."""
@@ -502,7 +528,11 @@ class MaterialStrength:
         and half of an impact's blocks are void.  The ghosts left stale may be flipped at a
         wall; nothing reads them.  The fill is returned while strips from other ranks may still
         travel, for :meth:`_finish_work_ghosts` (after :meth:`_around_ghosts` ran the kernels
-        that need none of them).  An adaptive mesh fills the axes one after another, completely
+        that need none of them).  On one process the stress slots are filled in a fill of their
+        own, for the blocks of :meth:`_mark_quiet` alone: the kick reads no stress ghost of a
+        quiet block (most of an impact's target right after contact); across MPI ranks they
+        go with the others, one message per peer, and every block holding material gets them.
+        An adaptive mesh fills the axes one after another, completely
         (:meth:`_fill_work_ghosts`), and returns no fill."""
         layers, skipped = self._ghost_reads()
         runs = slot_runs(slots, skipped)
@@ -510,10 +540,16 @@ class MaterialStrength:
             for axis in range(self.mesh.ndim):
                 self._fill_work_ghosts(partition, axis, runs, level)
             return []
-        fill = partition.start_field_ghosts(self.work, self.mesh, runs, self.holds, layers)
+        if partition.whole:
+            flow = slot_runs(slice(slots.start, max(slots.start, min(slots.stop, WK_S))), skipped)
+            stress = slot_runs(slice(min(slots.stop, max(slots.start, WK_S)), slots.stop), skipped)
+            fills = [partition.start_field_ghosts(self.work, self.mesh, part, wanted, layers)
+                     for part, wanted in ((flow, self.holds), (stress, self._stress_ghosts)) if part]
+        else:
+            fills = [partition.start_field_ghosts(self.work, self.mesh, runs, self.holds, layers)]
         for axis in range(self.mesh.ndim):
             self._flip_work_walls(axis, runs, layers)
-        return [fill]
+        return fills
 
     def _finish_work_ghosts(self, partition, fills: list[FieldFill]) -> None:
         """Complete the ghost ``fills`` of :meth:`_start_work_ghosts`: the slabs facing other
