@@ -333,20 +333,27 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
                         face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row,
-                                        carried)
+                                        carried, f == g or f == g + n)
                 else:
                     stays_clear = False
+                    # every material's scalars move only where some donor cell holds one
+                    if nq > 0 and not quiet:
+                        for k in range(nmat):
+                            if not carried:
+                                carried = scalars_carried(arhoq_f, (b * nmat + k) * nq * cs + offset, stride, cs, nq,
+                                                          g - 1, g + n + 1)
                     # 1. gather cell values
                     for i in range(ncell):
                         _gather_cell(sc, i, b, axis, t1, t2, j1, j2, i >= g and i < g + n, alpha, arho, arhoe,
                                      arhoq, mom, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
-                                     nq, wq_row, floors, grady_kipp, porosity, bulk_predictor)
+                                     nq, wq_row, floors, grady_kipp, porosity, bulk_predictor, carried)
                     # 2. MUSCL-Hancock face states of cells 1 .. ncell-2
                     for i in range(1, ncell - 1):
                         _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     # 3. face fluxes, faces g .. g+n (face f between cells f-1 and f)
                     for f in range(g, g + n + 1):
-                        _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
+                        _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, carried,
+                                   f == g or f == g + n)
                 # boundary counters: fluxes through domain faces (positive = leaving)
                 for side in range(2):
                     if neighbor[b, axis, side] < 0:
@@ -387,7 +394,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
                     _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
-                                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row)
+                                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row, carried)
         if tracked:
             clear_after[b] = 1 if stays_clear else 0
 
@@ -441,6 +448,8 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     (material m's scalars +0.0 in the pencil's donor cells,
     :func:`impactpipe.hydro.scheme.plain_pencils.scalars_carried`) no face reads its specific
     scalars, and they are not gathered (the damage and distension still set the pressure).
+    An undamaged cell (damage amount +-0) keeps Y_T and its tension without the division of
+    :func:`impactpipe.hydro.scheme.mixture.tension_left`, whose factor would be exactly 1.0.
     """
     a = alpha_f[ia]
     ar = arho_f[ia]
@@ -456,10 +465,13 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
         rho0_m = rho0_m / dist
     ytk = tensile_strength[m]
     if nq > 0 and ar > 0.0:
-        ytk = tension_left(ytk, arhoq_f[iq + (nq - 1) * cs], ar)
-        if grady_kipp is not None:
-            if grady_kipp[m] and pk < 0.0:
-                pk *= tension_left(1.0, arhoq_f[iq + (nq - 1) * cs], ar)
+        damage = arhoq_f[iq + (nq - 1) * cs]
+        # undamaged (D = +-0 / ar): tension_left would multiply Y_T and the tension by exactly 1.0
+        if damage != 0.0:
+            ytk = tension_left(ytk, damage, ar)
+            if grady_kipp is not None:
+                if grady_kipp[m] and pk < 0.0:
+                    pk *= tension_left(1.0, damage, ar)
     if dist != 1.0:
         ytk /= dist
     p_min = -ytk
@@ -507,13 +519,14 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
 @njit(cache=True, inline="always")
 def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, arhoq, mom, eos_kind, eos_params,
                  eos_table, shear_modulus, tensile_strength, nq, wq_row, floors, grady_kipp, porosity,
-                 bulk_predictor):
+                 bulk_predictor, carried):
     """Step 1 for cell i of the pencil: the cell values of the W rows.
 
     The mixture and per-material states from :func:`impactpipe.hydro.scheme.mixture.mixture_state`
-    (its EOS clamps and tensile limits counted for interior cells), the velocity m / rho and
-    the specific transported scalars q_k,j = (alpha_k rho_k q_k,j) / (alpha_k rho_k); a void
-    cell (rho <= 0 or phi < PHI_VOID) has zero density, velocity, pressure and bulk modulus.
+    (its EOS clamps and tensile limits counted for interior cells), the velocity m / rho and,
+    where the pencil ``carried`` scalars (:func:`_face_flux`), the specific transported scalars
+    q_k,j = (alpha_k rho_k q_k,j) / (alpha_k rho_k); a void cell (rho <= 0 or phi < PHI_VOID)
+    has zero density, velocity, pressure and bulk modulus.
     """
     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
@@ -523,7 +536,7 @@ def _gather_cell(sc, i, b, axis, t1, t2, j1, j2, interior, alpha, arho, arhoe, a
         floors[b, FLOOR_EOS_CLAMP] += clamps
     if interior and limits > 0:
         floors[b, FLOOR_TENSILE_LIMIT] += limits
-    if nq > 0:
+    if carried:
         for k in range(alpha.shape[1]):
             ar = arho[b, k, ix, iy, iz]
             inv_ar = 1.0 / ar if ar > 0.0 else 0.0
@@ -604,8 +617,15 @@ def _reconstruct_cell(sc, i, nmat, half, qm_row, qp_row, floors, b, interior):
 
 
 @njit(cache=True, inline="always")
-def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row):
-    """Fluxes through face f (between cells f-1 and f), stored in column f of the F rows."""
+def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, carried, edge):
+    """Fluxes through face f (between cells f-1 and f), stored in column f of the F rows.
+
+    Without ``carried`` (every material's scalars +0.0 in the donor cells g - 1 .. g + n of
+    the pencil, :func:`impactpipe.hydro.scheme.plain_pencils.scalars_carried`) the scalar
+    fluxes are the mass fluxes times the +0.0 specific values, +-0.0 (the inverse partial
+    density of a donor is finite wherever it is a normal number), which leave the scalars at
+    +0.0 (:func:`_update_cell` does not apply them then): they are not gathered, and written
+    at a block face (``edge``) only, which the sweep stores for refluxing."""
     il = f - 1
     ir = f
     rho_l = 0.0
@@ -632,8 +652,9 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
             sc[f, frow] = 0.0
             sc[f, frow + 1] = 0.0
             sc[f, frow + 2] = 0.0
-            for j in range(nq):
-                sc[f, fq_row + nq * k + j] = 0.0
+            if carried or edge:
+                for j in range(nq):
+                    sc[f, fq_row + nq * k + j] = 0.0
             continue
         # a donor cell holding void in a diverging flow (its velocity or its left neighbour's
         # negative, its own or its right neighbour's positive) may lose material through both
@@ -645,8 +666,12 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
             share = 0.5
         mk, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, share, s, chi, dt,
                                     iv_donor)
-        for j in range(nq):
-            sc[f, fq_row + nq * k + j] = mk * sc[donor, wq_row + nq * k + j]
+        if carried:
+            for j in range(nq):
+                sc[f, fq_row + nq * k + j] = mk * sc[donor, wq_row + nq * k + j]
+        elif edge:
+            for j in range(nq):
+                sc[f, fq_row + nq * k + j] = mk * 0.0
         mass += mk
         eint += mk * ek
     flow_fluxes(sc, f, f_row, krow, donor, mass, eint, s, p_star, de)
@@ -655,8 +680,13 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row)
 @njit(cache=True, inline="always")
 def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
-                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row):
+                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row, carried):
     """Flux-form update of cell i with volume closure, energy reconciliation and floors.
+
+    Without ``carried`` (:func:`_face_flux`, or for a cell of a plain pencil
+    :func:`impactpipe.hydro.scheme.plain_pencils.face_flux_plain`) every scalar flux of the
+    cell's faces is +-0.0, and the scalars are left as the fluxes would leave them (+0.0 -
+    (+-0.0) is +0.0, and x - (+0.0) is x); the floors still clear them with the material.
 
     A material at its tensile limit (pressure <= -Y_T (1 - D), the damaged tensile strength
     the gather put in scratch row 5 of the material; a failed material, D = 1, holds none) does
@@ -713,9 +743,10 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         alpha[b, k, ix, iy, iz] = a_new
         arho[b, k, ix, iy, iz] = ar
         arhoe[b, k, ix, iy, iz] = ae
-        for j in range(nq):
-            c = nq * k + j
-            arhoq[b, c, ix, iy, iz] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
+        if carried:
+            for j in range(nq):
+                c = nq * k + j
+                arhoq[b, c, ix, iy, iz] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
     mn = mom[b, axis, ix, iy, iz] - (wr * sc[fr, f_row + F_MN] - wl * sc[fl, f_row + F_MN])
     if radial:
         p_half = 0.5 * (sc[i, qm_row + Q_P] + sc[i, qp_row + Q_P])

@@ -143,15 +143,18 @@ def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
 
 
 @njit(cache=True, inline="always")
-def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, carried):
+def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, carried, edge):
     """Step 3 for face f (between cells f-1 and f) of a plain pencil: HLLC fluxes into column f.
 
     No void on either side; material m's volume flux is alpha_face s with the ultrabee face
     value and its mass flux alpha_face rho_m,K chi s, capped as in the general path
     (:func:`impactpipe.hydro.scheme.directional._face_flux`); absent materials carry zero fluxes.
-    Material m's scalar fluxes are its mass flux times the donor's specific values, or +0.0
-    when not ``carried`` (its scalars are +0.0 in every donor cell of the pencil,
-    :func:`scalars_carried`; the product would be +-0.0, which no update can tell apart).
+    Material m's scalar fluxes are its mass flux times the donor's specific values.  Without
+    ``carried`` (its scalars are +0.0 in every donor cell of the pencil, :func:`scalars_carried`)
+    they are the mass flux times +0.0, and the scalar fluxes are written at a block face
+    (``edge``) only, which the sweep stores for refluxing at a coarse/fine face: neither
+    :func:`update_plain` nor, for a cell it hands back, the general update
+    (:func:`impactpipe.hydro.scheme.directional._update_cell`) applies them then.
     """
     row = W_MAT + W_STRIDE * m
     qrow = Q_MAT + 3 * m
@@ -168,14 +171,15 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
         if k != m:
             for c in range(3):
                 sc[f, f_row + F_MAT + 3 * k + c] = 0.0
-            for j in range(nq):
-                sc[f, fq_row + nq * k + j] = 0.0
+            if carried or edge:
+                for j in range(nq):
+                    sc[f, fq_row + nq * k + j] = 0.0
     if carried:
         for j in range(nq):
             sc[f, fq_row + nq * m + j] = mass * sc[donor, wq_row + nq * m + j]
-    else:
+    elif edge:
         for j in range(nq):
-            sc[f, fq_row + nq * m + j] = 0.0
+            sc[f, fq_row + nq * m + j] = mass * 0.0
     flow_fluxes(sc, f, f_row, krow, donor, mass, mass * ek, s, p_star, de)
 
 
