@@ -368,7 +368,10 @@ def snapshot_stress_fields(alpha, arho, arhoq, model, ns, nq, lo, hi, out):
 
 @njit(cache=True, inline="always")
 def _derivative(work, b, comp, ix, iy, iz, axis, dx):
-    """d v_comp / d x_axis at a cell: central, one-sided next to void, 0 between void cells (1/s)."""
+    """d v_comp / d x_axis at a cell: central, one-sided next to void, 0 between void cells (1/s).
+    A velocity difference of +-0 is returned as it is: divided by the cell size (> 0) it gives
+    the same +-0, and a cell at rest among its neighbours, most of an impact's target early on,
+    spares its divisions."""
     jx0, jy0, jz0 = ix, iy, iz
     jx1, jy1, jz1 = ix, iy, iz
     if axis == 0:
@@ -383,11 +386,14 @@ def _derivative(work, b, comp, ix, iy, iz, axis, dx):
     lo = work[b, WK_PHI, jx0, jy0, jz0] > 0.0
     hi = work[b, WK_PHI, jx1, jy1, jz1] > 0.0
     if lo and hi:
-        return (work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, jx0, jy0, jz0]) / (2.0 * dx)
+        dv = work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, jx0, jy0, jz0]
+        return dv / (2.0 * dx) if dv != 0.0 else dv
     if hi:
-        return (work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, ix, iy, iz]) / dx
+        dv = work[b, WK_V + comp, jx1, jy1, jz1] - work[b, WK_V + comp, ix, iy, iz]
+        return dv / dx if dv != 0.0 else dv
     if lo:
-        return (work[b, WK_V + comp, ix, iy, iz] - work[b, WK_V + comp, jx0, jy0, jz0]) / dx
+        dv = work[b, WK_V + comp, ix, iy, iz] - work[b, WK_V + comp, jx0, jy0, jz0]
+        return dv / dx if dv != 0.0 else dv
     return 0.0
 
 
@@ -589,11 +595,13 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         ek = arhoe[b, k, ix, iy, iz] * inv
                         dist = 1.0
                         stiffness = 1.0
+                        # Y_T / dist, the division left out where dist is 1.0 (the same number)
+                        y_t = tensile_strength[k]
                         if porosity[k, ALPHA0] > 1.0:
                             dist = arhoq[b, base + nq - 2, ix, iy, iz] * inv
                             h = wave_speed_ratio(porosity[k], dist)
                             stiffness = h * h
-                        y_t = tensile_strength[k] / dist
+                            y_t = tensile_strength[k] / dist
                         gradual = damage_model[k] == GRADY_KIPP
                         if (at_rest and not gradual and y_t >= 0.0 and _positive_zeros(sxx, syy, szz, sxy, sxz, syz)
                                 and pressure_not_negative(eos_kind[k], eos_params[k], dist * rk, ek)):
@@ -677,7 +685,13 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                         if dist * rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]:
                             y = 0.0
                             counts[b, CNT_LOW_DENSITY] += 1
-                        sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz, y, g)
+                        # without deviatoric stress y is 0 (or its cut to 0), and the return would
+                        # find sqrt(3 J2) = 0 <= y and leave S as it is
+                        returned = False
+                        dep = 0.0
+                        if stressed or store_strength:
+                            sxx, syy, szz, sxy, sxz, syz, dep, returned = radial_return(sxx, syy, szz, sxy, sxz, syz,
+                                                                                        y, g)
                         if returned:
                             counts[b, CNT_YIELD] += 1
                             eps_p += dep
