@@ -31,7 +31,7 @@ from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves
 from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, finite_blocks,
                                            finite_run, level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_first_ghost_layer, fill_state_ghosts
 from impactpipe.hydro.mesh.last_good import block_runs, scalar_clear_blocks, void_blocks
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
@@ -607,11 +607,13 @@ class Simulation:
     def refinement_flags(self) -> tuple[np.ndarray, np.ndarray]:
         """(refine, coarsen): per block, whether the refinement rule refines it or lets it coarsen now.
 
-        Fills the state's ghosts along every axis and raises ``peak_pressure`` (Pa) to the
-        largest |p| on the mesh (:func:`impactpipe.hydro.amr.regrid.flag_blocks`).
+        Fills the state's first ghost layer along every axis (what the indicators and the
+        regrid read, :func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`; the step
+        fills every layer along an axis before its sweep) and raises ``peak_pressure`` (Pa) to
+        the largest |p| on the mesh (:func:`impactpipe.hydro.amr.regrid.flag_blocks`).
         """
         for axis in range(self.mesh.ndim):
-            fill_state_ghosts(self.state, self.mesh, axis)
+            fill_first_ghost_layer(self.state, self.mesh, axis)
         refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
                                                           self.tensile_strength, self.refinement, self.peak_pressure,
                                                           self.grady_kipp, self.porosity, self.regrid_reach())

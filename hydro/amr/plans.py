@@ -135,3 +135,26 @@ def axis_plans(mesh: BlockMesh, axis: int) -> dict:
         else np.zeros(0)
     mesh.cache[key] = plans
     return plans
+
+
+def first_layer_plans(mesh: BlockMesh, axis: int) -> dict:
+    """The rows of the restrict and prolong plans of ``axis`` (:func:`axis_plans`) whose ghost
+    cell lies in the first ghost layer, next to the interior, cached on the mesh: ``restrict``,
+    ``restrict_weight`` and ``prolong`` as there.  A row of either reads interior cells and
+    first-layer ghosts only (the restriction fine interior cells; the prolongation a coarse
+    interior cell and its face neighbours), so these rows alone give that layer the values the
+    whole plans give it."""
+    key = ("first_layer_plans", axis)
+    if key in mesh.cache:
+        return mesh.cache[key]
+    plans = axis_plans(mesh, axis)
+    n = mesh.block_cells
+    out = {}
+    for name in ("restrict", "prolong"):
+        cell = plans[name][:, 1 + axis]  # the ghost cell's padded index along the axis (columns: block, cell)
+        rows = (cell == GHOST - 1) | (cell == GHOST + n)
+        out[name] = np.ascontiguousarray(plans[name][rows])
+        if name == "restrict":
+            out["restrict_weight"] = np.ascontiguousarray(plans["restrict_weight"][rows])
+    mesh.cache[key] = out
+    return out

@@ -192,7 +192,8 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
                 porosity: np.ndarray | None = None, reach: int | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
 
-    The state's ghosts along every used axis must be filled.  ``peak_pressure`` is the largest
+    The state's first ghost layer along every used axis must be filled (the indicators look one
+    cell beyond a block).  ``peak_pressure`` is the largest
     |p| of earlier regrids: the pressure floor is ``pressure_floor`` times the largest |p|
     ever on the mesh, so the waves left behind once the impact's shock has decayed (acoustic
     noise on the scale of the event) do not keep the whole body refined.  ``grady_kipp``: the
@@ -400,7 +401,8 @@ def leaves_index(mesh: BlockMesh, key: tuple) -> int:
 
 
 def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, HydroState]:
-    """The new mesh of ``plan`` and the state moved onto it (ghosts of ``state`` filled on every axis)."""
+    """The new mesh of ``plan`` and the state moved onto it (the first ghost layer of ``state``
+    filled on every axis: a new child's prolongation reads its parent cells' face neighbours)."""
     new_mesh = planned_mesh(mesh, plan)
     nq = state.arhoq.shape[1] // state.nmat
     new = HydroState.empty(new_mesh, state.nmat, nq)

@@ -21,8 +21,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.amr.plans import axis_plans
-from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
+from impactpipe.hydro.amr.plans import axis_plans, first_layer_plans
+from impactpipe.hydro.amr.transfer import (prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts,
+                                           restrict_state_ghosts)
 from impactpipe.hydro.mesh.blocks import REFLECTING
 
 
@@ -88,6 +89,23 @@ def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, 
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
                 _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers, True)
+
+
+@njit(cache=True, parallel=True)
+def fill_state_ghost_layer(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost):
+    """The first ghost layer (next to the interior) of the same-level and domain-face slabs of
+    every block along ``axis``, every conserved field: what :func:`fill_state_ghost_slabs`
+    writes there.  The other layers keep what they held."""
+    for b in prange(alpha.shape[0]):
+        for side in range(2):
+            nbr = neighbor[b, axis, side]
+            if nbr < 0 or neighbor_level[b, axis, side] == 0:
+                _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(arho, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(mom, b, side, nbr, axis, ghost, axis, 1)
+                _fill_block_side(energy, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, 1)
 
 
 @njit(cache=True, parallel=True)
@@ -285,3 +303,29 @@ def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None
         restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
     prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 
+
+def fill_first_ghost_layer(state, mesh, axis: int) -> None:
+    """The first ghost layer along ``axis`` (next to the interior) of every conserved field of
+    ``state``, the values :func:`fill_state_ghosts` gives it; the other layers keep what they
+    held.
+
+    Same-level and domain faces by :func:`fill_state_ghost_layer`; coarse/fine faces by the
+    rows of the restriction and then the prolongation that write the layer
+    (:func:`~impactpipe.hydro.amr.plans.first_layer_plans`), which read no other ghost layer.
+    What the regrid reads (:meth:`impactpipe.hydro.solver.Simulation.refinement_flags`): the
+    indicators look one cell beyond a block, the new children's prolongation
+    (:func:`~impactpipe.hydro.amr.transfer.prolong_blocks`) reads its parent cells' face
+    neighbours, and every later reader of a ghost before the next fill along its axis reads
+    the first layer only (a prolongation, at a block's edge, the coarse block's first layer
+    of the other axes); a sweep fills every layer along its axis first.
+    """
+    g = int(mesh.ghost[axis])
+    if g == 0:
+        return
+    fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+    fill_state_ghost_layer(*fields, mesh.neighbor, mesh.neighbor_level, axis, g)
+    if not mesh.adaptive:
+        return
+    plans = first_layer_plans(mesh, axis)
+    restrict_state_ghosts(fields, plans["restrict"], plans["restrict_weight"])
+    prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
