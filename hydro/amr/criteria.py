@@ -54,7 +54,9 @@ NINDICATOR = 5
 @njit(cache=True, parallel=True)
 def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength,
                      out, grady_kipp=None, porosity=None, void=None):
-    """Pressure sum_k alpha_k p_k (Pa) of every cell, ghosts included, into ``out[NB, NX, NY, NZ]``.
+    """Pressure sum_k alpha_k p_k (Pa) of the interior cells and their face neighbours in the first
+    ghost layer, what :func:`block_indicators` reads, into ``out[NB, NX, NY, NZ]``; the other
+    cells (the second ghost layer, the corners) keep what ``out`` holds.
 
     The mixture pressure of :func:`impactpipe.hydro.scheme.mixture.mixture_state`: p_k is limited by
     the tension material k still holds, Y_T,k (1 - D_k), as in the sweeps (and scaled by 1 - D_k for
@@ -64,12 +66,21 @@ def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table,
     ``out`` must hold there already.
     """
     nb, nmat, nx, ny, nz = alpha.shape
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
     for b in prange(nb):
         if void is not None and void[b] != 0:
             continue
-        for ix in range(nx):
-            for iy in range(ny):
-                for iz in range(nz):
+        for ix in range(max(gx - 1, 0), nx - max(gx - 1, 0)):
+            outside_x = (ix < gx) + (ix >= nx - gx)
+            for iy in range(max(gy - 1, 0), ny - max(gy - 1, 0)):
+                outside_xy = outside_x + (iy < gy) + (iy >= ny - gy)
+                if outside_xy > 1:
+                    continue
+                for iz in range(max(gz - 1, 0), nz - max(gz - 1, 0)):
+                    if outside_xy + (iz < gz) + (iz >= nz - gz) > 1:
+                        continue
                     rho, phi, p, kmod, eint, tmass, clamps, limits = mixture_state(
                         alpha, arho, arhoe, arhoq, b, ix, iy, iz, eos_kind, eos_params, eos_table, shear_modulus,
                         tensile_strength, False, None, 0, 0, grady_kipp, porosity)
