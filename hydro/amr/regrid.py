@@ -276,12 +276,14 @@ class _Leaves:
         self.mesh = mesh
         self.ndim = mesh.ndim
         self.periodic = [mesh.boundaries[d][0] == "periodic" if d < mesh.ndim else False for d in range(3)]
-        self.leaf = {(int(lv),) + tuple(int(v) for v in ix): b
-                     for b, (lv, ix) in enumerate(zip(mesh.block_level, mesh.block_index))}
+        self.leaf = {(lv, *ix): b for b, (lv, ix) in enumerate(zip(mesh.block_level.tolist(),
+                                                                    mesh.block_index.tolist()))}
+        #: per level, the blocks tiling the domain along each axis
+        self.extent = mesh.blocks_at_level(np.arange(mesh.max_level + 1)).tolist()
 
     def region(self, level: int, index) -> tuple | None:
         """The block-grid region (level, i, j, k) wrapped periodically; None outside the domain."""
-        extent = self.mesh.blocks_at_level(level)[0]
+        extent = self.extent[level]
         out = []
         for d in range(3):
             i = int(index[d])
@@ -316,6 +318,7 @@ def plan_leaves(mesh: BlockMesh, refine: np.ndarray, coarsen: np.ndarray) -> dic
     ndim = mesh.ndim
     offsets = _offsets(ndim)
     kids = _children(ndim)
+    refine, coarsen = np.asarray(refine, dtype=bool).tolist(), np.asarray(coarsen, dtype=bool).tolist()
     to_refine = {k for k, b in leaves.leaf.items() if refine[b]}
     queue = list(to_refine)
     while queue:
@@ -332,7 +335,7 @@ def plan_leaves(mesh: BlockMesh, refine: np.ndarray, coarsen: np.ndarray) -> dic
     for key, b in leaves.leaf.items():
         if coarsen[b] and key not in to_refine:
             level, *index = key
-            groups.setdefault((level - 1,) + tuple(i >> 1 for i in index), []).append(key)
+            groups.setdefault((level - 1, index[0] >> 1, index[1] >> 1, index[2] >> 1), []).append(key)
     merged = {}
     for parent in sorted(groups, key=lambda k: -k[0]):
         members = groups[parent]
