@@ -409,9 +409,11 @@ def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, H
     new_mesh = planned_mesh(mesh, plan)
     nq = state.arhoq.shape[1] // state.nmat
     new = HydroState.empty(new_mesh, state.nmat, nq)
-    keep = plan["keep"]
+    runs = _kept_runs(plan["keep"])
     for name in FIELDS:
-        getattr(new, name)[keep[:, 0]] = getattr(state, name)[keep[:, 1]]
+        old_field, new_field = getattr(state, name), getattr(new, name)
+        for new_start, old_start, length in runs:
+            new_field[new_start:new_start + length] = old_field[old_start:old_start + length]
     src = tuple(getattr(state, name) for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"))
     dst = tuple(getattr(new, name) for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"))
     if len(plan["children"]):
@@ -426,6 +428,19 @@ def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, H
         weight0 = axis0_weights(new_mesh, fine_level, 2 * parent_row.reshape(-1)).reshape(len(parents), half, 2)
         restrict_blocks(src, dst, parents, np.ascontiguousarray(weight0))
     return new_mesh, new
+
+
+def _kept_runs(keep: np.ndarray) -> list[tuple[int, int, int]]:
+    """(new start, old start, length) of the runs of consecutive ``keep`` rows (new, old) along
+    which both indices step by one: the kept blocks copied a run at a time, by slices (the
+    kept blocks keep their Morton order, so the runs are long), instead of gathered and
+    scattered by index arrays."""
+    if not len(keep):
+        return []
+    breaks = np.flatnonzero((np.diff(keep[:, 0]) != 1) | (np.diff(keep[:, 1]) != 1)) + 1
+    starts = np.concatenate([[0], breaks])
+    ends = np.concatenate([breaks, [len(keep)]])
+    return [(int(keep[a, 0]), int(keep[a, 1]), int(b - a)) for a, b in zip(starts, ends)]
 
 
 def planned_mesh(mesh: BlockMesh, plan: dict) -> BlockMesh:
