@@ -629,7 +629,7 @@ class Simulation:
         new_mesh, new_state = remesh(mesh, st, plan)
         self.mesh, self.state = new_mesh, new_state
         for axis in range(new_mesh.ndim):
-            fill_state_ghosts(new_state, new_mesh, axis)
+            fill_first_ghost_layer(new_state, new_mesh, axis)
         nb = new_mesh.nblocks
         self.boundary, self.floors, self.amounts, self.porosity_counts = (
             summed_rows(a, nb) for a in (self.boundary, self.floors, self.amounts, self.porosity_counts))

@@ -312,12 +312,14 @@ def fill_first_ghost_layer(state, mesh, axis: int) -> None:
     Same-level and domain faces by :func:`fill_state_ghost_layer`; coarse/fine faces by the
     rows of the restriction and then the prolongation that write the layer
     (:func:`~impactpipe.hydro.amr.plans.first_layer_plans`), which read no other ghost layer.
-    What the regrid reads (:meth:`impactpipe.hydro.solver.Simulation.refinement_flags`): the
-    indicators look one cell beyond a block, the new children's prolongation
+    The regrid fills this layer before its indicators and on the new mesh after a remesh
+    (:meth:`impactpipe.hydro.solver.Simulation.regrid`), where the full fill did: the
+    indicators look one cell beyond a block, a new child's prolongation
     (:func:`~impactpipe.hydro.amr.transfer.prolong_blocks`) reads its parent cells' face
-    neighbours, and every later reader of a ghost before the next fill along its axis reads
-    the first layer only (a prolongation, at a block's edge, the coarse block's first layer
-    of the other axes); a sweep fills every layer along its axis first.
+    neighbours, and until the step's own fills every other reader of a ghost reads the first
+    layer only (the prolongation of a later fill, a restore's included, reads a coarse
+    block's first layer of the other axes at its edges); a sweep fills every layer along its
+    axis first, so the second layer is read only after that.
     """
     g = int(mesh.ghost[axis])
     if g == 0:
