@@ -232,6 +232,21 @@ def test_the_tracer_scene_samples_tracers_and_records_their_peaks(serial):
     assert len(answer["tracers/history_time"]) >= 5
 
 
+def test_the_face_shear_stress_on_three_ranks_gives_the_single_process_answer_bit_for_bit(tmp_path):
+    """The column collapse with the face shear stress instead of the hourglass viscosity: each block
+    computes the face stresses of its own faces from its work arrays' ghosts, which travel between
+    ranks, so three ranks give the single-process answer bit for bit."""
+    config = yaml.safe_load(SCENES["column_collapse"].read_text())
+    config["scene"].update(hourglass=0, face_shear=True)
+    path = tmp_path / "face_shear.yaml"
+    path.write_text(yaml.safe_dump(config))
+    result = impactpipe_run(path, tmp_path / "serial")
+    assert result.returncode == 0, result.stderr
+    result = impactpipe_run(path, tmp_path / "shared", "--ranks", "3")
+    assert result.returncode == 0, result.stderr
+    assert_same_answer(tmp_path / "shared", tmp_path / "serial")
+
+
 def test_a_porous_run_with_strength_on_two_ranks_gives_the_single_process_answer_bit_for_bit(tmp_path):
     """A porous target with strength, chi and self-gravity (the distension transported, compacted and exchanged
     with the strength scalars between ranks; the lithostatic start and the potential's moments summed over the

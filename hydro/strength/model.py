@@ -83,7 +83,7 @@ from impactpipe.hydro.amr.transfer import allocate_face_flux, prolong_field_ghos
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import fill_ghosts_where
 from impactpipe.hydro.mesh.state import HydroState
-from impactpipe.hydro.parallel.distributed import FieldFill, WholeMesh
+from impactpipe.hydro.parallel.distributed import FieldFill
 from impactpipe.hydro.strength.divergence import apply_stress_divergence, quiet_blocks
 from impactpipe.hydro.strength.face_shear import apply_face_shear, update_face_shear
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
@@ -378,8 +378,6 @@ class MaterialStrength:
         self._mark_quiet(partition, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
         if self.face is not None:
-            if not isinstance(partition, WholeMesh):
-                raise ValueError("the face shear stress runs on one process; several MPI ranks are not supported yet")
             self._incoming += self._start_work_ghosts(partition, slice(WK_Y, NWORK_FACE), level)
             self._face_dt = dt
 
