@@ -170,6 +170,7 @@ from impactpipe.hydro.scheme.pencil_steps import (
     material_face_flux,
     predict_flow,
     predict_material,
+    scalar_face_fluxes,
     upwind_face,
 )
 from impactpipe.hydro.scheme.timestep import PHI_VOID
@@ -666,12 +667,7 @@ def _face_flux(sc, f, nmat, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row,
             share = 0.5
         mk, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, share, s, chi, dt,
                                     iv_donor)
-        if carried:
-            for j in range(nq):
-                sc[f, fq_row + nq * k + j] = mk * sc[donor, wq_row + nq * k + j]
-        elif edge:
-            for j in range(nq):
-                sc[f, fq_row + nq * k + j] = mk * 0.0
+        scalar_face_fluxes(sc, f, fq_row, wq_row, nq, k, mk, donor, carried, edge)
         mass += mk
         eint += mk * ek
     flow_fluxes(sc, f, f_row, krow, donor, mass, eint, s, p_star, de)

@@ -11,6 +11,7 @@ so both paths do the same arithmetic (the plain path's bit-for-bit agreement res
 - :func:`upwind_face`: the HLLC face solution and the upwind (donor) cell of a face;
 - :func:`material_face_flux`: material k's volume, mass and internal-energy fluxes through a
   face (compressive ultrabee volume fraction, donor caps);
+- :func:`scalar_face_fluxes`: material k's transported scalars carried by its mass flux;
 - :func:`flow_fluxes`: the momentum and total-energy fluxes of the summed mass flux.
 
 The equations and the rules behind the caps are in :mod:`impactpipe.hydro.scheme.directional`.
@@ -174,6 +175,21 @@ def material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, nu, flow, 
     sc[f, frow + 1] = mk
     sc[f, frow + 2] = mk * ek
     return mk, ek
+
+
+@njit(cache=True, inline="always")
+def scalar_face_fluxes(sc, f, fq_row, wq_row, nq, k, mass, donor, carried, edge):
+    """Material k's NQ scalar fluxes through face f, into its column of the FQ rows: its mass
+    flux ``mass`` times the donor cell's specific scalars where the pencil ``carried`` scalars;
+    without them (every donor's scalars +0.0) ``mass`` x +0.0, the +-0.0 the product would
+    give, and only at a block face (``edge``), which the sweep stores for refluxing: the
+    updates do not apply the scalar fluxes of a pencil that carries none."""
+    if carried:
+        for j in range(nq):
+            sc[f, fq_row + nq * k + j] = mass * sc[donor, wq_row + nq * k + j]
+    elif edge:
+        for j in range(nq):
+            sc[f, fq_row + nq * k + j] = mass * 0.0
 
 
 @njit(cache=True, inline="always")

@@ -65,6 +65,7 @@ from impactpipe.hydro.scheme.pencil_steps import (
     material_face_flux,
     predict_flow,
     predict_material,
+    scalar_face_fluxes,
     upwind_face,
 )
 from impactpipe.hydro.scheme.timestep import PHI_VOID
@@ -174,12 +175,7 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
             if carried or edge:
                 for j in range(nq):
                     sc[f, fq_row + nq * k + j] = 0.0
-    if carried:
-        for j in range(nq):
-            sc[f, fq_row + nq * m + j] = mass * sc[donor, wq_row + nq * m + j]
-    elif edge:
-        for j in range(nq):
-            sc[f, fq_row + nq * m + j] = mass * 0.0
+    scalar_face_fluxes(sc, f, fq_row, wq_row, nq, m, mass, donor, carried, edge)
     flow_fluxes(sc, f, f_row, krow, donor, mass, mass * ek, s, p_star, de)
 
 
