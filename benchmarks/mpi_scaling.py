@@ -31,11 +31,26 @@ rank's interior cells x steps), the cost of a cell-update on one core.  Then two
 touches the new arrays' memory, which a run pays once, not per snapshot).  With
 two or more ranks, ranks 0 and 1 also time a ping-pong (``pingpong``: the one-way latency of an
 8-byte message and the bandwidth of a 16 MiB one, s and B/s).  Rank 0 prints one JSON document.
+
+Memory per rank (B, from ``/proc/self/status``, Linux): ``setup_peak_resident_bytes``, the
+largest resident set up to the timed steps (the build of the whole initial state, the first
+steps and the sharing); ``step_peak_resident_bytes`` and ``resident_bytes``, the largest
+resident set during the timed steps and the resident set after them (the peak reset before
+them, ``/proc/self/clear_refs``), with ``resident_bytes_per_cell`` the latter over the rank's
+interior cells; ``snapshot_peak_resident_bytes``, the largest during the two snapshots;
+``released_resident_bytes``, the resident set once the Simulation is dropped and glibc has
+returned its free heap to the system (``malloc_trim``: the interpreter, numpy, numba, MPI and
+the loaded kernels); ``run_resident_bytes``, ``resident_bytes`` less it (what the run held),
+and ``run_resident_bytes_per_cell``, that over the rank's interior cells.  Run one case per
+process, with the kernels in numba's cache (a compile leaves its memory resident), for figures
+that nothing before has inflated (docs/performance.md, "Memory on several ranks").
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import gc
 import json
 import os
 import sys
@@ -57,6 +72,24 @@ DEFAULT_CASES = ("2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material")
 LATENCY_BYTES, BANDWIDTH_BYTES, ROUND_TRIPS = 8, 16 * 2 ** 20, 20
 
 
+def resident() -> tuple[int, int]:
+    """(resident set, its peak since the last :func:`reset_peak`) of this process (B): VmRSS and
+    VmHWM of ``/proc/self/status``."""
+    fields = {}
+    with open("/proc/self/status") as status:
+        for line in status:
+            name, _, value = line.partition(":")
+            if name in ("VmRSS", "VmHWM"):
+                fields[name] = int(value.split()[0]) * 1024
+    return fields["VmRSS"], fields["VmHWM"]
+
+
+def reset_peak() -> None:
+    """Start VmHWM again from the current resident set (``5`` to ``/proc/self/clear_refs``)."""
+    with open("/proc/self/clear_refs", "w") as refs:
+        refs.write("5")
+
+
 def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
     """Rate (cell-updates/s) and per-rank traffic of ``steps`` steps of ``case`` shared between
     the ranks of ``comm``; ``skipped`` with the reasons where the ranks cannot share it."""
@@ -76,7 +109,9 @@ def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
     if comm.size > 1:
         distribute(sim, comm)
     sim.step()
+    setup_peak = resident()[1]
     comm.Barrier()
+    reset_peak()
     traffic = sim.partition.traffic
     traffic.reset()
     start_updates = sim.cell_updates
@@ -85,12 +120,15 @@ def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
         sim.step()
     comm.Barrier()
     wall = time.perf_counter() - started
+    resident_bytes, step_peak = resident()
     per_step = traffic.as_dict()
+    reset_peak()
     sim.snapshot()
     gathered = traffic.gather_seconds
     snapshot_started = time.perf_counter()
     sim.snapshot()
     snapshot_s = time.perf_counter() - snapshot_started
+    snapshot_peak = resident()[1]
     lo, hi, _ = sim.partition.blocks.indices(sim.mesh.nblocks)
     owned_cells = (hi - lo) * sim.mesh.ncells // sim.mesh.nblocks
     compute = wall - per_step["exchange_seconds"] - per_step["allreduce_seconds"]
@@ -100,10 +138,19 @@ def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
             "wait_s": per_step["wait_seconds"] / steps, "exchange_s": per_step["exchange_seconds"] / steps,
             "allreduce_s": per_step["allreduce_seconds"] / steps,
             "compute_s_per_cell_update": compute / (owned_cells * steps),
-            "snapshot_s": snapshot_s, "gather_s": traffic.gather_seconds - gathered}
-    return {**result, "wall_s": wall, "cell_updates_per_s": (sim.cell_updates - start_updates) / wall,
-            "state_bytes": int(sum(array.nbytes for array in sim.state.arrays().values())),
-            "ranks": comm.gather(rank, root=0)}
+            "snapshot_s": snapshot_s, "gather_s": traffic.gather_seconds - gathered,
+            "setup_peak_resident_bytes": setup_peak, "step_peak_resident_bytes": step_peak,
+            "resident_bytes": resident_bytes, "resident_bytes_per_cell": resident_bytes / owned_cells,
+            "snapshot_peak_resident_bytes": snapshot_peak}
+    result.update(wall_s=wall, cell_updates_per_s=(sim.cell_updates - start_updates) / wall,
+                  state_bytes=int(sum(array.nbytes for array in sim.state.arrays().values())))
+    del sim
+    gc.collect()
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
+    rank["released_resident_bytes"] = resident()[0]
+    rank["run_resident_bytes"] = resident_bytes - rank["released_resident_bytes"]
+    rank["run_resident_bytes_per_cell"] = rank["run_resident_bytes"] / owned_cells
+    return {**result, "ranks": comm.gather(rank, root=0)}
 
 
 def pingpong(comm) -> dict | None:

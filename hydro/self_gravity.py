@@ -59,6 +59,7 @@ from scipy.constants import G
 from impactpipe.hydro.gravity_kick import cell_volume, gravity_kick
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
+from impactpipe.hydro.parallel.owned_memory import lazy_zeros
 
 #: Default expansion order L.
 DEFAULT_ORDER = 4
@@ -380,7 +381,7 @@ class SelfGravity:
     def _allocate(self, mesh: BlockMesh) -> None:
         nb = mesh.nblocks
         if self._phi.shape != (nb,) + mesh.padded_shape:
-            self._phi = np.zeros((nb,) + mesh.padded_shape)
+            self._phi = lazy_zeros((nb,) + mesh.padded_shape)
             self._rows = np.zeros((nb, 5))
             self._block_work = np.zeros(nb)
             self._block_potential = np.zeros(nb)
@@ -399,7 +400,7 @@ class SelfGravity:
             partition.share_rows(rows)
         mass = float(rows[:, 0].sum())
         largest = float(rows[:, 4].max(initial=0.0))
-        self._phi[:] = 0.0
+        self._phi[own] = 0.0
         if mass <= 0.0:
             return
         if self.axisymmetric:

@@ -40,6 +40,7 @@ from impactpipe.hydro.gravity import gravity_from_spec
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.hydro.parallel.distributed import WholeMesh
+from impactpipe.hydro.parallel.owned_memory import lazy_zeros
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
 from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, pack_damage
@@ -275,8 +276,16 @@ class Simulation:
         self.check_time_stepping()
 
     def _keep_good(self) -> None:
-        """Start the last-good copies (interior cells of the state, counters, clock) from the current ones."""
-        self._good = {name: self.mesh.interior(arr).copy() for name, arr in self.state.arrays().items()}
+        """Start the last-good copies (interior cells of the state, counters, clock) from the current ones:
+        of the state, the rows of the blocks this process advances (in :func:`~impactpipe.hydro.parallel.
+        owned_memory.lazy_zeros`, the other rows zero and never written on several ranks)."""
+        own = self.partition.blocks
+        rows = own.indices(self.mesh.nblocks)[:2]
+        self._good = {}
+        for name, arr in self.state.arrays().items():
+            interior = self.mesh.interior(arr)
+            self._good[name] = lazy_zeros(interior.shape, dense_rows=rows)
+            self._good[name][own] = interior[own]
         #: per block, 1 where the last-good copy is of a void block (:mod:`impactpipe.hydro.mesh.last_good`)
         self._good_void = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, 1 where the block is void now (:func:`~impactpipe.hydro.mesh.last_good.void_blocks`)
@@ -714,6 +723,15 @@ class Simulation:
             return ()
         return (self.strength.counts.copy(), self.strength.amounts.copy())
 
+    def _named_counters(self) -> dict[str, np.ndarray]:
+        """The per-block counters a checkpoint stores, by their names there."""
+        counters = {"boundary": self.boundary, "floors": self.floors, "amounts": self.amounts}
+        if self.porosity is not None:
+            counters["porosity_counts"] = self.porosity_counts
+        if self.strength is not None:
+            counters.update(strength_counts=self.strength.counts, strength_amounts=self.strength.amounts)
+        return counters
+
     def _counter_arrays(self) -> tuple:
         arrays = (self.boundary, self.floors, self.amounts, self.porosity_counts)
         if self.strength is not None:
@@ -828,18 +846,23 @@ class Simulation:
     def snapshot(self) -> Snapshot:
         """The interior cells at the current time as a :class:`Snapshot` (copies).  Collective
         on several ranks: each computes the fields of its own blocks, and the process that
-        writes (rank 0) receives them; the other ranks' snapshots hold only their own blocks."""
+        writes (rank 0) receives them; the other ranks' snapshots hold only their own blocks
+        (zeros elsewhere, in :func:`~impactpipe.hydro.parallel.owned_memory.lazy_zeros`: pages
+        never written)."""
         mesh = self.mesh
         st = self.state
         own = self.partition.blocks
         shape = (mesh.nblocks,) + mesh.interior_shape
-        pressure, sound, eint, temp = (np.zeros(shape) for _ in range(4))
+        rows = own.indices(mesh.nblocks)[:2]
+        pressure, sound, eint, temp = (lazy_zeros(shape, dense_rows=rows) for _ in range(4))
         cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
                             self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength,
                             pressure[own], sound[own], eint[own], temp[own], self.grady_kipp, self.porosity)
-        arho = mesh.interior(st.arho).copy()
-        alpha = mesh.interior(st.alpha).copy()
-        velocity = np.zeros((mesh.nblocks, 3) + mesh.interior_shape)
+        arho = lazy_zeros((mesh.nblocks, st.nmat) + mesh.interior_shape, dense_rows=rows)
+        alpha = lazy_zeros(arho.shape, dense_rows=rows)
+        arho[own] = mesh.interior(st.arho)[own]
+        alpha[own] = mesh.interior(st.alpha)[own]
+        velocity = lazy_zeros((mesh.nblocks, 3) + mesh.interior_shape, dense_rows=rows)
         rho = arho[own].sum(axis=1)
         safe = np.where(rho > 0.0, rho, 1.0)
         velocity[own] = np.where(rho[:, None] > 0.0, mesh.interior(st.momentum)[own] / safe[:, None], 0.0)
@@ -872,10 +895,14 @@ class Simulation:
     def save_checkpoint(self, path: str | Path) -> None:
         """Write the full state (ghosts included), mesh, materials and counters to HDF5, atomically.
 
-        Collective on several ranks: every block is shared, rank 0 writes.
+        Collective on several ranks: rank 0 receives every block's rows of the state and the
+        counters in arrays of their own (:meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.rows_at_root`),
+        writes them and drops them; the other ranks' arrays are unchanged.
         """
-        self.partition.share(self)
-        if not self.partition.is_root:
+        part = self.partition
+        state = {name: part.rows_at_root(getattr(self.state, name)) for name in FIELDS}
+        counters = {name: part.rows_at_root(array) for name, array in self._named_counters().items()}
+        if not part.is_root:
             return
         with atomic_path(path) as tmp:
             with h5py.File(tmp, "w") as fh:
@@ -904,19 +931,18 @@ class Simulation:
                         mesh_grp.create_dataset(key, data=np.asarray(value))
                 state_grp = fh.create_group("state")
                 for name in FIELDS:
-                    array = getattr(self.state, name)
-                    state_grp.create_dataset(name, data=array, **compression(array))
+                    state_grp.create_dataset(name, data=state[name], **compression(state[name]))
                 ctr = fh.create_group("counters")
-                ctr.create_dataset("boundary", data=self.boundary)
-                ctr.create_dataset("floors", data=self.floors).attrs["names"] = json.dumps(FLOOR_NAMES)
-                ctr.create_dataset("amounts", data=self.amounts).attrs["names"] = json.dumps(AMOUNT_NAMES)
+                ctr.create_dataset("boundary", data=counters["boundary"])
+                ctr.create_dataset("floors", data=counters["floors"]).attrs["names"] = json.dumps(FLOOR_NAMES)
+                ctr.create_dataset("amounts", data=counters["amounts"]).attrs["names"] = json.dumps(AMOUNT_NAMES)
                 ctr.create_dataset("shear_modulus", data=self.shear_modulus)
                 ctr.create_dataset("tensile_strength", data=self.tensile_strength)
                 if self.porosity is not None:
-                    ctr.create_dataset("porosity_counts", data=self.porosity_counts)
+                    ctr.create_dataset("porosity_counts", data=counters["porosity_counts"])
                 if self.strength is not None:
-                    ctr.create_dataset("strength_counts", data=self.strength.counts)
-                    ctr.create_dataset("strength_amounts", data=self.strength.amounts)
+                    ctr.create_dataset("strength_counts", data=counters["strength_counts"])
+                    ctr.create_dataset("strength_amounts", data=counters["strength_amounts"])
                 if self.tracers is not None:
                     self.tracers.save(fh.create_group("tracers"))
 

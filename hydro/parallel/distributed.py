@@ -2,7 +2,8 @@
 
 The Simulation asks its ``partition`` which blocks to advance (``blocks``, a slice of the
 block order), to fill their ghosts, to combine the time step and the failure checks over
-every process, and to bring every block up to date before an output.  :class:`WholeMesh`
+every process, and to bring every block to the process that writes an output (or, before a
+regrid or the totals, to every process).  :class:`WholeMesh`
 is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
 of one run (:func:`distribute` attaches it, :func:`collect` ends it).
 
@@ -39,6 +40,7 @@ from .decomposition import (block_costs, block_routes, every_axis_routes, exchan
 from .exchange import (FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
                        StripExchange, Traffic, broadcast_arrays, finish_strips, gather_owned_blocks, gather_rows,
                        share_owned_blocks)
+from .owned_memory import keep_owned_blocks, lazy_zeros
 
 log = logging.getLogger(__name__)
 
@@ -198,6 +200,11 @@ class WholeMesh:
     def gather_to_root(self, arrays: list[np.ndarray]) -> None:
         """Bring every block's rows of ``arrays`` (each (NB, ...)) to the process that writes
         (this one has them)."""
+
+    def rows_at_root(self, array: np.ndarray) -> np.ndarray | None:
+        """Every block's rows of ``array`` (NB, ...) on the process that writes, in an array of their
+        own there, None elsewhere (this process has them: ``array`` itself)."""
+        return array
 
     def share_rows(self, array: np.ndarray) -> None:
         """Bring every block's row of ``array`` ((NB, ...), computed by each block's owner) to
@@ -523,6 +530,16 @@ class BlockRanges(WholeMesh):
         :func:`~.exchange.gather_owned_blocks`)."""
         gather_owned_blocks(self.comm, arrays, self.cuts, self.traffic)
 
+    def rows_at_root(self, array: np.ndarray) -> np.ndarray | None:
+        """Rank 0: a new array (:func:`~.owned_memory.lazy_zeros`) holding every rank's rows of
+        ``array`` (NB, ...), received in one Gatherv (:func:`~.exchange.gather_owned_blocks`);
+        ``array`` itself is unchanged.  The other ranks send their rows and get None."""
+        whole = lazy_zeros(array.shape, array.dtype, (0, self.nblocks)) if self.is_root else array
+        if self.is_root:
+            whole[self.blocks] = array[self.blocks]
+        gather_owned_blocks(self.comm, [whole], self.cuts, self.traffic)
+        return whole if self.is_root else None
+
     def block_owners(self, blocks: np.ndarray, out: np.ndarray) -> None:
         """``out[t]``: the rank whose range holds block ``blocks[t]``, -1 where ``blocks[t]`` is -1."""
         np.subtract(np.searchsorted(self.cuts, blocks, side="right"), 1, out=out)
@@ -551,7 +568,10 @@ def distribute(sim, comm) -> None:
     """Share ``sim`` between the ranks of ``comm`` (collective; every rank built the same run).
 
     Rank 0's state, counters and tracers are broadcast, the blocks cut by estimated cost
-    (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  Raises ValueError
+    (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  On a uniform mesh each
+    rank then keeps in memory only its own blocks and the cells its exchanges write
+    (:func:`~.owned_memory.keep_owned_blocks`); an adaptive mesh's regrids give every rank every
+    block (:meth:`BlockRanges.share`), and it keeps the whole state.  Raises ValueError
     for what this version does not distribute (:func:`unsupported`) before anything moves.
     """
     reasons = unsupported(sim, comm.size)
@@ -562,6 +582,8 @@ def distribute(sim, comm) -> None:
     sim.tracers = comm.bcast(sim.tracers, root=0)
     cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size)
     sim.partition = BlockRanges(comm, sim.mesh, cuts)
+    if not sim.mesh.adaptive:
+        keep_owned_blocks(sim, sim.partition)
     sim._keep_good()
     if comm.rank == 0:
         log.info("hydro on %d MPI ranks: blocks %s", comm.size,
@@ -569,6 +591,10 @@ def distribute(sim, comm) -> None:
 
 
 def collect(sim) -> None:
-    """End the sharing: every rank receives every block, then runs as a single process again."""
-    sim.partition.share(sim)
-    sim.partition = WholeMesh()
+    """End the sharing (collective): rank 0 receives every block (state, ghosts included, and
+    counters) and runs as a single process again.  The other ranks send their blocks and are
+    done with ``sim``: it holds only their own blocks (so that no rank but the one that writes
+    ever holds the whole state), and its partition is None."""
+    partition = sim.partition
+    partition.gather_to_root(list(sim.state.arrays().values()) + list(sim._counter_arrays()))
+    sim.partition = WholeMesh() if partition.is_root else None

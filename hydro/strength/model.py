@@ -546,7 +546,7 @@ class MaterialStrength:
         else:
             fills = [partition.start_field_ghosts(self.work, self.mesh, runs, self.holds, layers)]
         for axis in range(self.mesh.ndim):
-            self._flip_work_walls(axis, runs, layers)
+            self._flip_work_walls(axis, runs, layers, owned=self._range(partition))
         return fills
 
     def _finish_work_ghosts(self, partition, fills: list[FieldFill]) -> None:
@@ -593,10 +593,11 @@ class MaterialStrength:
             _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, level.mask & self.holds, layers)
         self._flip_work_walls(axis, runs, layers, level)
 
-    def _flip_work_walls(self, axis: int, runs: tuple[slice, ...], layers: int, level: LevelBlocks | None = None
-                         ) -> None:
+    def _flip_work_walls(self, axis: int, runs: tuple[slice, ...], layers: int, level: LevelBlocks | None = None,
+                         owned: tuple[int, int] | None = None) -> None:
         """Negate, in the ``layers`` ghost layers of the reflecting faces along ``axis`` (of the
-        ``level``'s blocks when given), the work slots of the ``runs`` whose sign flips there:
+        ``level``'s blocks when given, else of the blocks ``owned[0] .. owned[1] - 1`` when given,
+        else of every block), the work slots of the ``runs`` whose sign flips there:
         the normal velocity and the shear stress with one index normal to the wall (at a rough
         wall, :meth:`set_rough_wall`, every velocity component and no stress), and the velocity
         gradients along the wall."""
@@ -604,16 +605,20 @@ class MaterialStrength:
             flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
             flips += _GRADIENT_FLIP[axis]
             self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if _in_runs(c, runs)], layers,
-                                   None if level is None else level.walls[axis, side])
+                                   None if level is None else level.walls[axis, side], owned)
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
-                          blocks: np.ndarray | None = None) -> None:
+                          blocks: np.ndarray | None = None, owned: tuple[int, int] | None = None) -> None:
         """Negate ``components`` of ``array`` in the ``layers`` ghost layers next to the interior
         of the reflecting faces on ``side`` of ``axis``: of the ``blocks`` (int64) when given, which
-        must all have a reflecting face there, else of every block that has one."""
+        must all have a reflecting face there, else of every block that has one among the blocks
+        ``owned[0] .. owned[1] - 1`` (every block when None: on several MPI ranks of a uniform mesh
+        a rank flips only its own blocks' ghosts, which alone it reads, so that it writes no other
+        rank's block, :mod:`impactpipe.hydro.parallel.owned_memory`)."""
         mesh = self.mesh
         if blocks is None:
-            blocks = np.nonzero(mesh.neighbor[:, axis, side] == REFLECTING)[0]
+            lo, hi = (0, mesh.nblocks) if owned is None else owned
+            blocks = lo + np.nonzero(mesh.neighbor[lo:hi, axis, side] == REFLECTING)[0]
         if blocks.size == 0 or not components:
             return
         n = mesh.interior_shape[axis]

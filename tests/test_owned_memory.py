@@ -1,0 +1,112 @@
+"""On several MPI ranks of a uniform mesh a rank writes only its own blocks and the cells its
+exchanges receive (:mod:`impactpipe.hydro.parallel.owned_memory`): after steps, a snapshot and a
+checkpoint of the r-z impact with strength and tracers on 3 ranks, every other value of the
+state, of the strength model's work arrays and of the last-good copy is still the +0.0 that
+its untouched page reads, on every rank; and :func:`lazy_zeros` commits a page only when it
+is written.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from impactpipe.hydro.parallel.owned_memory import lazy_zeros
+
+pytest.importorskip("mpi4py")
+
+from impactpipe.pipeline import ranks  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parent / "configs" / "mpi" / "impact_strength.yaml"
+ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+
+#: Argument 1: the config; writes, per rank, to OUT.rankR.json (argument 2): for each array, the
+#: values outside the rank's own rows and its halo that are not +0.0 (bit patterns), and the
+#: halo's values that are not (what the exchanges wrote).
+UNWRITTEN = """
+import json, mmap, sys
+import numpy as np
+from impactpipe.hydro.parallel.distributed import distribute
+from impactpipe.pipeline import derived, load_config, ranks
+from impactpipe.pipeline.adapters.hydro import add_tracers, build_simulation
+config = load_config(sys.argv[1])
+values = derived.derive(config)
+sim = build_simulation(config, values)
+add_tracers(sim, config, float(values["end_time"]))
+comm = ranks.join_world()
+distribute(sim, comm)
+for _ in range(4):
+    sim.step()
+sim.snapshot()
+sim.save_checkpoint(sys.argv[2] + ".checkpoint.h5")
+part = sim.partition
+strips = [route for routes in part.routes for route in routes]
+arrays = {**sim.state.arrays(), "work": sim.strength.work}
+halos = {name: strips + part.neighbourhood for name in sim.state.arrays()}
+halos["work"] = strips
+def stray_pages(array, kept):
+    # pages of ``array`` that this process wrote (present and exclusively mapped, /proc/self/pagemap:
+    # a page only read maps the shared zero page) and that hold none of the values where ``kept`` (flat) is True
+    pages = -(-array.nbytes // mmap.PAGESIZE)
+    with open("/proc/self/pagemap", "rb") as pagemap:
+        pagemap.seek(array.ctypes.data // mmap.PAGESIZE * 8)
+        entries = np.frombuffer(pagemap.read(8 * pages), dtype=np.uint64)
+    written = ((entries >> np.uint64(63)) & (entries >> np.uint64(56)) & np.uint64(1)).astype(bool)
+    allowed = np.zeros(pages, dtype=bool)
+    allowed[np.flatnonzero(kept) * array.itemsize // mmap.PAGESIZE] = True
+    return int(np.count_nonzero(written & ~allowed))
+out = {"tracers": len(sim.tracers), "lo": part.lo, "hi": part.hi, "nblocks": sim.mesh.nblocks}
+for name, array in arrays.items():
+    halo = np.zeros(array.size, dtype=bool)
+    for route in halos[name]:
+        halo[route.receive.indices(array)] = True
+    own = np.zeros(array.shape, dtype=bool)
+    own[part.lo:part.hi] = True
+    bits = array.view(np.int64).reshape(-1)
+    outside = ~(own.reshape(-1) | halo)
+    out[name] = {"outside": int(np.count_nonzero(bits[outside])), "halo": int(np.count_nonzero(bits[halo & ~own.reshape(-1)])),
+                 "stray_pages": stray_pages(array, ~outside)}
+for name, good in sim._good.items():
+    own = np.zeros(good.shape, dtype=bool)
+    own[part.lo:part.hi] = True
+    out["good_" + name] = {"outside": int(np.count_nonzero(good.view(np.int64)[~own])),
+                           "stray_pages": stray_pages(good, own.reshape(-1))}
+with open(f"{sys.argv[2]}.rank{comm.rank}.json", "w") as fh:
+    fh.write(json.dumps(out))
+"""
+
+
+def test_lazy_zeros_commits_a_page_only_when_written():
+    array = lazy_zeros((4, 3, 1024))
+    assert array.dtype == np.float64 and array.flags.c_contiguous and array.flags.writeable
+    assert not array.any()
+    array[2, 1, 7] = 1.5
+    assert array.sum() == 1.5
+    assert lazy_zeros((0, 3)).shape == (0, 3)
+
+
+def test_a_rank_writes_only_its_own_blocks_and_the_cells_its_exchanges_receive(tmp_path):
+    config = yaml.safe_load(CONFIG.read_text())
+    config["hydro"]["tracers"] = {"enabled": True, "count": 60, "history_interval": 0.01}
+    path = tmp_path / "impact_strength_tracers.yaml"
+    path.write_text(yaml.safe_dump(config))
+    out = tmp_path / "unwritten"
+    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", UNWRITTEN, str(path), str(out)],
+                            env=ENV, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    for rank in range(3):
+        counted = json.loads(Path(f"{out}.rank{rank}.json").read_text())
+        assert counted["tracers"] > 0
+        assert counted["hi"] - counted["lo"] < counted["nblocks"]
+        for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq", "work"):
+            assert counted[name] == {**counted[name], "outside": 0, "stray_pages": 0}, (rank, name)
+        for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"):
+            assert counted["good_" + name] == {"outside": 0, "stray_pages": 0}, (rank, name)
+        assert counted["arho"]["halo"] > 0 and counted["work"]["halo"] > 0, rank
