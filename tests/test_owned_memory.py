@@ -1,9 +1,10 @@
 """On several MPI ranks of a uniform mesh a rank writes only its own blocks and the cells its
 exchanges receive (:mod:`impactpipe.hydro.parallel.owned_memory`): after steps, a snapshot and a
-checkpoint of the r-z impact with strength and tracers on 3 ranks, every other value of the
-state, of the strength model's work arrays and of the last-good copy is still the +0.0 that
-its untouched page reads, on every rank; and :func:`lazy_zeros` commits a page only when it
-is written.
+checkpoint of the r-z impact with strength and tracers on 3 ranks, no rank has written a page
+of the state, of the strength model's work arrays or of the last-good copy outside those
+(``/proc/self/pagemap``: present and exclusively mapped; a page only read maps the shared zero
+page), and every other value is still +0.0 (the wall sign flips of the work ghosts that wrote
+other ranks' blocks, -0.0 after one flip and +0.0 after two, fail the page check).
 """
 
 from __future__ import annotations
@@ -27,9 +28,10 @@ from impactpipe.pipeline import ranks  # noqa: E402
 CONFIG = Path(__file__).resolve().parent / "configs" / "mpi" / "impact_strength.yaml"
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 
-#: Argument 1: the config; writes, per rank, to OUT.rankR.json (argument 2): for each array, the
-#: values outside the rank's own rows and its halo that are not +0.0 (bit patterns), and the
-#: halo's values that are not (what the exchanges wrote).
+#: Argument 1: the config; 4 steps on the ranks, a snapshot and a checkpoint, then writes, per
+#: rank, to OUT.rankR.json (argument 2): for each array, the values outside the rank's own rows
+#: and its halo that are not +0.0 (bit patterns), the halo's values that are not (what the
+#: exchanges wrote), and the pages written that hold none of the own rows' and halo's values.
 UNWRITTEN = """
 import json, mmap, sys
 import numpy as np
@@ -71,7 +73,8 @@ for name, array in arrays.items():
     own[part.lo:part.hi] = True
     bits = array.view(np.int64).reshape(-1)
     outside = ~(own.reshape(-1) | halo)
-    out[name] = {"outside": int(np.count_nonzero(bits[outside])), "halo": int(np.count_nonzero(bits[halo & ~own.reshape(-1)])),
+    out[name] = {"outside": int(np.count_nonzero(bits[outside])),
+                 "halo": int(np.count_nonzero(bits[halo & ~own.reshape(-1)])),
                  "stray_pages": stray_pages(array, ~outside)}
 for name, good in sim._good.items():
     own = np.zeros(good.shape, dtype=bool)
