@@ -40,7 +40,6 @@ from impactpipe.hydro.gravity import gravity_from_spec
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
 from impactpipe.hydro.parallel.distributed import WholeMesh
-from impactpipe.hydro.parallel.owned_memory import lazy_zeros
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
 from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, pack_damage
@@ -277,14 +276,14 @@ class Simulation:
 
     def _keep_good(self) -> None:
         """Start the last-good copies (interior cells of the state, counters, clock) from the current ones:
-        of the state, the rows of the blocks this process advances (in :func:`~impactpipe.hydro.parallel.
-        owned_memory.lazy_zeros`, the other rows zero and never written on several ranks)."""
+        of the state, the rows of the blocks this process advances (in the partition's
+        :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros`: on several ranks the other
+        rows are zero and never written)."""
         own = self.partition.blocks
-        rows = own.indices(self.mesh.nblocks)[:2]
         self._good = {}
         for name, arr in self.state.arrays().items():
             interior = self.mesh.interior(arr)
-            self._good[name] = lazy_zeros(interior.shape, dense_rows=rows)
+            self._good[name] = self.partition.zeros(interior.shape)
             self._good[name][own] = interior[own]
         #: per block, 1 where the last-good copy is of a void block (:mod:`impactpipe.hydro.mesh.last_good`)
         self._good_void = np.zeros(self.mesh.nblocks, dtype=np.uint8)
@@ -847,22 +846,22 @@ class Simulation:
         """The interior cells at the current time as a :class:`Snapshot` (copies).  Collective
         on several ranks: each computes the fields of its own blocks, and the process that
         writes (rank 0) receives them; the other ranks' snapshots hold only their own blocks
-        (zeros elsewhere, in :func:`~impactpipe.hydro.parallel.owned_memory.lazy_zeros`: pages
-        never written)."""
+        (zeros elsewhere, in the partition's
+        :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros`: pages never written)."""
         mesh = self.mesh
         st = self.state
         own = self.partition.blocks
         shape = (mesh.nblocks,) + mesh.interior_shape
-        rows = own.indices(mesh.nblocks)[:2]
-        pressure, sound, eint, temp = (lazy_zeros(shape, dense_rows=rows) for _ in range(4))
+        zeros = self.partition.zeros
+        pressure, sound, eint, temp = (zeros(shape) for _ in range(4))
         cell_thermodynamics(st.alpha[own], st.arho[own], st.arhoe[own], st.arhoq[own], self.eos.kind,
                             self.eos.params, self.eos.table, self.shear_modulus, self.tensile_strength,
                             pressure[own], sound[own], eint[own], temp[own], self.grady_kipp, self.porosity)
-        arho = lazy_zeros((mesh.nblocks, st.nmat) + mesh.interior_shape, dense_rows=rows)
-        alpha = lazy_zeros(arho.shape, dense_rows=rows)
+        arho = zeros((mesh.nblocks, st.nmat) + mesh.interior_shape)
+        alpha = zeros(arho.shape)
         arho[own] = mesh.interior(st.arho)[own]
         alpha[own] = mesh.interior(st.alpha)[own]
-        velocity = lazy_zeros((mesh.nblocks, 3) + mesh.interior_shape, dense_rows=rows)
+        velocity = zeros((mesh.nblocks, 3) + mesh.interior_shape)
         rho = arho[own].sum(axis=1)
         safe = np.where(rho > 0.0, rho, 1.0)
         velocity[own] = np.where(rho[:, None] > 0.0, mesh.interior(st.momentum)[own] / safe[:, None], 0.0)

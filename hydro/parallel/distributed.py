@@ -206,6 +206,11 @@ class WholeMesh:
         own there, None elsewhere (this process has them: ``array`` itself)."""
         return array
 
+    def zeros(self, shape: tuple[int, ...]) -> np.ndarray:
+        """A float64 per-block array (NB, ...) of zeros of which this process writes the rows of
+        ``blocks``: here every row, so numpy's own array."""
+        return np.zeros(shape)
+
     def share_rows(self, array: np.ndarray) -> None:
         """Bring every block's row of ``array`` ((NB, ...), computed by each block's owner) to
         every process (this one has them)."""
@@ -529,6 +534,11 @@ class BlockRanges(WholeMesh):
         """Rank 0 receives every rank's rows of ``arrays`` (one Gatherv each,
         :func:`~.exchange.gather_owned_blocks`)."""
         gather_owned_blocks(self.comm, arrays, self.cuts, self.traffic)
+
+    def zeros(self, shape: tuple[int, ...]) -> np.ndarray:
+        """Zeros in :func:`~.owned_memory.lazy_zeros`, whose pages outside this rank's rows are
+        committed only if written."""
+        return lazy_zeros(shape, dense_rows=(self.lo, self.hi))
 
     def rows_at_root(self, array: np.ndarray) -> np.ndarray | None:
         """Rank 0: a new array (:func:`~.owned_memory.lazy_zeros`) holding every rank's rows of
