@@ -37,6 +37,9 @@ SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impac
           "column_collapse": CONFIGS / "column_collapse.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+#: Seconds a run may take: the first one in a fresh environment compiles every kernel it calls
+#: (271 s of the module fixture on an idle 2-core machine), so 300 s left no margin under load.
+SUBPROCESS_TIMEOUT_S = 900
 #: Stops rank 0's hydro stage at the end of its 4th step, as a first SIGINT would (the run
 #: writes its checkpoint and exits 130); the remaining arguments are the command line's.
 STOP_AFTER_FOUR_STEPS = """
@@ -167,17 +170,17 @@ cli.main()
 
 def impactpipe_run(config: Path, out: Path, *options: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "impactpipe.pipeline.cli", "run", str(config), "--out", str(out),
-                           "--stage", "hydro", "-q", *options], env=ENV, capture_output=True, text=True, timeout=300)
+                           "--stage", "hydro", "-q", *options], env=ENV, capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S)
 
 
 def run_serial_and_shared(script: str, nranks: int, serial_out: Path, shared_out: Path) -> None:
     """``script`` on the advection scene as one process (writing ``serial_out``) and on ``nranks``
     ranks (``shared_out``); both must exit 0."""
     serial = subprocess.run([sys.executable, "-c", script, str(SCENES["advection"]), str(serial_out)],
-                            env=ENV, capture_output=True, text=True, timeout=300)
+                            env=ENV, capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S)
     shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", script,
                              str(SCENES["advection"]), str(shared_out)], env=ENV, capture_output=True, text=True,
-                            timeout=300)
+                            timeout=SUBPROCESS_TIMEOUT_S)
     assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
 
 
@@ -280,7 +283,7 @@ def test_a_run_checkpointed_on_two_ranks_resumes_on_another_number_to_the_same_a
                                                                                        tmp_path):
     command = [ranks.mpiexec_path(), "-n", "2", sys.executable, "-c", STOP_AFTER_FOUR_STEPS, "run",
                str(SCENES[scene]), "--out", str(tmp_path), "--stage", "hydro", "-q"]
-    stopped = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=300)
+    stopped = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S)
     assert stopped.returncode == 130, stopped.stderr
     with h5py.File(tmp_path / "hydro.checkpoint.h5", "r") as f:
         assert f.attrs["step_count"] == 4
@@ -313,7 +316,7 @@ def test_the_traffic_counters_count_the_bytes_and_messages_of_one_step(tmp_path)
     2 x 2 x 4 x 7 x 8 = 896 B (a row of 4 blocks each, as the x-fastest order cut it, shares 4
     faces: twice that); three allreduces (the time step and the failure check of each sweep)."""
     result = subprocess.run([ranks.mpiexec_path(), "-n", "2", sys.executable, "-c", COUNT_TRAFFIC,
-                             str(tmp_path / "traffic")], env=ENV, capture_output=True, text=True, timeout=300)
+                             str(tmp_path / "traffic")], env=ENV, capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S)
     assert result.returncode == 0, result.stderr
     for rank in range(2):
         counted = json.loads((tmp_path / f"traffic.rank{rank}.json").read_text())
@@ -338,7 +341,7 @@ def test_a_killed_rank_stops_every_rank_with_a_clear_message_and_the_same_comman
     run_dir = tmp_path / "run"
     killed = subprocess.run([sys.executable, "-c", KILL_RANK_ONE, "run", str(path), "--out", str(run_dir),
                              "--stage", "hydro", "-q", "--ranks", "2"], env=ENV, capture_output=True, text=True,
-                            timeout=300)
+                            timeout=SUBPROCESS_TIMEOUT_S)
     assert killed.returncode not in ranks.PIPELINE_STATUSES
     assert "an MPI rank ended abnormally" in killed.stderr and "run the same command again" in killed.stderr
     with h5py.File(run_dir / "hydro.checkpoint.h5", "r") as f:
@@ -360,7 +363,7 @@ def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):
     assert not (tmp_path / "run").exists()  # refused before anything was written
     direct = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-m", "impactpipe.pipeline.cli", "run",
                              str(path), "--out", str(tmp_path / "direct"), "-q"], env=ENV, capture_output=True,
-                            text=True, timeout=300)
+                            text=True, timeout=SUBPROCESS_TIMEOUT_S)
     assert direct.returncode == 2, direct.stderr
     assert "more ranks (3) than blocks (2)" in direct.stderr
     assert not (tmp_path / "direct").exists()
