@@ -59,7 +59,6 @@ from scipy.constants import G
 from impactpipe.hydro.gravity_kick import cell_volume, gravity_kick
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
 from impactpipe.hydro.mesh.state import HydroState
-from impactpipe.hydro.parallel.owned_memory import lazy_zeros
 
 #: Default expansion order L.
 DEFAULT_ORDER = 4
@@ -378,10 +377,11 @@ class SelfGravity:
         """What rebuilds this object (:func:`impactpipe.hydro.gravity.gravity_from_spec`)."""
         return {"kind": "self", "order": self.order, "mirror_y": self.mirror_y, "work": self.work}
 
-    def _allocate(self, mesh: BlockMesh) -> None:
+    def _allocate(self, mesh: BlockMesh, partition=None) -> None:
         nb = mesh.nblocks
         if self._phi.shape != (nb,) + mesh.padded_shape:
-            self._phi = lazy_zeros((nb,) + mesh.padded_shape)
+            zeros = np.zeros if partition is None else partition.zeros
+            self._phi = zeros((nb,) + mesh.padded_shape)
             self._rows = np.zeros((nb, 5))
             self._block_work = np.zeros(nb)
             self._block_potential = np.zeros(nb)
@@ -389,7 +389,7 @@ class SelfGravity:
     def prepare(self, state: HydroState, mesh: BlockMesh, partition=None) -> None:
         """The potential of the current mass at the cells of the blocks this process advances
         (and one layer around them): centre of mass, exact shell moments, Phi."""
-        self._allocate(mesh)
+        self._allocate(mesh, partition)
         nb = mesh.nblocks
         own = slice(0, nb) if partition is None else partition.blocks
         lo, hi, _ = own.indices(nb)
