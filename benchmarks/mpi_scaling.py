@@ -19,8 +19,10 @@ needs to recount the bytes exchanged).  A case that
 is reported with ``skipped``, the reasons, and not run; on one rank every case runs as a
 single process.
 
-Each case takes one step, is shared between the ranks, takes one more step, then ``--steps``
-timed steps between two barriers, with the ranks' traffic counters
+Rank 0 alone builds each case (the others receive their blocks,
+:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`, as in ``impactpipe run
+--ranks N``); it is shared between the ranks, takes two steps, then ``--steps`` timed steps
+between two barriers, with the ranks' traffic counters
 (:class:`~impactpipe.hydro.parallel.exchange.Traffic`) reset at the start.  Per rank, per step:
 ``bytes_sent``, ``bytes_received`` (B), ``messages_sent``, ``allreduces``; ``wait_s`` (s in
 ``Waitall``), ``exchange_s`` (s in the ghost exchanges: packing, waiting, unpacking),
@@ -33,8 +35,8 @@ two or more ranks, ranks 0 and 1 also time a ping-pong (``pingpong``: the one-wa
 8-byte message and the bandwidth of a 16 MiB one, s and B/s).  Rank 0 prints one JSON document.
 
 Memory per rank (B, from ``/proc/self/status``, Linux): ``setup_peak_resident_bytes``, the
-largest resident set up to the timed steps (the build of the whole initial state, the first
-steps and the sharing); ``step_peak_resident_bytes`` and ``resident_bytes``, the largest
+largest resident set through the setup (the build of the initial state on rank 0, the sharing
+on every rank), before any step; ``step_peak_resident_bytes`` and ``resident_bytes``, the largest
 resident set during the timed steps and the resident set after them (the peak reset before
 them, ``/proc/self/clear_refs``), with ``resident_bytes_per_cell`` the latter over the rank's
 interior cells; ``snapshot_peak_resident_bytes``, the largest during the two snapshots;
@@ -64,7 +66,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hydro_throughput import build  # noqa: E402
 
-from impactpipe.hydro.parallel.distributed import distribute, unsupported  # noqa: E402
+from impactpipe.hydro.parallel.distributed import distribute_from_root, unsupported  # noqa: E402
 
 CASES = ("2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material", "2d-ideal-gas")
 DEFAULT_CASES = ("2d-cyl-tillotson", "2d-cyl-strength", "3d-two-material")
@@ -90,26 +92,35 @@ def reset_peak() -> None:
         refs.write("5")
 
 
+def describe(case: str, sim, steps: int) -> dict:
+    """The mesh and the state of ``case``'s Simulation ``sim`` (what benchmarks/scaling_model.py
+    needs to recount the bytes exchanged)."""
+    mesh = sim.mesh
+    return {"case": case, "cells": mesh.ncells, "blocks": mesh.nblocks, "block_cells": mesh.block_cells,
+            "blocks_per_axis": mesh.blocks_per_axis[:mesh.ndim].tolist(),
+            "periodic": [low == "periodic" for low, _ in mesh.boundaries],
+            "components": sum(array.shape[1] for array in sim.state.arrays().values()),
+            "materials": sim.state.nmat, "strength": sim.strength is not None, "steps": steps}
+
+
 def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
     """Rate (cell-updates/s) and per-rank traffic of ``steps`` steps of ``case`` shared between
-    the ranks of ``comm``; ``skipped`` with the reasons where the ranks cannot share it."""
-    sim = build(case, quick=False, block_cells=None if case.startswith("2d-cyl") else block_cells)
-    mesh = sim.mesh
-    result = {"case": case, "cells": mesh.ncells, "blocks": mesh.nblocks, "block_cells": mesh.block_cells,
-              "blocks_per_axis": mesh.blocks_per_axis[:mesh.ndim].tolist(),
-              "periodic": [low == "periodic" for low, _ in mesh.boundaries],
-              "components": sum(array.shape[1] for array in sim.state.arrays().values()),
-              "materials": sim.state.nmat, "strength": sim.strength is not None, "steps": steps}
+    the ranks of ``comm``; ``skipped`` with the reasons where the ranks cannot share it (rank 0's
+    result; the others return an empty dict)."""
+    sim = build(case, quick=False, block_cells=None if case.startswith("2d-cyl") else block_cells) \
+        if comm.rank == 0 else None
+    reasons = comm.bcast(unsupported(sim, comm.size) if comm.rank == 0 and comm.size > 1 else [], root=0)
+    if reasons and comm.rank != 0:
+        return {}
+    if reasons:
+        return {**describe(case, sim, steps), "skipped": f"not shared between {comm.size} ranks in this version: "
+                                                         f"{'; '.join(reasons)} (hydro.parallel.distributed.unsupported)"}
     if comm.size > 1:
-        reasons = unsupported(sim, comm.size)
-        if reasons:
-            return {**result, "skipped": f"not shared between {comm.size} ranks in this version: "
-                                         f"{'; '.join(reasons)} (hydro.parallel.distributed.unsupported)"}
-    sim.step()
-    if comm.size > 1:
-        distribute(sim, comm)
-    sim.step()
+        sim = distribute_from_root(sim, comm)
     setup_peak = resident()[1]
+    result = describe(case, sim, steps)
+    for _ in range(2):
+        sim.step()
     comm.Barrier()
     reset_peak()
     traffic = sim.partition.traffic

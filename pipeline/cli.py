@@ -140,12 +140,12 @@ def _follow_rank_zero(config_path: str, comm) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # rank 0 decides when the run stops
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     try:
-        config = load_config(config_path)
+        load_config(config_path)  # rank 0 reports a bad config; this rank exits with the same status
     except ConfigError:
         ranks.wait_for_order(comm)
         return 2
     try:
-        return follow_hydro_stage(config, derived.derive(config), comm)
+        return follow_hydro_stage(comm)
     except Exception as exc:  # rank 0 waits for this rank in a step
         ranks.abort(comm, f"the hydro stage failed: {type(exc).__name__}: {exc}")
         raise

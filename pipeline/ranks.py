@@ -4,8 +4,8 @@
 run CONFIG ...`` (:func:`launch`).  Under ``mpiexec`` (:func:`join_world`) rank 0 runs the
 pipeline as a single process would: the run store, its lock, the logs, every stage other
 than hydro and all files.  The other ranks only take part in the hydro stage: they wait for
-rank 0's order (:func:`wait_for_order`, sleeping rather than polling), build the same
-simulation, advance their blocks, and exit after the hydro stage; an order of None (the
+rank 0's order (:func:`wait_for_order`, sleeping rather than polling), receive their blocks of
+rank 0's simulation, advance them, and exit after the hydro stage; an order of None (the
 hydro stage does not run, or rank 0 stopped before it) lets them exit at once.
 
 A sweep runs each of its points this way too (``execution.ranks_per_run``,

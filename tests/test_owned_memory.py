@@ -4,7 +4,10 @@ checkpoint of the r-z impact with strength and tracers on 3 ranks, no rank has w
 of the state, of the strength model's work arrays or of the last-good copy outside those
 (``/proc/self/pagemap``: present and exclusively mapped; a page only read maps the shared zero
 page), and every other value is still +0.0 (the wall sign flips of the work ghosts that wrote
-other ranks' blocks, -0.0 after one flip and +0.0 after two, fail the page check).
+other ranks' blocks, -0.0 after one flip and +0.0 after two, fail the page check).  Nor does
+a rank other than 0 ever hold the whole state while the run is shared out: rank 0 alone builds
+it (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`), and the others' peak
+resident memory grows by about their share of it (``/proc/self/status``).
 """
 
 from __future__ import annotations
@@ -28,22 +31,25 @@ from impactpipe.pipeline import ranks  # noqa: E402
 CONFIG = Path(__file__).resolve().parent / "configs" / "mpi" / "impact_strength.yaml"
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 
-#: Argument 1: the config; 4 steps on the ranks, a snapshot and a checkpoint, then writes, per
-#: rank, to OUT.rankR.json (argument 2): for each array, the values outside the rank's own rows
-#: and its halo that are not +0.0 (bit patterns), the halo's values that are not (what the
-#: exchanges wrote), and the pages written that hold none of the own rows' and halo's values.
+#: Argument 1: the config, which rank 0 alone builds; 4 steps on the ranks, a snapshot and a
+#: checkpoint, then writes, per rank, to OUT.rankR.json (argument 2): for each array, the values
+#: outside the rank's own rows and its halo that are not +0.0 (bit patterns), the halo's values
+#: that are not (what the exchanges wrote), and the pages written that hold none of the own
+#: rows' and halo's values.
 UNWRITTEN = """
 import json, mmap, sys
 import numpy as np
-from impactpipe.hydro.parallel.distributed import distribute
+from impactpipe.hydro.parallel.distributed import distribute_from_root
 from impactpipe.pipeline import derived, load_config, ranks
 from impactpipe.pipeline.adapters.hydro import add_tracers, build_simulation
-config = load_config(sys.argv[1])
-values = derived.derive(config)
-sim = build_simulation(config, values)
-add_tracers(sim, config, float(values["end_time"]))
 comm = ranks.join_world()
-distribute(sim, comm)
+sim = None
+if comm.rank == 0:
+    config = load_config(sys.argv[1])
+    values = derived.derive(config)
+    sim = build_simulation(config, values)
+    add_tracers(sim, config, float(values["end_time"]))
+sim = distribute_from_root(sim, comm)
 for _ in range(4):
     sim.step()
 sim.snapshot()
@@ -85,6 +91,35 @@ with open(f"{sys.argv[2]}.rank{comm.rank}.json", "w") as fh:
     fh.write(json.dumps(out))
 """
 
+#: Argument 1: a small config, argument 2: the same scene on a finer mesh; argument 3: OUT.  Rank
+#: 0 builds each run and shares it out (the small one first, so that the kernels of the sharing
+#: are loaded before the measurement); writes, per rank, to OUT.rankR.json: how much the peak
+#: resident set (VmHWM, B) grew over the resident set before the fine run was built, and the
+#: bytes of the fine run's whole state.
+SETUP_PEAK = """
+import gc, json, sys
+from impactpipe.hydro.parallel.distributed import distribute_from_root
+from impactpipe.pipeline import derived, load_config, ranks
+from impactpipe.pipeline.adapters.hydro import build_simulation
+def resident(name):
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) * 1024 for line in status if line.startswith(name + ":"))
+def shared(path):
+    config = load_config(path)
+    return distribute_from_root(build_simulation(config, derived.derive(config)) if comm.rank == 0 else None, comm)
+comm = ranks.join_world()
+shared(sys.argv[1])
+gc.collect()
+with open("/proc/self/clear_refs", "w") as refs:
+    refs.write("5")
+before = resident("VmRSS")
+sim = shared(sys.argv[2])
+grown = resident("VmHWM") - before
+whole = sum(array.nbytes for array in sim.state.arrays().values())
+with open(f"{sys.argv[3]}.rank{comm.rank}.json", "w") as out:
+    out.write(json.dumps({"grown": grown, "whole": whole}))
+"""
+
 
 def test_lazy_zeros_commits_a_page_only_when_written():
     array = lazy_zeros((4, 3, 1024))
@@ -113,3 +148,24 @@ def test_a_rank_writes_only_its_own_blocks_and_the_cells_its_exchanges_receive(t
         for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"):
             assert counted["good_" + name] == {"outside": 0, "stray_pages": 0}, (rank, name)
         assert counted["arho"]["halo"] > 0 and counted["work"]["halo"] > 0, rank
+
+
+def test_only_rank_0_holds_the_whole_state_while_the_run_is_shared_out(tmp_path):
+    config = yaml.safe_load(CONFIG.read_text())
+    paths = []
+    for name, cells, block in (("small", 2, 4), ("fine", 24, 16)):
+        config["hydro"].update(cells_per_projectile_radius=cells, block_cells=block)
+        paths.append(tmp_path / f"impact_strength_{name}.yaml")
+        paths[-1].write_text(yaml.safe_dump(config))
+    out = tmp_path / "setup"
+    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", SETUP_PEAK, *map(str, paths),
+                             str(out)], env=ENV, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    grown = [json.loads(Path(f"{out}.rank{rank}.json").read_text())["grown"] for rank in range(3)]
+    whole = json.loads(Path(f"{out}.rank0.json").read_text())["whole"]
+    assert whole > 50e6  # the state stands well above the other memory the sharing moves
+    assert grown[0] > whole, grown  # rank 0 built the whole run: its state, work arrays, last-good copy
+    # A rank that built or received the whole state would grow as much as rank 0 (when every
+    # rank built the run: 94 MB on each of the 3); a rank holds its own blocks (28 % and 41 % of
+    # them here), their last-good copy and work arrays, and the pages of its halo (42 and 52 MB).
+    assert max(grown[1:]) < 0.75 * grown[0], grown

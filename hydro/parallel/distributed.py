@@ -5,7 +5,8 @@ block order), to fill their ghosts, to combine the time step and the failure che
 every process, and to bring every block to the process that writes an output (or, before a
 regrid or the totals, to every process).  :class:`WholeMesh`
 is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
-of one run (:func:`distribute` attaches it, :func:`collect` ends it).
+of one run (:func:`distribute_from_root` or :func:`distribute` attaches it, :func:`collect`
+ends it).
 
 Tracers (:class:`~impactpipe.hydro.tracers.motion.Tracers`) ask the partition which process
 samples each tracer (the owner of the block holding the point, :meth:`WholeMesh.block_owners`),
@@ -40,7 +41,7 @@ from .decomposition import (block_costs, block_routes, every_axis_routes, exchan
 from .exchange import (FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
                        StripExchange, Traffic, broadcast_arrays, finish_strips, gather_owned_blocks, gather_rows,
                        share_owned_blocks)
-from .owned_memory import keep_owned_blocks, lazy_zeros
+from .owned_memory import from_outline, lazy_zeros, outline, receive_owned_blocks, shared_arrays
 
 log = logging.getLogger(__name__)
 
@@ -574,26 +575,55 @@ def unsupported(sim, nranks: int) -> list[str]:
     return reasons
 
 
-def distribute(sim, comm) -> None:
-    """Share ``sim`` between the ranks of ``comm`` (collective; every rank built the same run).
-
-    Rank 0's state, counters and tracers are broadcast, the blocks cut by estimated cost
-    (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  On a uniform mesh each
-    rank then keeps in memory only its own blocks and the cells its exchanges write
-    (:func:`~.owned_memory.keep_owned_blocks`); an adaptive mesh's regrids give every rank every
-    block (:meth:`BlockRanges.share`), and it keeps the whole state.  Raises ValueError
-    for what this version does not distribute (:func:`unsupported`) before anything moves.
-    """
-    reasons = unsupported(sim, comm.size)
+def refuse(reasons: list[str]) -> None:
+    """Raise ValueError with the ``reasons`` of :func:`unsupported`, if any."""
     if reasons:
         raise ValueError(f"several MPI ranks: not supported in this version: {'; '.join(reasons)} "
                          f"(run with one rank)")
-    broadcast_arrays(comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()))
+
+
+def distribute_from_root(sim, comm):
+    """Share rank 0's ``sim`` between the ranks of ``comm`` (collective) and return this rank's
+    Simulation; ``sim`` is None on the other ranks: only rank 0 builds the run.
+
+    Rank 0 broadcasts the :func:`~.owned_memory.outline` of ``sim`` (everything but its arrays
+    of cells), from which each other rank builds its Simulation with arrays of zeros that hold
+    no memory yet; then :func:`distribute`.  On a uniform mesh a rank other than 0 thus never
+    holds the whole state: its memory at the start is its own blocks, its halo and the mesh's
+    per-block tables.  Raises ValueError on every rank, before anything else moves, for what
+    this version does not distribute (:func:`unsupported`)."""
+    refuse(comm.bcast(unsupported(sim, comm.size) if comm.rank == 0 else None, root=0))
+    described = comm.bcast(outline(sim) if comm.rank == 0 else None, root=0)
+    if comm.rank != 0:
+        sim = from_outline(described)
+    del described
+    distribute(sim, comm)
+    return sim
+
+
+def distribute(sim, comm) -> None:
+    """Share ``sim`` between the ranks of ``comm`` (collective; every rank holds the same run:
+    built there too, or from rank 0's outline, :func:`distribute_from_root`).
+
+    Rank 0's counters and tracers are broadcast, the blocks cut by the estimated cost of rank
+    0's state (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  On a uniform
+    mesh each rank then holds only its own blocks of rank 0's state and the cells its exchanges
+    write (:func:`~.owned_memory.receive_owned_blocks`); what it built of the state is dropped
+    unread.  An adaptive mesh's regrids give every rank every block (:meth:`BlockRanges.share`):
+    rank 0's whole state and strength work arrays are broadcast and every rank keeps them.
+    Raises ValueError for what this version does not distribute (:func:`unsupported`) before
+    anything moves.
+    """
+    refuse(unsupported(sim, comm.size))
+    broadcast_arrays(comm, list(sim._counter_arrays()))
     sim.tracers = comm.bcast(sim.tracers, root=0)
-    cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size)
+    cuts = comm.bcast(owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size) if comm.rank == 0 else None,
+                      root=0)
     sim.partition = BlockRanges(comm, sim.mesh, cuts)
-    if not sim.mesh.adaptive:
-        keep_owned_blocks(sim, sim.partition)
+    if sim.mesh.adaptive:
+        broadcast_arrays(comm, shared_arrays(sim))
+    else:
+        receive_owned_blocks(sim, sim.partition)
     sim._keep_good()
     if comm.rank == 0:
         log.info("hydro on %d MPI ranks: blocks %s", comm.size,

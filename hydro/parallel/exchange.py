@@ -1,5 +1,5 @@
 """The messages between ranks: strips before a ghost fill or a tracer sample, owned blocks
-before an output, tracer rows after a tracer sample.
+before an output and from rank 0 at the start, tracer rows after a tracer sample.
 
 All fields are float64 arrays (NB, C, NX, NY, NZ), C-contiguous, so a block's values are one
 contiguous run and a strip is a fixed set of flat indices (:class:`~.decomposition.Strips`).
@@ -33,6 +33,9 @@ FLUX_TAG = 500
 #: Message tag of the strips along every axis before a derived field's ghost fills along every
 #: axis (the stress step's work arrays), one message per peer.
 FIELD_TAG = 600
+#: Message tag of the halo cells a rank receives from their owners when the run is shared
+#: (:func:`~.owned_memory.receive_owned_blocks`).
+SETUP_TAG = 700
 
 
 @dataclass
@@ -314,6 +317,25 @@ def gather_owned_blocks(comm, arrays: list[np.ndarray], cuts: np.ndarray, traffi
             comm.Gatherv([flat[lo * row:hi * row], kind], None, root=0)
     traffic.gathers += 1
     traffic.gather_seconds += time.perf_counter() - started
+
+
+def scatter_owned_blocks(comm, source: np.ndarray | None, target: np.ndarray, cuts: np.ndarray) -> None:
+    """Each rank receives the rows ``cuts[rank] .. cuts[rank + 1] - 1`` of rank 0's ``source``
+    into the same rows of ``target`` (both (NB, ...), C-contiguous, of one shape and dtype;
+    ``source`` is read on rank 0 only): one Scatterv."""
+    from mpi4py import MPI
+    from mpi4py.util.dtlib import from_numpy_dtype
+
+    row = int(np.prod(target.shape[1:], dtype=np.int64))
+    lo, hi = int(cuts[comm.rank]), int(cuts[comm.rank + 1])
+    kind = from_numpy_dtype(target.dtype)
+    received = [_flat(target)[lo * row:hi * row], kind]
+    if comm.rank == 0:
+        counts = (np.diff(cuts) * row).tolist()
+        displacements = (cuts[:-1] * row).tolist()
+        comm.Scatterv([_flat(source), (counts, displacements), kind], received, root=0)
+    else:
+        comm.Scatterv(None, received, root=0)
 
 
 def gather_rows(comm, owner: np.ndarray, arrays: list[np.ndarray]) -> None:

@@ -9,22 +9,30 @@ private mapping (Linux, macOS) a page is committed when it is first written, and
 read maps the system's shared zero page; so an array whose other rows are never written holds
 about the rank's own rows and its halo in memory, whatever its shape.
 
-:func:`keep_owned_blocks` moves a distributed Simulation's state, and the strength model's
-per-block work arrays, into such arrays (:func:`owned_copy`): the rows of the rank's own
-blocks and the halo cells are copied from the arrays every rank built (and rank 0's values
-broadcast into), and the old arrays are dropped.  Nothing but those rows and cells is written
-afterwards on that rank (tests/test_owned_memory.py checks that no other page is written).
+Only rank 0 needs to build the run's initial state.  It sends the other ranks the outline of
+its Simulation (:func:`outline`: everything but the per-block arrays of cells, which travel as
+their shapes only), from which each rank builds its own Simulation with arrays of zeros that
+hold no memory yet (:func:`from_outline`).  :func:`receive_owned_blocks` then gives each rank,
+in such arrays, the rows of its own blocks of rank 0's state and of the strength model's
+per-block work arrays (one Scatterv each, :func:`~.exchange.scatter_owned_blocks`) and the halo
+cells from their owners (one exchange of strips); whatever whole arrays a rank held are
+dropped.  Nothing but those rows and cells is written afterwards on that rank
+(tests/test_owned_memory.py checks that no other page is written, and that a rank other than 0
+never holds the whole state).
 """
 
 from __future__ import annotations
 
+import io
 import mmap
+import pickle
 
 import numpy as np
 
 from impactpipe.hydro.mesh.state import FIELDS
 
 from .decomposition import Route
+from .exchange import SETUP_TAG, StripExchange, Traffic, scatter_owned_blocks
 
 
 #: The transparent huge page (B) of x86-64 and of arm64 with 4 KiB pages.
@@ -56,35 +64,104 @@ def lazy_zeros(shape: tuple[int, ...], dtype=np.float64, dense_rows: tuple[int, 
     return np.frombuffer(pages, dtype=dtype).reshape(shape)
 
 
-def owned_copy(array: np.ndarray, lo: int, hi: int, routes: list[Route]) -> np.ndarray:
-    """A copy of the per-block ``array`` (NB, C, NX, NY, NZ) in :func:`lazy_zeros` (huge pages
-    within rows ``lo .. hi - 1``) holding only those rows (ghosts included) and the cells the
-    ``routes`` receive (every component); the other rows and cells are zero and their pages
-    uncommitted."""
-    kept = lazy_zeros(array.shape, array.dtype, (lo, hi))
-    kept[lo:hi] = array[lo:hi]
-    if routes and array.shape[1]:
-        source, target = array.reshape(-1), kept.reshape(-1)
-        for route in routes:
-            index = route.receive.indices(array)
-            target[index] = source[index]
+def shared_arrays(sim) -> list[np.ndarray]:
+    """The per-block arrays of cells (each (NB, C, ...), float64) that the ranks of ``sim`` share
+    out from rank 0: the state and the strength model's work arrays and face stresses."""
+    arrays = list(sim.state.arrays().values())
+    strength = sim.strength
+    if strength is not None:
+        arrays.append(strength.work)
+        if strength.face is not None:
+            arrays.append(strength.face)
+    return arrays
+
+
+def cell_arrays(sim) -> list[np.ndarray]:
+    """Every per-block array of cells of ``sim``: :func:`shared_arrays` and the last-good copy
+    of the state (which each rank takes from its own blocks).  The self-gravity potential is
+    allocated at the first step, in the partition's own arrays."""
+    return shared_arrays(sim) + list(sim._good.values())
+
+
+class _OutlinePickler(pickle.Pickler):
+    """Pickles an object with the arrays of ``cells`` as their shape and dtype only."""
+
+    def __init__(self, file, cells: list[np.ndarray]):
+        super().__init__(file, protocol=pickle.HIGHEST_PROTOCOL)
+        self._cells = {id(array) for array in cells}
+
+    def persistent_id(self, obj):
+        if isinstance(obj, np.ndarray) and id(obj) in self._cells:
+            return id(obj), obj.shape, obj.dtype.str
+        return None
+
+
+class _OutlineUnpickler(pickle.Unpickler):
+    """Unpickles what :class:`_OutlinePickler` wrote, each array of cells a :func:`lazy_zeros`
+    (one per array pickled, however often it was referred to)."""
+
+    def __init__(self, file):
+        super().__init__(file)
+        self._arrays: dict[int, np.ndarray] = {}
+
+    def persistent_load(self, pid):
+        key, shape, dtype = pid
+        if key not in self._arrays:
+            self._arrays[key] = lazy_zeros(shape, np.dtype(dtype))
+        return self._arrays[key]
+
+
+def outline(sim) -> bytes:
+    """``sim`` pickled without the values of its arrays of cells (:func:`cell_arrays`): the
+    mesh, the materials, the counters, the tracers and the clock, about the size of the mesh's
+    per-block tables, not of its cells."""
+    out = io.BytesIO()
+    _OutlinePickler(out, cell_arrays(sim)).dump(sim)
+    return out.getvalue()
+
+
+def from_outline(data: bytes):
+    """The Simulation of an :func:`outline`, its arrays of cells zeros in :func:`lazy_zeros` (no
+    memory committed until written)."""
+    return _OutlineUnpickler(io.BytesIO(data)).load()
+
+
+def owned_rows(array: np.ndarray, partition) -> np.ndarray:
+    """A :func:`lazy_zeros` array of the shape of the per-block ``array`` (NB, ...) holding rank 0's
+    rows of this rank's blocks (``partition``: a :class:`~.distributed.BlockRanges`; huge pages
+    within those rows), received in one Scatterv; the other rows are zero and their pages
+    uncommitted.  Only rank 0 reads ``array``'s values."""
+    kept = lazy_zeros(array.shape, array.dtype, (partition.lo, partition.hi))
+    scatter_owned_blocks(partition.comm, array if partition.is_root else None, kept, partition.cuts)
     return kept
 
 
-def keep_owned_blocks(sim, partition) -> None:
+def receive_halo(arrays: list[np.ndarray], partition, routes: list[Route]) -> None:
+    """Receive the cells of ``routes`` (by peer) of every component of ``arrays`` (NB, C, NX, NY,
+    NZ) from the ranks that own them, who send them from their own rows (one exchange of
+    strips, its persistent requests freed at the end)."""
+    fields = tuple(array for array in arrays if array.size)
+    if fields:
+        StripExchange(partition.comm, routes, SETUP_TAG).exchange(fields, Traffic())
+
+
+def receive_owned_blocks(sim, partition) -> None:
     """Replace the per-block arrays of ``sim`` (a Simulation on a uniform mesh just given its
     ``partition``, a :class:`~.distributed.BlockRanges`) that this rank writes only for its own
-    blocks by :func:`owned_copy`: the state, kept with the cells of the ghost fills' strips and
-    of the tracers' neighbourhood (:attr:`~.distributed.BlockRanges.routes`,
-    :attr:`~.distributed.BlockRanges.neighbourhood`), and the strength model's work arrays
-    (with the strips) and face stresses (own rows only: each block updates and reads its own
-    faces, :mod:`impactpipe.hydro.strength.face_shear`)."""
-    lo, hi = partition.lo, partition.hi
-    strips = [route for routes in partition.routes for route in routes]
-    for name in FIELDS:  # one array at a time, each whole one dropped before the next is copied
-        setattr(sim.state, name, owned_copy(getattr(sim.state, name), lo, hi, strips + partition.neighbourhood))
+    blocks by :func:`owned_rows` of rank 0's: the state, with the cells of the ghost fills'
+    strips and of the tracers' neighbourhood received from their owners
+    (:attr:`~.distributed.BlockRanges.field_routes`, :attr:`~.distributed.BlockRanges.neighbourhood`),
+    and the strength model's work arrays (with the strips) and face stresses (own rows only:
+    each block updates and reads its own faces, :mod:`impactpipe.hydro.strength.face_shear`)."""
+    state = sim.state
+    for name in FIELDS:  # one array at a time, each whole one dropped before the next is received
+        setattr(state, name, owned_rows(getattr(state, name), partition))
+    fields = list(state.arrays().values())
+    receive_halo(fields, partition, partition.field_routes)
+    receive_halo(fields, partition, partition.neighbourhood)
     strength = sim.strength
     if strength is not None:
-        strength.work = owned_copy(strength.work, lo, hi, strips)
+        strength.work = owned_rows(strength.work, partition)
+        receive_halo([strength.work], partition, partition.field_routes)
         if strength.face is not None:
-            strength.face = owned_copy(strength.face, lo, hi, [])
+            strength.face = owned_rows(strength.face, partition)

@@ -8,8 +8,10 @@ checkpoint when its config hash is unchanged.  A run that fails (NaN, negative d
 time-step collapse) writes its last good state to the checkpoint and raises.
 
 On several MPI ranks (:mod:`impactpipe.pipeline.ranks`) rank 0 runs this stage as above and
-sends the other ranks its order; they build the same simulation (:func:`follow_hydro_stage`)
-and the run is shared between them (:mod:`impactpipe.hydro.parallel`).  Rank 0 decides after
+sends the other ranks its order; rank 0 alone builds the simulation (or reads it from the
+checkpoint) and the other ranks receive their blocks of it (:func:`follow_hydro_stage`,
+:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`), so that on a uniform mesh no
+rank but 0 ever holds the whole state.  Rank 0 decides after
 every step whether a checkpoint is due or a stop was asked for, and the others follow.
 """
 
@@ -28,7 +30,7 @@ import numpy as np
 from impactpipe import storage
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.output.io import append_snapshot, write_tracers
-from impactpipe.hydro.parallel.distributed import collect, distribute
+from impactpipe.hydro.parallel.distributed import collect, distribute_from_root
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.self_gravity import DEFAULT_ORDER
 from impactpipe.hydro.solver import HydroFailure, Simulation
@@ -149,9 +151,8 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         _append(work, sim.snapshot())
     comm = ranks.world()
     if comm is not None:
-        ranks.send_order({"resume": checkpoint.is_file(), "checkpoint": str(checkpoint), "end_time": end_time,
-                          "times": times})
-        distribute(sim, comm)
+        ranks.send_order({"checkpoint": str(checkpoint), "end_time": end_time, "times": times})
+        sim = distribute_from_root(sim, comm)
         log.info("hydro: snapshots and checkpoints gathered to rank 0, which writes them (every block "
                  "shared before each output; h5py %s parallel HDF5, which this version does not use)",
                  "has" if h5py.get_config().mpi else "is built without")
@@ -225,11 +226,12 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     }
 
 
-def follow_hydro_stage(config, values: dict[str, Any], comm) -> int:
+def follow_hydro_stage(comm) -> int:
     """A rank other than 0: take part in rank 0's hydro stage, if it runs one; returns the exit status.
 
-    The simulation is built as rank 0 built it (from the checkpoint it resumes, or new) and
-    runs to the same times; snapshots, checkpoints and totals are collective, and rank 0
+    The simulation is rank 0's (new, or resumed from its checkpoint): this rank receives its
+    outline and its own blocks (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`)
+    and runs to the same times; snapshots, checkpoints and totals are collective, and rank 0
     alone writes.  0 when the stage finished (or did not run), 1 after a hydro failure, 2
     when the run cannot be shared, 130 when rank 0 stopped it.
     """
@@ -237,9 +239,8 @@ def follow_hydro_stage(config, values: dict[str, Any], comm) -> int:
     if order is None:
         return 0
     checkpoint = Path(order["checkpoint"])
-    sim = Simulation.from_checkpoint(checkpoint) if order["resume"] else build_simulation(config, values)
     try:
-        distribute(sim, comm)
+        sim = distribute_from_root(None, comm)
     except ValueError:
         return 2
 
