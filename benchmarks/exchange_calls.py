@@ -2,8 +2,8 @@
 
     NUMBA_NUM_THREADS=1 mpiexec -n 2 python benchmarks/exchange_calls.py --case 2d-cyl-strength --steps 30
 
-Builds a case of benchmarks/hydro_throughput.py as benchmarks/mpi_scaling.py does (one step,
-shared between the ranks, one more step), then times ``--steps`` steps and records, after each
+Builds a case of benchmarks/hydro_throughput.py on rank 0 and shares it between the ranks as
+benchmarks/mpi_scaling.py does, takes two steps, then times ``--steps`` steps and records, after each
 exchange completes (:func:`impactpipe.hydro.parallel.exchange.finish_strips`, wrapped here),
 what the rank's :class:`~impactpipe.hydro.parallel.exchange.Traffic` gained since the previous
 one: exchange - Waitall (s: starting the requests, packing, unpacking and the Python around
@@ -64,9 +64,10 @@ def main() -> None:
 
     comm = MPI.COMM_WORLD
     numba.set_num_threads(1)
-    sim = build(args.case, quick=False, block_cells=None if args.case.startswith("2d-cyl") else args.block_cells)
+    sim = build(args.case, quick=False, block_cells=None if args.case.startswith("2d-cyl") else args.block_cells) \
+        if comm.rank == 0 else None
+    sim = distributed.distribute_from_root(sim, comm)
     sim.step()
-    distributed.distribute(sim, comm)
     sim.step()
     calls: list = []
     record_calls(sim.partition.traffic, calls)

@@ -6,8 +6,8 @@ Run under mpiexec, one numba thread per rank:
 
 The r-z impact of benchmarks/hydro_throughput.py (``2d-cyl-tillotson``: 100 cells per
 projectile radius, 2400 blocks of 16^2; ``--quick``: 25, 150 blocks) with the impact scene's
-900 tracers, shared between the ranks after one step
-(:func:`impactpipe.hydro.parallel.distributed.distribute`).  On several ranks the tracers add
+900 tracers, built on rank 0 and shared between the ranks before the first step
+(:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`).  On several ranks the tracers add
 per step one exchange of the cells within one cell of each rank's blocks
 (:meth:`BlockRanges.share_neighbourhood`) and three gathers of the sampled rows (v_n, v_{n+1},
 the peaks; :meth:`BlockRanges.gather_tracers`).  Rank 0 prints the wall time of a step with
@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hydro_throughput import build  # noqa: E402
 
-from impactpipe.hydro.parallel.distributed import distribute  # noqa: E402
+from impactpipe.hydro.parallel.distributed import distribute_from_root  # noqa: E402
 from impactpipe.hydro.problems.impact import tracer_positions  # noqa: E402
 from impactpipe.hydro.tracers.motion import Tracers  # noqa: E402
 
@@ -61,12 +61,14 @@ def message_seconds(comm, repeats: int, message) -> float:
 
 def measure(comm, quick: bool, steps: int, repeats: int) -> dict:
     """Per-step wall seconds of the r-z impact with and without tracers, and of the tracers' messages."""
-    sim = build("2d-cyl-tillotson", quick)
-    positions, materials = tracer_positions(sim.mesh.geometry, 1000.0, 250.0, TRACERS)
-    sim.tracers = Tracers(positions, materials)
-    sim.step()
+    sim = None
+    if comm.rank == 0:
+        sim = build("2d-cyl-tillotson", quick)
+        positions, materials = tracer_positions(sim.mesh.geometry, 1000.0, 250.0, TRACERS)
+        sim.tracers = Tracers(positions, materials)
     if comm.size > 1:
-        distribute(sim, comm)
+        sim = distribute_from_root(sim, comm)
+    sim.step()
     sim.step()
     with_tracers = step_seconds(comm, sim, steps)
     tracers = sim.tracers
