@@ -501,14 +501,15 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     the face shear stress (:mod:`impactpipe.hydro.strength.face_shear`; the work arrays then have
     NWORK_FACE slots).
 
-    A material without deviatoric stress (each component +0.0), without Grady-Kipp, in a cell at
-    rest among its neighbours (every L_ij is 0), where the pressure is certain to be >= 0
-    without evaluating the EOS (:func:`impactpipe.hydro.eos.pressure_not_negative`: Tillotson at
-    rho >= rho0 with e >= 0), skips the EOS when neither the surface-layer pressure nor
-    ``store_strength`` needs it: it cannot fail in tension (p_k >= 0 >= -Y_T (1 - D)), and the
-    Jaumann update of S = +0.0 with L = 0 and a finite G is +0.0 whatever G, so the step leaves
-    the state bit for bit as the evaluation would.  Early in an impact most of the target is
-    such a cell.
+    A material without deviatoric stress (each component +0.0) in a cell at rest among its
+    neighbours (every L_ij is 0), where the pressure is certain to be >= 0 without evaluating
+    the EOS (:func:`impactpipe.hydro.eos.pressure_not_negative`: Tillotson at rho >= rho0 with
+    e >= 0), skips the EOS when neither the surface-layer pressure nor ``store_strength`` needs
+    it: it cannot fail in tension (p_k >= 0 >= -Y_T (1 - D)), a Grady-Kipp material's damage
+    cannot grow (its largest principal stress is -p_k <= 0, so its tensile strain is 0), and
+    the Jaumann update of S = +0.0 with L = 0 and a finite G is +0.0 whatever G, so the step
+    leaves the state and the counters bit for bit as the evaluation would.  Early in an impact
+    most of the target is such a cell.
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
@@ -603,11 +604,12 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                             stiffness = h * h
                             y_t = tensile_strength[k] / dist
                         gradual = damage_model[k] == GRADY_KIPP
-                        if (at_rest and not gradual and y_t >= 0.0 and _positive_zeros(sxx, syy, szz, sxy, sxz, syz)
+                        if (at_rest and y_t >= 0.0 and _positive_zeros(sxx, syy, szz, sxy, sxz, syz)
                                 and pressure_not_negative(eos_kind[k], eos_params[k], dist * rk, ek)):
                             # at rest and unstressed, where the pressure is certain to be >= 0: the
-                            # EOS, which G, the tensile-failure test and the Jaumann update would take,
-                            # is not evaluated (update_stress docstring); S stays +0.0, as they leave it
+                            # EOS, which G, the tensile-failure test, the Grady-Kipp damage and the
+                            # Jaumann update would take, is not evaluated (update_stress docstring);
+                            # S and D stay as they are, as those leave them
                             pk = 0.0
                             g = 0.0
                             p_matrix = pk
