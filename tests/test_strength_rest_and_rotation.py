@@ -11,8 +11,9 @@ from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.problems.impact import sphere_fraction
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
-from impactpipe.hydro.strength.update import WK_PHI
-from impactpipe.pipeline.presets import resolve_strength
+from impactpipe.hydro.strength import model as strength_model
+from impactpipe.hydro.strength.update import NWORK_FACE, WK_PHI, update_stress
+from impactpipe.pipeline.presets import resolve_damage, resolve_strength
 
 STRONG = resolve_strength("geo", "strong", {})
 
@@ -202,3 +203,41 @@ def test_elastic_stress_work_equals_the_stored_strain_energy():
         stored = float((ss / (4.0 * shear) * mesh.cell_volumes().reshape(-1)).sum())
         assert sim.floor_counts["yield_return"] == 0
         assert sim.floor_amounts["stress_work"] == pytest.approx(stored, rel=5e-3)
+
+
+def _strong_impact(grady_kipp: bool) -> Simulation:
+    """The r-z impact of a 250 m basalt projectile at 2 km/s on a 1 km basalt target, GEO
+    'strong' strength, with the basalt Grady-Kipp flaws or instant failure, 8 cells per R_P."""
+    basalt = preset_material("basalt")
+    basalt["strength"] = resolve_strength("geo", "strong", {})
+    if grady_kipp:
+        basalt["strength"]["damage"] = resolve_damage({"model": "grady_kipp", "preset": "basalt"})
+    params = {"target": {"material": "basalt", "radius": 1000.0},
+              "projectile": {"material": "basalt", "radius": 250.0, "velocity": 2000.0},
+              "cells_per_projectile_radius": 8}
+    return PROBLEMS["impact"].setup(params, {"basalt": basalt})
+
+
+@pytest.mark.parametrize("grady_kipp", [False, True], ids=["instant_failure", "grady_kipp"])
+def test_unstressed_cells_at_rest_skip_the_eos_and_leave_what_its_evaluation_leaves(grady_kipp, monkeypatch):
+    """The stress update skips the EOS of an unstressed material in a cell at rest where its
+    pressure is certain to be >= 0 (hydro.strength.update.update_stress).  With
+    ``store_strength`` every cell is evaluated: the step must leave the same state and counters
+    bit for bit, with instant failure and with Grady-Kipp damage (whose damage cannot grow at
+    p >= 0 without deviatoric stress)."""
+    skipped, evaluated = _strong_impact(grady_kipp), _strong_impact(grady_kipp)
+    for sim in (skipped, evaluated):
+        for _ in range(3):
+            sim.step()
+    at_rest = np.all(skipped.state.momentum == 0.0, axis=1) & (skipped.state.arho.sum(axis=1) > 0.0)
+    assert at_rest.sum() > 0.5 * (skipped.state.arho.sum(axis=1) > 0.0).sum()  # the skip is exercised
+    skipped.step()
+    work = evaluated.strength.work
+    evaluated.strength.work = np.concatenate(
+        [work, np.zeros((work.shape[0], NWORK_FACE - work.shape[1]) + work.shape[2:])], axis=1)
+    monkeypatch.setattr(strength_model, "update_stress", lambda *args: update_stress(*args[:-1], True))
+    evaluated.step()
+    for name, array in skipped.state.arrays().items():
+        assert np.array_equal(array.view(np.int64), getattr(evaluated.state, name).view(np.int64)), name
+    assert np.array_equal(skipped.strength.counts, evaluated.strength.counts)
+    assert np.array_equal(skipped.strength.amounts.view(np.int64), evaluated.strength.amounts.view(np.int64))
