@@ -59,7 +59,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
 from impactpipe.hydro.scheme.timestep import allocate_rate_work, cell_thermodynamics, max_signal_rate
 from impactpipe.hydro.scheme.settling import settle_void
 from impactpipe.hydro.scheme.step_tension import UNLIMITED_TENSION, open_void_in_tension
-from impactpipe.storage import atomic_path, compression
+from impactpipe.storage import store_array
 
 logger = logging.getLogger(__name__)
 
@@ -845,9 +845,11 @@ class Simulation:
     def snapshot(self) -> Snapshot:
         """The interior cells at the current time as a :class:`Snapshot` (copies).  Collective
         on several ranks: each computes the fields of its own blocks, and the process that
-        writes (rank 0) receives them; the other ranks' snapshots hold only their own blocks
-        (zeros elsewhere, in the partition's
-        :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros`: pages never written)."""
+        writes (rank 0) receives them, unless the ranks write the snapshot together
+        (:attr:`~impactpipe.hydro.parallel.distributed.WholeMesh.writes_together`); the other
+        ranks' snapshots (every rank's, writing together) hold only their own blocks (zeros
+        elsewhere, in the partition's :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros`:
+        pages never written)."""
         mesh = self.mesh
         st = self.state
         own = self.partition.blocks
@@ -870,7 +872,8 @@ class Simulation:
             extra["distension"] = np.zeros(shape)
             extra["distension"][own] = distension_field(mesh.interior(st.arho)[own], mesh.interior(st.arhoq)[own],
                                                         self.porosity)
-        self.partition.gather_to_root([pressure, sound, eint, temp, arho, alpha, velocity, *extra.values()])
+        if not self.partition.writes_together:
+            self.partition.gather_to_root([pressure, sound, eint, temp, arho, alpha, velocity, *extra.values()])
         return Snapshot(
             time=self.time,
             geometry=mesh.geometry,
@@ -896,54 +899,70 @@ class Simulation:
 
         Collective on several ranks: rank 0 receives every block's rows of the state and the
         counters in arrays of their own (:meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.rows_at_root`),
-        writes them and drops them; the other ranks' arrays are unchanged.
+        writes them and drops them; the other ranks' arrays are unchanged.  Where the ranks
+        write together (:attr:`~impactpipe.hydro.parallel.distributed.WholeMesh.writes_together`)
+        each writes its own blocks' rows into the one file instead, and the attributes are rank 0's.
         """
         part = self.partition
-        state = {name: part.rows_at_root(getattr(self.state, name)) for name in FIELDS}
-        counters = {name: part.rows_at_root(array) for name, array in self._named_counters().items()}
-        if not part.is_root:
-            return
-        with atomic_path(path) as tmp:
-            with h5py.File(tmp, "w") as fh:
-                fh.attrs["time"] = self.time
-                fh.attrs["step_count"] = self.step_count
-                fh.attrs["cell_updates"] = self.cell_updates
-                fh.attrs["cfl"] = self.cfl
-                fh.attrs["time_stepping"] = self.time_stepping
-                fh.attrs["dt_first"] = -1.0 if self.dt_first is None else self.dt_first
-                fh.attrs["material_names"] = json.dumps(self.material_names)
-                fh.attrs["eos_specs"] = json.dumps(self.eos_specs)
-                fh.attrs["strength_specs"] = json.dumps(self.strength_specs)
-                fh.attrs["refinement"] = json.dumps(dataclasses.asdict(self.refinement))
-                fh.attrs["regrids"] = self.regrids
-                fh.attrs["level_step_retakes"] = self.level_step_retakes
-                fh.attrs["settled_cells"] = self.settled_cells
-                fh.attrs["blocks_refined"] = self.blocks_refined
-                fh.attrs["blocks_coarsened"] = self.blocks_coarsened
-                fh.attrs["peak_pressure"] = self.peak_pressure
-                fh.attrs["gravity"] = json.dumps(None if self.gravity is None else self.gravity.spec())
+        attrs = self._checkpoint_attributes()
+        if part.writes_together:
+            attrs = part.agree(attrs)
+            state = {name: getattr(self.state, name) for name in FIELDS}
+            counters = self._named_counters()
+            rows = part.blocks
+        else:
+            state = {name: part.rows_at_root(getattr(self.state, name)) for name in FIELDS}
+            counters = {name: part.rows_at_root(array) for name, array in self._named_counters().items()}
+            rows = None
+            if not part.is_root:
+                return
+        with part.atomic_output(path) as tmp:
+            with part.output_file(tmp, "w") as fh:
+                fh.attrs.update(attrs)
                 mesh_grp = fh.create_group("mesh")
                 for key, value in self.mesh.to_arrays().items():
                     if isinstance(value, (str, int)):
                         mesh_grp.attrs[key] = value
                     else:
-                        mesh_grp.create_dataset(key, data=np.asarray(value))
+                        store_array(mesh_grp, key, value)
                 state_grp = fh.create_group("state")
                 for name in FIELDS:
-                    state_grp.create_dataset(name, data=state[name], **compression(state[name]))
+                    store_array(state_grp, name, state[name], rows)
                 ctr = fh.create_group("counters")
-                ctr.create_dataset("boundary", data=counters["boundary"])
-                ctr.create_dataset("floors", data=counters["floors"]).attrs["names"] = json.dumps(FLOOR_NAMES)
-                ctr.create_dataset("amounts", data=counters["amounts"]).attrs["names"] = json.dumps(AMOUNT_NAMES)
-                ctr.create_dataset("shear_modulus", data=self.shear_modulus)
-                ctr.create_dataset("tensile_strength", data=self.tensile_strength)
+                store_array(ctr, "boundary", counters["boundary"], rows)
+                store_array(ctr, "floors", counters["floors"], rows).attrs["names"] = json.dumps(FLOOR_NAMES)
+                store_array(ctr, "amounts", counters["amounts"], rows).attrs["names"] = json.dumps(AMOUNT_NAMES)
+                store_array(ctr, "shear_modulus", self.shear_modulus)
+                store_array(ctr, "tensile_strength", self.tensile_strength)
                 if self.porosity is not None:
-                    ctr.create_dataset("porosity_counts", data=counters["porosity_counts"])
+                    store_array(ctr, "porosity_counts", counters["porosity_counts"], rows)
                 if self.strength is not None:
-                    ctr.create_dataset("strength_counts", data=counters["strength_counts"])
-                    ctr.create_dataset("strength_amounts", data=counters["strength_amounts"])
+                    store_array(ctr, "strength_counts", counters["strength_counts"], rows)
+                    store_array(ctr, "strength_amounts", counters["strength_amounts"], rows)
                 if self.tracers is not None:
                     self.tracers.save(fh.create_group("tracers"))
+
+    def _checkpoint_attributes(self) -> dict:
+        """The scalars of a checkpoint: clock, counts, the scene's settings (JSON where not a number)."""
+        return {
+            "time": self.time,
+            "step_count": self.step_count,
+            "cell_updates": self.cell_updates,
+            "cfl": self.cfl,
+            "time_stepping": self.time_stepping,
+            "dt_first": -1.0 if self.dt_first is None else self.dt_first,
+            "material_names": json.dumps(self.material_names),
+            "eos_specs": json.dumps(self.eos_specs),
+            "strength_specs": json.dumps(self.strength_specs),
+            "refinement": json.dumps(dataclasses.asdict(self.refinement)),
+            "regrids": self.regrids,
+            "level_step_retakes": self.level_step_retakes,
+            "settled_cells": self.settled_cells,
+            "blocks_refined": self.blocks_refined,
+            "blocks_coarsened": self.blocks_coarsened,
+            "peak_pressure": self.peak_pressure,
+            "gravity": json.dumps(None if self.gravity is None else self.gravity.spec()),
+        }
 
     @classmethod
     def from_checkpoint(cls, path: str | Path) -> "Simulation":

@@ -67,6 +67,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
+@contextlib.contextmanager
+def atomic_path_together(path: str | os.PathLike, comm: Any) -> Iterator[Path]:
+    """:func:`atomic_path` for the processes of an MPI communicator ``comm`` (mpi4py) that write
+    one file together (:func:`written_together`): rank 0 makes the temporary path and gives it to
+    the others, and renames it onto ``path`` as it leaves the block.  Every process must close
+    the file inside the block: closing a file of h5py's ``mpio`` driver is collective, so when
+    rank 0 has closed it every process has finished writing."""
+    if comm.rank == 0:
+        with atomic_path(path) as tmp:
+            comm.bcast(str(tmp), root=0)
+            yield tmp
+    else:
+        yield Path(comm.bcast(None, root=0))
+
+
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
@@ -165,15 +180,41 @@ def compression(data: np.ndarray) -> dict[str, Any]:
     return {"compression": "gzip", "compression_opts": 1, "shuffle": True}
 
 
-def write_dataset(group: Any, name: str, data: Any, units: str, description: str | None = None) -> Any:
+def written_together(group: Any) -> bool:
+    """Whether the file of the h5py ``group`` is written by several MPI processes together
+    (opened with h5py's ``mpio`` driver, parallel HDF5)."""
+    return group.file.driver == "mpio"
+
+
+def store_array(group: Any, name: str, data: Any, rows: slice | None = None) -> Any:
+    """Create dataset ``name`` in an h5py group holding ``data``, compressed when large
+    (:func:`compression`); returns the dataset.
+
+    In a file that several MPI processes write together (:func:`written_together`) every
+    process calls this with an array of the same shape and dtype, and it writes, in one
+    collective write, the rows ``rows`` (a slice of the first axis: the blocks this process
+    owns) of ``data``, or, where ``rows`` is None, all of ``data``, which every process then
+    holds the same.  In any other file ``rows`` is ignored and the whole array is written.
+    """
+    array = np.asarray(data)
+    if not written_together(group):
+        return group.create_dataset(name, data=array, **compression(array))
+    dset = group.create_dataset(name, shape=array.shape, dtype=array.dtype, **compression(array))
+    part = () if array.ndim == 0 else slice(None) if rows is None else rows
+    with dset.collective:
+        dset[part] = array[part]
+    return dset
+
+
+def write_dataset(group: Any, name: str, data: Any, units: str, description: str | None = None,
+                  rows: slice | None = None) -> Any:
     """Create dataset ``name`` in an h5py group with a ``units`` attribute (and a description);
-    large arrays are compressed (:func:`compression`).
+    large arrays are compressed (:func:`compression`); ``rows``: see :func:`store_array`.
 
     ``units`` uses yt-style strings: "m", "kg", "s", "m/s", "kg/m**3", "Pa", "J/kg", "K",
     "dimensionless".
     """
-    array = np.asarray(data)
-    dset = group.create_dataset(name, data=array, **compression(array))
+    dset = store_array(group, name, data, rows)
     dset.attrs["units"] = units
     if description:
         dset.attrs["description"] = description

@@ -59,25 +59,28 @@ def snapshot_name(index: int) -> str:
     return f"{SNAPSHOT_GROUP}/{index:04d}"
 
 
-def write_snapshot(group: h5py.Group, snapshot: Snapshot) -> None:
-    """Write ``snapshot`` into an (empty) h5py group."""
+def write_snapshot(group: h5py.Group, snapshot: Snapshot, rows: slice | None = None) -> None:
+    """Write ``snapshot`` into an (empty) h5py group.  In a file that several MPI processes write
+    together (:func:`impactpipe.storage.written_together`) each writes the block rows ``rows``
+    of every array (its own blocks; :func:`impactpipe.storage.store_array`)."""
     group.attrs["time"] = float(snapshot.time)
     group.attrs["geometry"] = snapshot.geometry
     group.attrs["material_names"] = json.dumps(list(snapshot.material_names))
     for name, (units, description) in FIELD_UNITS.items():
-        write_dataset(group, name, getattr(snapshot, name), units, description)
+        write_dataset(group, name, getattr(snapshot, name), units, description, rows)
     if snapshot.extra:
         extra = group.create_group("extra")
         for name, arr in snapshot.extra.items():
             units, description = EXTRA_UNITS.get(name, ("unspecified", ""))
-            write_dataset(extra, name, arr, units, description)
+            write_dataset(extra, name, arr, units, description, rows)
 
 
-def append_snapshot(h5file: h5py.File, snapshot: Snapshot) -> int:
-    """Write ``snapshot`` as the next ``/snapshots/<index>`` of an open file; returns the index."""
+def append_snapshot(h5file: h5py.File, snapshot: Snapshot, rows: slice | None = None) -> int:
+    """Write ``snapshot`` as the next ``/snapshots/<index>`` of an open file; returns the index
+    (``rows``: see :func:`write_snapshot`)."""
     root = h5file.require_group(SNAPSHOT_GROUP)
     index = len(root)
-    write_snapshot(h5file.create_group(snapshot_name(index)), snapshot)
+    write_snapshot(h5file.create_group(snapshot_name(index)), snapshot, rows)
     return index
 
 

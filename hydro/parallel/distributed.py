@@ -2,8 +2,9 @@
 
 The Simulation asks its ``partition`` which blocks to advance (``blocks``, a slice of the
 block order), to fill their ghosts, to combine the time step and the failure checks over
-every process, and to bring every block to the process that writes an output (or, before a
-regrid or the totals, to every process).  :class:`WholeMesh`
+every process, and to bring every block to the process that writes an output, or to open
+the output with the other processes where they write it together (``writes_together``), and
+(before a regrid or the totals) to bring every block to every process.  :class:`WholeMesh`
 is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
 of one run (:func:`distribute_from_root` or :func:`distribute` attaches it, :func:`collect`
 ends it).
@@ -22,11 +23,13 @@ the exchange before the next ghost fill rebuilds exactly the serial state.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import h5py
 import numpy as np
 
 from impactpipe.hydro.amr.plans import axis_plans
@@ -35,6 +38,7 @@ from impactpipe.hydro.mesh.boundary import (
     NO_RECORD, every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_from_ranks_where, fill_ghosts_where,
     fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
+from impactpipe.storage import atomic_path, atomic_path_together
 
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
                             neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
@@ -91,6 +95,10 @@ class WholeMesh:
     keeps_scalar_record = True
     #: Whether this process advances every block (no strips travel between ranks).
     whole = True
+    #: Whether the processes write each snapshot and checkpoint together into one file, each its
+    #: own blocks' rows (parallel HDF5, :func:`parallel_hdf5`), instead of the process that writes
+    #: receiving every block first (:meth:`gather_to_root`, :meth:`rows_at_root`).
+    writes_together = False
 
     def __init__(self):
         self.traffic = Traffic()
@@ -202,6 +210,16 @@ class WholeMesh:
         """Bring every block's rows of ``arrays`` (each (NB, ...)) to the process that writes
         (this one has them)."""
 
+    def output_file(self, path, mode: str) -> h5py.File:
+        """The h5py File of an output as this process opens it (with ``writes_together``, every
+        process opens it together, with the mpio driver)."""
+        return h5py.File(path, mode)
+
+    def atomic_output(self, path):
+        """The context of :func:`~impactpipe.storage.atomic_path` (every process together with
+        ``writes_together``: :func:`~impactpipe.storage.atomic_path_together`)."""
+        return atomic_path(path)
+
     def rows_at_root(self, array: np.ndarray) -> np.ndarray | None:
         """Every block's rows of ``array`` (NB, ...) on the process that writes, in an array of their
         own there, None elsewhere (this process has them: ``array`` itself)."""
@@ -242,6 +260,7 @@ class BlockRanges(WholeMesh):
         self.blocks = slice(self.lo, self.hi)
         self.is_root = comm.rank == 0
         self.rank = comm.rank
+        self.writes_together = parallel_hdf5()
         self.nblocks = mesh.nblocks
         self.routes = exchange_routes(mesh, cuts, comm.rank)
         self.neighbourhood = neighbourhood_routes(mesh, cuts, comm.rank)
@@ -536,6 +555,14 @@ class BlockRanges(WholeMesh):
         :func:`~.exchange.gather_owned_blocks`)."""
         gather_owned_blocks(self.comm, arrays, self.cuts, self.traffic)
 
+    def output_file(self, path, mode: str) -> h5py.File:
+        if self.writes_together:
+            return h5py.File(path, mode, driver="mpio", comm=self.comm)
+        return h5py.File(path, mode)
+
+    def atomic_output(self, path):
+        return atomic_path_together(path, self.comm) if self.writes_together else atomic_path(path)
+
     def zeros(self, shape: tuple[int, ...]) -> np.ndarray:
         """Zeros in :func:`~.owned_memory.lazy_zeros`, whose pages outside this rank's rows are
         committed only if written."""
@@ -565,6 +592,19 @@ class BlockRanges(WholeMesh):
         """Row t of each of ``arrays`` from rank ``owner[t]`` on every rank (one Allgatherv,
         :func:`~.exchange.gather_rows`)."""
         gather_rows(self.comm, owner, arrays)
+
+
+#: Set to "0" to have the ranks gather each snapshot and checkpoint on rank 0 even where h5py
+#: has parallel HDF5 (:func:`parallel_hdf5`).
+PARALLEL_HDF5_VARIABLE = "IMPACTPIPE_PARALLEL_HDF5"
+
+
+def parallel_hdf5() -> bool:
+    """Whether the ranks of a run write its snapshots and checkpoints together, each its own
+    blocks' rows into the one file (h5py's mpio driver): where h5py was built with parallel
+    HDF5, unless the environment sets PARALLEL_HDF5_VARIABLE to "0".  Then rank 0 never holds
+    the whole state for an output; otherwise it receives every block for each one."""
+    return bool(h5py.get_config().mpi) and os.environ.get(PARALLEL_HDF5_VARIABLE, "1") != "0"
 
 
 def unsupported(sim, nranks: int) -> list[str]:

@@ -30,7 +30,7 @@ import numpy as np
 from impactpipe import storage
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.output.io import append_snapshot, write_tracers
-from impactpipe.hydro.parallel.distributed import collect, distribute_from_root
+from impactpipe.hydro.parallel.distributed import PARALLEL_HDF5_VARIABLE, collect, distribute_from_root
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.self_gravity import DEFAULT_ORDER
 from impactpipe.hydro.solver import HydroFailure, Simulation
@@ -151,11 +151,17 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         _append(work, sim.snapshot())
     comm = ranks.world()
     if comm is not None:
-        ranks.send_order({"checkpoint": str(checkpoint), "end_time": end_time, "times": times})
+        ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time, "times": times})
         sim = distribute_from_root(sim, comm)
-        log.info("hydro: snapshots and checkpoints gathered to rank 0, which writes them (every block "
-                 "shared before each output; h5py %s parallel HDF5, which this version does not use)",
-                 "has" if h5py.get_config().mpi else "is built without")
+        if sim.partition.writes_together:
+            log.info("hydro: snapshots and checkpoints written by every rank together, each its own blocks, "
+                     "into one file (parallel HDF5, h5py's mpio driver)")
+        elif h5py.get_config().mpi:
+            log.info("hydro: snapshots and checkpoints gathered to rank 0, which writes them (h5py has "
+                     "parallel HDF5, not used: %s=0)", PARALLEL_HDF5_VARIABLE)
+        else:
+            log.info("hydro: snapshots and checkpoints gathered to rank 0, which writes them (h5py is built "
+                     "without parallel HDF5)")
     progress = ctx.progress("hydro", end_time)
     last_checkpoint = [time.perf_counter()]
     stopped = []
@@ -177,7 +183,8 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
 
     try:
         with ctx.stop_at_safe_points():
-            sim.run(end_time, output_times=times, on_output=lambda snap: _append(work, snap), progress=on_progress)
+            sim.run(end_time, output_times=times, on_output=lambda snap: _append(work, snap, sim.partition),
+                    progress=on_progress)
     except HydroFailure as exc:
         sim.restore_last_good()
         sim.save_checkpoint(checkpoint)
@@ -252,7 +259,8 @@ def follow_hydro_stage(comm) -> int:
             raise _StoppedByRankZero(stop)
 
     try:
-        sim.run(order["end_time"], output_times=order["times"], on_output=lambda snapshot: None, progress=follow)
+        sim.run(order["end_time"], output_times=order["times"],
+                on_output=lambda snapshot: _append(Path(order["work"]), snapshot, sim.partition), progress=follow)
     except HydroFailure:
         sim.restore_last_good()
         sim.save_checkpoint(checkpoint)
@@ -263,9 +271,15 @@ def follow_hydro_stage(comm) -> int:
     return 0
 
 
-def _append(work: Path, snapshot) -> None:
-    with h5py.File(work, "a") as f:
-        append_snapshot(f, snapshot)
+def _append(work: Path, snapshot, partition=None) -> None:
+    """Append ``snapshot`` to the working file: this process alone, or, where the ranks of
+    ``partition`` write together, every rank its own blocks' rows."""
+    if partition is not None and partition.writes_together:
+        with partition.output_file(work, "a") as f:
+            append_snapshot(f, snapshot, partition.blocks)
+    elif partition is None or partition.is_root:
+        with h5py.File(work, "a") as f:
+            append_snapshot(f, snapshot)
 
 
 INITIAL_KEYS = ("mass", "energy", "momentum")
