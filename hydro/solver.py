@@ -27,11 +27,11 @@ import h5py
 import numba
 import numpy as np
 
-from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves, remesh, summed_rows
+from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves
 from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, finite_blocks,
                                            finite_run, level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_first_ghost_layer, fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_state_ghosts
 from impactpipe.hydro.mesh.last_good import block_runs, scalar_clear_blocks, void_blocks
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
@@ -616,42 +616,44 @@ class Simulation:
         """(refine, coarsen): per block, whether the refinement rule refines it or lets it coarsen now.
 
         Fills the state's first ghost layer along every axis (what the indicators and the
-        regrid read, :func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`; the step
-        fills every layer along an axis before its sweep) and raises ``peak_pressure`` (Pa) to
-        the largest |p| on the mesh (:func:`impactpipe.hydro.amr.regrid.flag_blocks`).
+        regrid read, :func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`, through the
+        partition's exchanges on several ranks; the step fills every layer along an axis before
+        its sweep) and raises ``peak_pressure`` (Pa) to the largest |p| on the mesh
+        (:func:`impactpipe.hydro.amr.regrid.flag_blocks`; on several ranks each reads its own
+        blocks, and every rank gets the same flags).  Collective on several ranks.
         """
         for axis in range(self.mesh.ndim):
-            fill_first_ghost_layer(self.state, self.mesh, axis)
+            self.partition.fill_first_ghost_layer(self.state, self.mesh, axis)
         refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
                                                           self.tensile_strength, self.refinement, self.peak_pressure,
-                                                          self.grady_kipp, self.porosity, self.regrid_reach())
+                                                          self.grady_kipp, self.porosity, self.regrid_reach(),
+                                                          None if self.partition.whole else self.partition)
         return refine, coarsen
 
     def _regrid(self) -> bool:
-        self.partition.share(self)
-        mesh, st = self.mesh, self.state
+        """:meth:`regrid`: on several ranks each reads and builds its own blocks only, and every
+        rank reaches the same plan (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.regrid`)."""
+        st = self.state
         refine, coarsen = self.refinement_flags()
-        plan = plan_leaves(mesh, refine, coarsen)
+        plan = plan_leaves(self.mesh, refine, coarsen)
         if plan is None:
             return False
-        new_mesh, new_state = remesh(mesh, st, plan)
-        self.mesh, self.state = new_mesh, new_state
-        for axis in range(new_mesh.ndim):
-            fill_first_ghost_layer(new_state, new_mesh, axis)
+        old = self.partition
+        new_mesh, self.state, self.partition = old.regrid(self, plan)
+        self.mesh = new_mesh
         nb = new_mesh.nblocks
         self.boundary, self.floors, self.amounts, self.porosity_counts = (
-            summed_rows(a, nb) for a in (self.boundary, self.floors, self.amounts, self.porosity_counts))
+            old.summed_rows(a, nb) for a in (self.boundary, self.floors, self.amounts, self.porosity_counts))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
         self._face_flux = allocate_face_flux(nb, new_mesh.padded_shape, new_mesh.ndim, st.nmat, st.arhoq.shape[1])
         if self.strength is not None:
-            self.strength.mesh_changed(new_mesh)
+            self.strength.mesh_changed(new_mesh, None if self.partition.whole else self.partition, old.summed_rows)
         if self.tracers is not None:
             self.tracers.mesh_changed(new_mesh)
         self.regrids += 1
         self.blocks_refined += len(plan["children"]) // 2 ** new_mesh.ndim
         self.blocks_coarsened += len(plan["parents"]) // 2 ** new_mesh.ndim
-        self.partition = self.partition.remeshed(self)
         self._keep_good()
         return True
 

@@ -131,7 +131,7 @@ class BlockWants:
 def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
                 rule: RefinementRule, peak_pressure: float = 0.0,
                 grady_kipp: np.ndarray | None = None,
-                porosity: np.ndarray | None = None, reach: int | None = None) -> BlockWants:
+                porosity: np.ndarray | None = None, reach: int | None = None, partition=None) -> BlockWants:
     """The levels the refinement rule asks of each block (:class:`BlockWants`; arguments as :func:`flag_blocks`).
 
     With ``buffer: reach`` a jump refines the neighbours across the faces, edges and corners
@@ -140,19 +140,33 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     cfl cells of its level per substep, so ``reach`` = ceil(cfl x finest substeps between
     regrids) + 1 (the indicators' stencil) keeps it inside refined blocks until the next
     regrid, and the blocks it has left may coarsen.  With ``buffer: block``, or ``reach``
-    None, a jump refines every neighbour."""
-    void = np.zeros(mesh.nblocks, dtype=np.uint8)
+    None, a jump refines every neighbour.
+
+    ``partition`` (several MPI ranks, :mod:`impactpipe.hydro.parallel.distributed`), or None
+    (one process): each process computes the pressure and the indicators of the blocks it
+    advances (``partition.blocks``) only, the largest |p| is one reduction (MAX) and the
+    indicator rows reach every process (``partition.share_rows``), so every process goes on
+    from the same (NB, ...) indicators, the single process's bit for bit."""
+    lo, hi = (0, mesh.nblocks) if partition is None else partition.blocks.indices(mesh.nblocks)[:2]
+    zeros = np.zeros if partition is None else partition.zeros
+    void = np.ones(mesh.nblocks, dtype=np.uint8)  # the blocks of other processes are skipped as void
     void_blocks(*(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
-                                                     state.energy)), 0, mesh.nblocks, void)
-    pressure = np.zeros((mesh.nblocks,) + mesh.padded_shape)
+                                                     state.energy)), lo, hi, void)
+    pressure = zeros((mesh.nblocks,) + mesh.padded_shape)
     mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,
                      shear_modulus, tensile_strength, pressure, grady_kipp, porosity, void)
-    peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)).max(initial=0.0)))
+    peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)[lo:hi]).max(initial=0.0)))
+    if partition is not None:
+        peak_pressure = partition.largest(peak_pressure)
     floor = rule.pressure_floor * max(peak_pressure, 1e-300)
     ind = np.zeros((mesh.nblocks, NINDICATOR))
     near = np.zeros((mesh.nblocks, 3, 2, 2))
     margin = mesh.block_cells if reach is None or rule.buffer == "block" else int(reach)
     block_indicators(state.alpha, state.arho, state.momentum, pressure, mesh.ndim, floor, margin, ind, near, void)
+    del pressure
+    if partition is not None:
+        partition.share_rows(ind)
+        partition.share_rows(near)
     thresholds = np.full(IND_MAX_PRESSURE, np.inf)
     if rule.interfaces != "off":
         thresholds[IND_INTERFACE] = INTERFACE_JUMP
@@ -189,7 +203,8 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
 def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
                 rule: RefinementRule, peak_pressure: float = 0.0,
                 grady_kipp: np.ndarray | None = None,
-                porosity: np.ndarray | None = None, reach: int | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+                porosity: np.ndarray | None = None, reach: int | None = None,
+                partition=None) -> tuple[np.ndarray, np.ndarray, float]:
     """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
 
     The state's first ghost layer along every used axis must be filled (the indicators look one
@@ -202,10 +217,11 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     The pressure and indicators of the void blocks (ghosts included,
     :func:`~impactpipe.hydro.mesh.last_good.void_blocks`) are not computed: they are 0.
     ``reach``: the cells a wave crosses between two regrids plus one, for ``buffer: reach``
-    (:func:`block_wants`).
+    (:func:`block_wants`).  ``partition``: as there (each process reads its own blocks; every
+    process returns the same flags).
     """
     wants = block_wants(mesh, state, eos, shear_modulus, tensile_strength, rule, peak_pressure, grady_kipp,
-                        porosity, reach)
+                        porosity, reach, partition)
     level = mesh.block_level
     refine = ((wants.want > level) | (wants.boxes > level)) & (level < mesh.max_level)
     coarsen = (wants.keep < level) & (wants.boxes < level) & (level > 0)
@@ -407,8 +423,52 @@ def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, H
     """The new mesh of ``plan`` and the state moved onto it (the first ghost layer of ``state``
     filled on every axis: a new child's prolongation reads its parent cells' face neighbours)."""
     new_mesh = planned_mesh(mesh, plan)
+    return new_mesh, moved_state(mesh, new_mesh, state, plan, 0, new_mesh.nblocks, np.zeros)
+
+
+def plan_rows(plan: dict, lo: int, hi: int) -> dict:
+    """The rows of ``plan`` (:func:`plan_leaves`) that build the new blocks ``lo .. hi - 1``
+    (``keep``, ``children`` and ``parents``; the new leaves' ``level`` and ``index`` as they are)."""
+    rows = dict(plan)
+    for name in ("keep", "children", "parents"):
+        new = plan[name][:, 0]
+        rows[name] = np.ascontiguousarray(plan[name][(new >= lo) & (new < hi)])
+    return rows
+
+
+def plan_sources(plan: dict, lo: int, hi: int) -> np.ndarray:
+    """The old blocks (sorted int64 block numbers) that the new blocks ``lo .. hi - 1`` of
+    ``plan`` are made from: a kept block itself, a new child's parent, a new parent's children."""
+    rows = plan_rows(plan, lo, hi)
+    return np.unique(np.concatenate([rows["keep"][:, 1], rows["children"][:, 1], rows["parents"][:, 1]]))
+
+
+def planned_costs(plan: dict, costs: np.ndarray, ndim: int) -> np.ndarray:
+    """(new NB,) int64 estimated cost of each new block of ``plan`` from the old blocks' ``costs``
+    (:func:`~impactpipe.hydro.parallel.decomposition.block_costs`): a kept block's own, a new
+    child's its parent's (a child has as many cells as its parent), a new parent's the mean of
+    its 2^ndim children's (rounded down)."""
+    out = np.zeros(len(plan["level"]), dtype=np.int64)
+    out[plan["keep"][:, 0]] = costs[plan["keep"][:, 1]]
+    out[plan["children"][:, 0]] = costs[plan["children"][:, 1]]
+    parents = plan["parents"]
+    np.add.at(out, parents[:, 0], costs[parents[:, 1]])
+    out[np.unique(parents[:, 0])] //= 2 ** ndim
+    return out
+
+
+def moved_state(mesh: BlockMesh, new_mesh: BlockMesh, state: HydroState, plan: dict, lo: int, hi: int,
+                zeros) -> HydroState:
+    """The state on the new blocks of ``plan`` (on ``new_mesh``, :func:`planned_mesh`), of which
+    the blocks ``lo .. hi - 1`` are moved from ``state`` (whose first ghost layer is filled on
+    every axis in the old blocks they read, :func:`remesh`) and the others left zero; each array
+    from ``zeros(shape)``.  Kept blocks are copied ghosts included, new children prolonged from
+    their parent, new parents restricted from their children."""
     nq = state.arhoq.shape[1] // state.nmat
-    new = HydroState.empty(new_mesh, state.nmat, nq)
+    shapes = HydroState.shapes(new_mesh, state.nmat, nq)
+    new = HydroState(**{name: zeros(shapes[name]) for name in FIELDS})
+    if (lo, hi) != (0, new_mesh.nblocks):
+        plan = plan_rows(plan, lo, hi)
     runs = _kept_runs(plan["keep"])
     for name in FIELDS:
         old_field, new_field = getattr(state, name), getattr(new, name)
@@ -427,7 +487,7 @@ def remesh(mesh: BlockMesh, state: HydroState, plan: dict) -> tuple[BlockMesh, H
         fine_level = np.repeat(new_mesh.block_level[parents[:, 0]] + 1, half)
         weight0 = axis0_weights(new_mesh, fine_level, 2 * parent_row.reshape(-1)).reshape(len(parents), half, 2)
         restrict_blocks(src, dst, parents, np.ascontiguousarray(weight0))
-    return new_mesh, new
+    return new
 
 
 def _kept_runs(keep: np.ndarray) -> list[tuple[int, int, int]]:

@@ -92,11 +92,12 @@ def fill_state_ghost_slabs_of(alpha, arho, arhoe, mom, energy, arhoq, neighbor, 
 
 
 @njit(cache=True, parallel=True)
-def fill_state_ghost_layer(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost):
+def fill_state_ghost_layer(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo, hi):
     """The first ghost layer (next to the interior) of the same-level and domain-face slabs of
-    every block along ``axis``, every conserved field: what :func:`fill_state_ghost_slabs`
-    writes there.  The other layers keep what they held."""
-    for b in prange(alpha.shape[0]):
+    the blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range) along ``axis``,
+    every conserved field: what :func:`fill_state_ghost_slabs` writes there.  The other layers
+    keep what they held."""
+    for b in prange(lo, hi):
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
@@ -330,7 +331,7 @@ def fill_first_ghost_layer(state, mesh, axis: int) -> None:
     if g == 0:
         return
     fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-    fill_state_ghost_layer(*fields, mesh.neighbor, mesh.neighbor_level, axis, g)
+    fill_state_ghost_layer(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks)
     if not mesh.adaptive:
         return
     plans = first_layer_plans(mesh, axis)

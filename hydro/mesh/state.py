@@ -45,16 +45,16 @@ class HydroState:
     @classmethod
     def empty(cls, mesh: BlockMesh, nmat: int, nq: int = 0) -> "HydroState":
         """All-void state (zeros) for ``nmat`` materials with ``nq`` transported scalars each."""
-        shape = (mesh.nblocks,)
+        return cls(**{name: np.zeros(shape) for name, shape in cls.shapes(mesh, nmat, nq).items()})
+
+    @staticmethod
+    def shapes(mesh: BlockMesh, nmat: int, nq: int = 0) -> dict[str, tuple[int, ...]]:
+        """The shape (NB, C, NX, NY, NZ) of each field, by name, for ``nmat`` materials with ``nq``
+        transported scalars each on ``mesh``."""
+        lead = (mesh.nblocks,)
         pad = mesh.padded_shape
-        return cls(
-            alpha=np.zeros(shape + (nmat,) + pad),
-            arho=np.zeros(shape + (nmat,) + pad),
-            arhoe=np.zeros(shape + (nmat,) + pad),
-            momentum=np.zeros(shape + (3,) + pad),
-            energy=np.zeros(shape + (1,) + pad),
-            arhoq=np.zeros(shape + (nmat * nq,) + pad),
-        )
+        columns = {"alpha": nmat, "arho": nmat, "arhoe": nmat, "momentum": 3, "energy": 1, "arhoq": nmat * nq}
+        return {name: lead + (columns[name],) + pad for name in FIELDS}
 
     @property
     def nmat(self) -> int:

@@ -48,11 +48,12 @@ MIXED_BLOCK_CELL_COST = 20
 
 
 def block_costs(mesh, alpha: np.ndarray) -> np.ndarray:
-    """(NB,) int64 estimated cost per block from the volume fractions ``alpha`` (NB, M, NX, NY, NZ):
+    """(B,) int64 estimated cost per block from the volume fractions ``alpha`` (B, M, NX, NY, NZ) of
+    B blocks of ``mesh`` (all of them, or a range):
     :data:`MATERIAL_CELL_COST` per interior cell whose summed volume fraction is >= PHI_VOID,
     :data:`VOID_CELL_COST` per other interior cell, and :data:`MIXED_BLOCK_CELL_COST` per cell
     of a block that has both."""
-    phi = mesh.interior(alpha).sum(axis=1).reshape(mesh.nblocks, -1)
+    phi = mesh.interior(alpha).sum(axis=1).reshape(alpha.shape[0], -1)
     cells = phi.shape[1]
     material = (phi >= PHI_VOID).sum(axis=1).astype(np.int64)
     mixed = (material > 0) & (material < cells)

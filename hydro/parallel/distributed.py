@@ -32,20 +32,23 @@ from typing import Any
 import h5py
 import numpy as np
 
-from impactpipe.hydro.amr.plans import axis_plans
-from impactpipe.hydro.amr.transfer import prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts
+from impactpipe.hydro.amr.plans import axis_plans, first_layer_plans
+from impactpipe.hydro.amr.regrid import moved_state, plan_sources, planned_costs, planned_mesh, remesh, summed_rows
+from impactpipe.hydro.amr.transfer import (prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts,
+                                           restrict_state_ghosts)
 from impactpipe.hydro.mesh.boundary import (
-    NO_RECORD, every_layer, fill_field_ghosts, fill_ghosts, fill_ghosts_from_ranks_where, fill_ghosts_where,
-    fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
+    NO_RECORD, every_layer, fill_field_ghosts, fill_first_ghost_layer, fill_ghosts, fill_ghosts_from_ranks_where,
+    fill_ghosts_where, fill_state_ghost_layer, fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
+from impactpipe.hydro.mesh.state import FIELDS
 from impactpipe.storage import atomic_path, atomic_path_together
 
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
                             neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
 from .exchange import (FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
                        StripExchange, Traffic, broadcast_arrays, finish_strips, gather_owned_blocks, gather_rows,
-                       share_owned_blocks)
-from .owned_memory import from_outline, lazy_zeros, outline, receive_owned_blocks, shared_arrays
+                       move_rows, share_owned_blocks)
+from .owned_memory import from_outline, lazy_zeros, outline, receive_owned_blocks
 
 log = logging.getLogger(__name__)
 
@@ -187,9 +190,25 @@ class WholeMesh:
         """Bring the coarse/fine face fluxes ``face_flux`` (NB, 2, NQ, N1, N2) of the finer
         blocks this process refluxes from up to date (they are)."""
 
-    def remeshed(self, sim) -> "WholeMesh":
-        """The partition of ``sim`` after a regrid changed its mesh (every block again)."""
-        return self
+    def fill_first_ghost_layer(self, state, mesh, axis: int) -> None:
+        """The first ghost layer along ``axis`` of every block
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`: what the regrid reads)."""
+        fill_first_ghost_layer(state, mesh, axis)
+
+    def regrid(self, sim, plan: dict) -> tuple:
+        """(new mesh, new state, new partition) of ``sim`` after the regrid ``plan``
+        (:func:`~impactpipe.hydro.amr.regrid.plan_leaves`): every block moved
+        (:func:`~impactpipe.hydro.amr.regrid.remesh`), the first ghost layer filled on every
+        axis, and this partition (every block again)."""
+        new_mesh, new_state = remesh(sim.mesh, sim.state, plan)
+        for axis in range(new_mesh.ndim):
+            fill_first_ghost_layer(new_state, new_mesh, axis)
+        return new_mesh, new_state, self
+
+    def summed_rows(self, counters: np.ndarray, nblocks: int) -> np.ndarray:
+        """Per-block ``counters`` (NB, ...) for a new mesh of ``nblocks`` blocks: their totals in
+        row 0 (:func:`~impactpipe.hydro.amr.regrid.summed_rows`)."""
+        return summed_rows(counters, nblocks)
 
     def first_failure(self, failure: np.ndarray) -> int:
         """The first block whose sweep failed (``failure[:, 0]`` != 0), or -1."""
@@ -474,13 +493,91 @@ class BlockRanges(WholeMesh):
                                                    FLUX_TAG + axis)
         self._flux_strips[key].exchange((face_flux,), self.traffic)
 
-    def remeshed(self, sim) -> "BlockRanges":
-        """A new cut of ``sim``'s blocks after a regrid (every rank regridded the same way from
-        the whole state, :meth:`share`), by the estimated cost of the new blocks."""
-        cuts = owned_ranges(block_costs(sim.mesh, sim.state.alpha), self.comm.size)
-        partition = BlockRanges(self.comm, sim.mesh, cuts)
-        partition.traffic = self.traffic
-        return partition
+    def fill_first_ghost_layer(self, state, mesh, axis: int) -> None:
+        """The first ghost layer along ``axis`` of the owned blocks, the values
+        :func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer` gives it: the strips along
+        ``axis`` and (adaptive mesh) the fine cells of the restriction received from their
+        owners, the same-level layer, then this rank's rows of the first-layer restriction, the
+        coarse cells the prolongation reads received, this rank's rows of the first-layer
+        prolongation."""
+        g = int(mesh.ghost[axis])
+        if g == 0:
+            return
+        fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+        self.strips[axis].exchange(fields, self.traffic)
+        if mesh.adaptive:
+            self.plans(mesh, axis)["restrict_strips"].exchange(fields, self.traffic)
+        fill_state_ghost_layer(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
+        if not mesh.adaptive:
+            return
+        first = self._first_layer_plans(mesh, axis)
+        restrict_state_ghosts(fields, first["restrict"], first["restrict_weight"])
+        self.plans(mesh, axis)["prolong_strips"].exchange(fields, self.traffic)
+        prolong_state_ghosts(fields, first["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
+
+    def _first_layer_plans(self, mesh, axis: int) -> dict:
+        """This rank's rows (destination blocks it owns) of the first-layer plans of ``axis``
+        (:func:`~impactpipe.hydro.amr.plans.first_layer_plans`), kept."""
+        key = ("first_layer", axis)
+        if key not in self._plans:
+            whole = first_layer_plans(mesh, axis)
+            owner = owners(self.cuts)
+            mine = {}
+            for name, weight in (("restrict", "restrict_weight"), ("prolong", None)):
+                keep = owner[whole[name][:, 0]] == self.rank
+                mine[name] = np.ascontiguousarray(whole[name][keep])
+                if weight is not None:
+                    mine[weight] = np.ascontiguousarray(whole[weight][keep])
+            self._plans[key] = mine
+        return self._plans[key]
+
+    def regrid(self, sim, plan: dict) -> tuple:
+        """(new mesh, new state, new partition) of ``sim`` after the regrid ``plan`` (the same on
+        every rank), no rank holding more than its own blocks and halo before and after.
+
+        The new blocks are cut by their estimated cost (:func:`~.decomposition.owned_ranges` of
+        :func:`~impactpipe.hydro.amr.regrid.planned_costs`: the old blocks' costs,
+        :func:`~.decomposition.block_costs`, each computed by its owner and shared, carried over
+        to the new blocks made from them).  Each rank receives from their old owners the old
+        blocks, ghosts included, that its new blocks are made from
+        (:func:`~impactpipe.hydro.amr.regrid.plan_sources`; one Alltoallv per field,
+        :func:`~.exchange.move_rows`, into the old arrays' rows), builds its own new blocks in
+        arrays of :meth:`zeros` of the new partition
+        (:func:`~impactpipe.hydro.amr.regrid.moved_state`) and fills their first ghost layer on
+        every axis through the new partition's exchanges (:meth:`fill_first_ghost_layer`)."""
+        mesh, state = sim.mesh, sim.state
+        new_mesh = planned_mesh(mesh, plan)
+        costs = np.zeros(mesh.nblocks, dtype=np.int64)
+        costs[self.blocks] = block_costs(mesh, state.alpha[self.blocks])
+        self.share_rows(costs)
+        cuts = owned_ranges(planned_costs(plan, costs, mesh.ndim), self.comm.size)
+        new = BlockRanges(self.comm, new_mesh, cuts)
+        new.traffic = self.traffic
+        owner = owners(self.cuts)
+        needed = [plan_sources(plan, int(cuts[r]), int(cuts[r + 1])) for r in range(self.comm.size)]
+        sent = [blocks[owner[blocks] == self.rank] if r != self.rank else blocks[:0] for r, blocks in
+                enumerate(needed)]
+        mine = needed[self.rank]
+        received = [mine[owner[mine] == r] if r != self.rank else mine[:0] for r in range(self.comm.size)]
+        started = time.perf_counter()
+        move_rows(self.comm, [getattr(state, name) for name in FIELDS], sent, received)
+        self.traffic.gathers += 1
+        self.traffic.gather_seconds += time.perf_counter() - started
+        new_state = moved_state(mesh, new_mesh, state, plan, new.lo, new.hi, new.zeros)
+        for axis in range(new_mesh.ndim):
+            new.fill_first_ghost_layer(new_state, new_mesh, axis)
+        return new_mesh, new_state, new
+
+    def summed_rows(self, counters: np.ndarray, nblocks: int) -> np.ndarray:
+        """Per-block ``counters`` (NB, ...) for a new mesh of ``nblocks`` blocks, their totals in
+        row 0 on every rank, the single process's bit for bit: rank 0 receives every rank's rows
+        (:meth:`rows_at_root`) and sums them in block order
+        (:func:`~impactpipe.hydro.amr.regrid.summed_rows`), then broadcasts the totals."""
+        whole = self.rows_at_root(counters)
+        total = self.comm.bcast(summed_rows(whole, 1)[0] if self.is_root else None, root=0)
+        out = np.zeros((nblocks,) + counters.shape[1:], dtype=counters.dtype)
+        out[0] = total
+        return out
 
     def any(self, flag: bool) -> bool:
         """Whether ``flag`` holds on some rank (one allreduce, LOR)."""
@@ -660,10 +757,7 @@ def distribute(sim, comm) -> None:
     cuts = comm.bcast(owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size) if comm.rank == 0 else None,
                       root=0)
     sim.partition = BlockRanges(comm, sim.mesh, cuts)
-    if sim.mesh.adaptive:
-        broadcast_arrays(comm, shared_arrays(sim))
-    else:
-        receive_owned_blocks(sim, sim.partition)
+    receive_owned_blocks(sim, sim.partition)
     sim._keep_good()
     if comm.rank == 0:
         log.info("hydro on %d MPI ranks: blocks %s", comm.size,

@@ -360,6 +360,34 @@ def gather_rows(comm, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
         start += row.shape[1]
 
 
+def move_rows(comm, arrays: list[np.ndarray], sent: list[np.ndarray], received: list[np.ndarray]) -> None:
+    """Rows of per-block arrays between ranks, in place: for each of ``arrays`` (each (NB, ...),
+    C-contiguous, of the same NB on every rank) the rows ``sent[r]`` (int64 block numbers) go
+    to rank r and the rows ``received[r]`` come from rank r into the same rows here (rank r
+    sends them in that order).  One Alltoallv per array, through a buffer of the rows sent and
+    one of the rows received."""
+    from mpi4py.util.dtlib import from_numpy_dtype
+
+    send_rows, receive_rows = np.concatenate(sent), np.concatenate(received)
+    send_counts = np.array([len(rows) for rows in sent], dtype=np.int64)
+    receive_counts = np.array([len(rows) for rows in received], dtype=np.int64)
+    for array in arrays:
+        row = int(np.prod(array.shape[1:], dtype=np.int64))
+        if row == 0:
+            continue
+        kind = from_numpy_dtype(array.dtype)
+        outgoing = np.ascontiguousarray(array[send_rows])
+        incoming = np.empty((len(receive_rows),) + array.shape[1:], dtype=array.dtype)
+        comm.Alltoallv([outgoing, (send_counts * row).tolist(), _starts(send_counts * row), kind],
+                       [incoming, (receive_counts * row).tolist(), _starts(receive_counts * row), kind])
+        array[receive_rows] = incoming
+
+
+def _starts(counts: np.ndarray) -> list[int]:
+    """The displacements of consecutive segments of ``counts`` elements."""
+    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64).tolist()
+
+
 def broadcast_arrays(comm, arrays: list[np.ndarray]) -> None:
     """Rank 0's values of ``arrays`` on every rank (in place)."""
     for array in arrays:

@@ -274,21 +274,28 @@ class MaterialStrength:
                                  self.nmat * self.nq)
         return np.zeros((3,) + one.shape)
 
-    def mesh_changed(self, mesh: BlockMesh) -> None:
+    def mesh_changed(self, mesh: BlockMesh, partition=None, summed=summed_rows) -> None:
         """Follow a regrid: new work arrays (the face shear stresses start again from the cells'
-        stress); the per-block counters' totals move to block 0."""
+        stress, NaN); the per-block counters' totals move to block 0 (``summed(counters,
+        nblocks)``: on several ranks the old partition's
+        :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.summed_rows`).  ``partition``:
+        the new mesh's on several ranks, whose :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros`
+        hold the work arrays (only its own rows of the face stresses are set: each block reads
+        its own faces only), or None (one process)."""
         self.mesh = mesh
-        self.work = np.zeros((mesh.nblocks, self.work.shape[1]) + mesh.padded_shape)
+        zeros = np.zeros if partition is None else partition.zeros
+        self.work = zeros((mesh.nblocks, self.work.shape[1]) + mesh.padded_shape)
         if self.face is not None:
-            self.face = np.full((mesh.nblocks, mesh.ndim ** 2) + mesh.padded_shape, np.nan)
+            self.face = zeros((mesh.nblocks, mesh.ndim ** 2) + mesh.padded_shape)
+            self.face[slice(None) if partition is None else partition.blocks] = np.nan
         self.holds = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.has_mass = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
         self._quiet = np.zeros(mesh.nblocks, dtype=np.uint8)
         self._stress_ghosts = np.zeros(mesh.nblocks, dtype=np.uint8)
         self.face_flux = self._face_flux_arrays(mesh)
-        self.counts = summed_rows(self.counts, mesh.nblocks)
-        self.amounts = summed_rows(self.amounts, mesh.nblocks)
+        self.counts = summed(self.counts, mesh.nblocks)
+        self.amounts = summed(self.amounts, mesh.nblocks)
 
     def prepare_state(self, state: HydroState) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
