@@ -1,6 +1,7 @@
-"""On several MPI ranks of a uniform mesh a rank writes only its own blocks and the cells its
-exchanges receive (:mod:`impactpipe.hydro.parallel.owned_memory`): after steps, a snapshot and a
-checkpoint of the r-z impact with strength and tracers on 3 ranks, no rank has written a page
+"""On several MPI ranks a rank writes only its own blocks and the cells its exchanges receive
+(:mod:`impactpipe.hydro.parallel.owned_memory`): after steps, a snapshot and a checkpoint of the
+r-z impact with strength and tracers on 3 ranks, on a uniform mesh and on an adaptive one
+across regrids that refine and coarsen, no rank has written a page
 of the state, of the strength model's work arrays or of the last-good copy outside those
 (``/proc/self/pagemap``: present and exclusively mapped; a page only read maps the shared zero
 page), and every other value is still +0.0 (the wall sign flips of the work ghosts that wrote
@@ -29,13 +30,18 @@ pytest.importorskip("mpi4py")
 from impactpipe.pipeline import ranks  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parent / "configs" / "mpi" / "impact_strength.yaml"
+ADAPTIVE_CONFIG = CONFIG.parent / "impact_adaptive.yaml"
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 
-#: Argument 1: the config, which rank 0 alone builds; 4 steps on the ranks, a snapshot and a
-#: checkpoint, then writes, per rank, to OUT.rankR.json (argument 2): for each array, the values
-#: outside the rank's own rows and its halo that are not +0.0 (bit patterns), the halo's values
-#: that are not (what the exchanges wrote), and the pages written that hold none of the own
-#: rows' and halo's values.
+#: Argument 1: the config, which rank 0 alone builds; argument 3: the steps on the ranks (on an
+#: adaptive mesh at least that many, then on until a regrid has refined blocks and one has
+#: coarsened blocks since the sharing began), then a snapshot and a checkpoint; writes, per
+#: rank, to OUT.rankR.json (argument 2): the blocks refined and coarsened meanwhile and, for
+#: each array, the values outside the rank's own rows and its halo (the cells of its ghost
+#: fills' strips, of the coarse/fine plans' exchanges on an adaptive mesh and, for the state,
+#: of the tracers' neighbourhood) that are not +0.0 (bit patterns), the halo's values that
+#: are not (what the exchanges wrote), and the pages written that hold none of the own rows'
+#: and halo's values.
 UNWRITTEN = """
 import json, mmap, sys
 import numpy as np
@@ -50,12 +56,20 @@ if comm.rank == 0:
     sim = build_simulation(config, values)
     add_tracers(sim, config, float(values["end_time"]))
 sim = distribute_from_root(sim, comm)
-for _ in range(4):
+refined, coarsened = sim.blocks_refined, sim.blocks_coarsened
+for step in range(60):
+    if step >= int(sys.argv[3]) and (not sim.mesh.adaptive or (sim.blocks_refined > refined
+                                                              and sim.blocks_coarsened > coarsened)):
+        break
     sim.step()
 sim.snapshot()
 sim.save_checkpoint(sys.argv[2] + ".checkpoint.h5")
 part = sim.partition
 strips = [route for routes in part.routes for route in routes]
+if sim.mesh.adaptive:
+    for axis in range(sim.mesh.ndim):
+        plans = part.plans(sim.mesh, axis)
+        strips += plans["restrict_strips"].routes + plans["prolong_strips"].routes
 arrays = {**sim.state.arrays(), "work": sim.strength.work}
 halos = {name: strips + part.neighbourhood for name in sim.state.arrays()}
 halos["work"] = strips
@@ -70,7 +84,8 @@ def stray_pages(array, kept):
     allowed = np.zeros(pages, dtype=bool)
     allowed[np.flatnonzero(kept) * array.itemsize // mmap.PAGESIZE] = True
     return int(np.count_nonzero(written & ~allowed))
-out = {"tracers": len(sim.tracers), "lo": part.lo, "hi": part.hi, "nblocks": sim.mesh.nblocks}
+out = {"tracers": len(sim.tracers), "lo": part.lo, "hi": part.hi, "nblocks": sim.mesh.nblocks,
+       "refined": sim.blocks_refined - refined, "coarsened": sim.blocks_coarsened - coarsened}
 for name, array in arrays.items():
     halo = np.zeros(array.size, dtype=bool)
     for route in halos[name]:
@@ -130,17 +145,19 @@ def test_lazy_zeros_commits_a_page_only_when_written():
     assert lazy_zeros((0, 3)).shape == (0, 3)
 
 
-def test_a_rank_writes_only_its_own_blocks_and_the_cells_its_exchanges_receive(tmp_path):
-    config = yaml.safe_load(CONFIG.read_text())
-    config["hydro"]["tracers"] = {"enabled": True, "count": 60, "history_interval": 0.01}
-    path = tmp_path / "impact_strength_tracers.yaml"
-    path.write_text(yaml.safe_dump(config))
-    out = tmp_path / "unwritten"
-    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", UNWRITTEN, str(path), str(out)],
-                            env=ENV, capture_output=True, text=True, timeout=600)
+def unwritten(path: Path, steps: int, out: Path) -> list[dict]:
+    """What :data:`UNWRITTEN` counts on each of 3 ranks for the config at ``path``."""
+    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", UNWRITTEN, str(path), str(out),
+                             str(steps)], env=ENV, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
-    for rank in range(3):
-        counted = json.loads(Path(f"{out}.rank{rank}.json").read_text())
+    return [json.loads(Path(f"{out}.rank{rank}.json").read_text()) for rank in range(3)]
+
+
+def assert_own_blocks_and_halo_only(per_rank: list[dict]) -> None:
+    """No rank wrote a value or a page of the state, the work arrays or the last-good copy
+    outside its own blocks and halo (``per_rank``: what :func:`unwritten` counted), and its
+    exchanges wrote some of its halo."""
+    for rank, counted in enumerate(per_rank):
         assert counted["tracers"] > 0
         assert counted["hi"] - counted["lo"] < counted["nblocks"]
         for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq", "work"):
@@ -148,6 +165,24 @@ def test_a_rank_writes_only_its_own_blocks_and_the_cells_its_exchanges_receive(t
         for name in ("alpha", "arho", "arhoe", "momentum", "energy", "arhoq"):
             assert counted["good_" + name] == {"outside": 0, "stray_pages": 0}, (rank, name)
         assert counted["arho"]["halo"] > 0 and counted["work"]["halo"] > 0, rank
+
+
+def test_a_rank_writes_only_its_own_blocks_and_the_cells_its_exchanges_receive(tmp_path):
+    config = yaml.safe_load(CONFIG.read_text())
+    config["hydro"]["tracers"] = {"enabled": True, "count": 60, "history_interval": 0.01}
+    path = tmp_path / "impact_strength_tracers.yaml"
+    path.write_text(yaml.safe_dump(config))
+    assert_own_blocks_and_halo_only(unwritten(path, 4, tmp_path / "unwritten"))
+
+
+def test_on_an_adaptive_mesh_a_rank_writes_only_its_own_blocks_and_halo_across_regrids(tmp_path):
+    """The adaptive impact (strength, Grady-Kipp fracture, self-gravity, tracers; a regrid every
+    2 steps), shared out by rank 0: each regrid builds a rank's new blocks from the old ones
+    its owners send it, so no rank ever holds the whole state
+    (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.regrid`)."""
+    counted = unwritten(ADAPTIVE_CONFIG, 3, tmp_path / "unwritten")
+    assert counted[0]["refined"] > 0 and counted[0]["coarsened"] > 0, counted[0]
+    assert_own_blocks_and_halo_only(counted)
 
 
 def test_only_rank_0_holds_the_whole_state_while_the_run_is_shared_out(tmp_path):

@@ -582,7 +582,8 @@ class MaterialStrength:
     def _fill_work_ghosts(self, partition, axis: int, runs: tuple[slice, ...], level: LevelBlocks | None = None
                           ) -> None:
         """Ghosts along ``axis`` of the work arrays' ``runs`` of slots on an adaptive mesh, then
-        the wall sign flips: every layer of every block (the prolongation reads the coarse
+        the wall sign flips (of the ``partition``'s blocks: a rank writes no other rank's
+        block): every layer of every block (the prolongation reads the coarse
         blocks' ghosts, those of the axes filled before included;
         ``partition.fill_field_ghosts``: same-level copies, across MPI ranks received strips,
         restriction and copies at coarse/fine faces).  With a ``level`` (:class:`LevelBlocks`),
@@ -593,7 +594,7 @@ class MaterialStrength:
         flips of the level's blocks."""
         if level is None:
             partition.fill_field_ghosts(self.work, self.mesh, axis, runs, self.holds, GHOST)
-            self._flip_work_walls(axis, runs, GHOST)
+            self._flip_work_walls(axis, runs, GHOST, owned=self._range(partition))
             return
         layers = self._ghost_reads()[0]
         for run in runs:
