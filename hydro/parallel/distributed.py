@@ -2,10 +2,10 @@
 
 The Simulation asks its ``partition`` which blocks to advance (``blocks``, a slice of the
 block order), to fill their ghosts, to combine the time step and the failure checks over
-every process, and to bring every block to the process that writes an output, or to open
-the output with the other processes where they write it together (``writes_together``), and
-(before a regrid or the totals) to bring every block to every process.  :class:`WholeMesh`
-is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
+every process, to regrid its blocks, and to bring every block to the process that writes an
+output, or to open the output with the other processes where they write it together
+(``writes_together``), and (for the totals) to bring every block to every process.
+:class:`WholeMesh` is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
 of one run (:func:`distribute_from_root` or :func:`distribute` attaches it, :func:`collect`
 ends it).
 
@@ -725,9 +725,9 @@ def distribute_from_root(sim, comm):
 
     Rank 0 broadcasts the :func:`~.owned_memory.outline` of ``sim`` (everything but its arrays
     of cells), from which each other rank builds its Simulation with arrays of zeros that hold
-    no memory yet; then :func:`distribute`.  On a uniform mesh a rank other than 0 thus never
-    holds the whole state: its memory at the start is its own blocks, its halo and the mesh's
-    per-block tables.  Raises ValueError on every rank, before anything else moves, for what
+    no memory yet; then :func:`distribute`.  A rank other than 0 thus never holds the whole
+    state: its memory at the start is its own blocks, its halo and the mesh's per-block
+    tables.  Raises ValueError on every rank, before anything else moves, for what
     this version does not distribute (:func:`unsupported`)."""
     refuse(comm.bcast(unsupported(sim, comm.size) if comm.rank == 0 else None, root=0))
     described = comm.bcast(outline(sim) if comm.rank == 0 else None, root=0)
@@ -743,12 +743,10 @@ def distribute(sim, comm) -> None:
     built there too, or from rank 0's outline, :func:`distribute_from_root`).
 
     Rank 0's counters and tracers are broadcast, the blocks cut by the estimated cost of rank
-    0's state (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  On a uniform
-    mesh each rank then holds only its own blocks of rank 0's state and the cells its exchanges
-    write (:func:`~.owned_memory.receive_owned_blocks`); what it built of the state is dropped
-    unread.  An adaptive mesh's regrids give every rank every block (:meth:`BlockRanges.share`):
-    rank 0's whole state and strength work arrays are broadcast and every rank keeps them.
-    Raises ValueError for what this version does not distribute (:func:`unsupported`) before
+    0's state (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  Each rank then
+    holds only its own blocks of rank 0's state and the cells its exchanges write
+    (:func:`~.owned_memory.receive_owned_blocks`), uniform or adaptive mesh (whose regrids keep
+    it so, :meth:`BlockRanges.regrid`); what it built of the state is dropped unread.  Raises ValueError for what this version does not distribute (:func:`unsupported`) before
     anything moves.
     """
     refuse(unsupported(sim, comm.size))

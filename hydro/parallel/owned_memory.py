@@ -1,10 +1,12 @@
-"""The memory a rank holds on a uniform mesh: its own blocks and the cells its exchanges write.
+"""The memory a rank holds: its own blocks and the cells its exchanges write.
 
 The per-block arrays of a run shared between ranks keep the whole mesh's shape and block
 numbering on every rank (every kernel and every exchange plan indexes them by block number),
 but a rank writes only the rows of the blocks it owns (``cuts[rank] .. cuts[rank + 1] - 1``,
-ghosts included) and, through its exchanges, the interior strips of other ranks' blocks that
-its ghost fills and its tracers read (the halo, :mod:`.decomposition`).  In an anonymous
+ghosts included) and, through its exchanges, the cells of other ranks' blocks that its ghost
+fills and its tracers read (the halo, :mod:`.decomposition`: interior strips and, on an
+adaptive mesh, the fine cells of a restriction and the coarse cells, ghosts included, of a
+prolongation).  In an anonymous
 private mapping (Linux, macOS) a page is committed when it is first written, and a page only
 read maps the system's shared zero page; so an array whose other rows are never written holds
 about the rank's own rows and its halo in memory, whatever its shape.
@@ -16,9 +18,11 @@ hold no memory yet (:func:`from_outline`).  :func:`receive_owned_blocks` then gi
 in such arrays, the rows of its own blocks of rank 0's state and of the strength model's
 per-block work arrays (one Scatterv each, :func:`~.exchange.scatter_owned_blocks`) and the halo
 cells from their owners (one exchange of strips); whatever whole arrays a rank held are
-dropped.  Nothing but those rows and cells is written afterwards on that rank
-(tests/test_owned_memory.py checks that no other page is written, and that a rank other than 0
-never holds the whole state).
+dropped.  Nothing but those rows and cells is written afterwards on that rank; on an adaptive
+mesh each regrid builds a rank's new blocks in new such arrays from the old blocks their owners
+send it (:meth:`~.distributed.BlockRanges.regrid`).  tests/test_owned_memory.py checks that no
+other page is written, on a uniform mesh and across an adaptive mesh's regrids, and that a
+rank other than 0 never holds the whole state.
 """
 
 from __future__ import annotations
@@ -77,10 +81,17 @@ def shared_arrays(sim) -> list[np.ndarray]:
 
 
 def cell_arrays(sim) -> list[np.ndarray]:
-    """Every per-block array of cells of ``sim``: :func:`shared_arrays` and the last-good copy
-    of the state (which each rank takes from its own blocks).  The self-gravity potential is
-    allocated at the first step, in the partition's own arrays."""
-    return shared_arrays(sim) + list(sim._good.values())
+    """Every per-block array of cells of ``sim``: :func:`shared_arrays`, the last-good copy
+    of the state (which each rank takes from its own blocks) and, on an adaptive mesh, the
+    coarse/fine face fluxes of the sweeps and of the stress step (zeros until a step writes
+    its own blocks' rows).  The self-gravity potential is allocated at the first step, in the
+    partition's own arrays."""
+    arrays = shared_arrays(sim) + list(sim._good.values())
+    if sim.mesh.adaptive:
+        arrays.append(sim._face_flux)
+        if sim.strength is not None:
+            arrays.append(sim.strength.face_flux)
+    return arrays
 
 
 class _OutlinePickler(pickle.Pickler):
@@ -146,7 +157,7 @@ def receive_halo(arrays: list[np.ndarray], partition, routes: list[Route]) -> No
 
 
 def receive_owned_blocks(sim, partition) -> None:
-    """Replace the per-block arrays of ``sim`` (a Simulation on a uniform mesh just given its
+    """Replace the per-block arrays of ``sim`` (a Simulation just given its
     ``partition``, a :class:`~.distributed.BlockRanges`) that this rank writes only for its own
     blocks by :func:`owned_rows` of rank 0's: the state, with the cells of the ghost fills'
     strips and of the tracers' neighbourhood received from their owners

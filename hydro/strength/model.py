@@ -438,7 +438,7 @@ class MaterialStrength:
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
                                     self.face_flux, 3 * self.nmat, level.blocks, self.stressed)
             return
-        self.face_flux[...] = 0.0
+        self.face_flux[:, lo:hi] = 0.0  # the other rows are received whole before a reflux reads them
 
         def kick_blocks(blocks):
             """The stress divergence of ``blocks`` (int64)."""
