@@ -646,7 +646,8 @@ class Simulation:
             old.summed_rows(a, nb) for a in (self.boundary, self.floors, self.amounts, self.porosity_counts))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
-        self._face_flux = allocate_face_flux(nb, new_mesh.padded_shape, new_mesh.ndim, st.nmat, st.arhoq.shape[1])
+        self._face_flux = allocate_face_flux(nb, new_mesh.padded_shape, new_mesh.ndim, st.nmat, st.arhoq.shape[1],
+                                             self.partition.zeros)
         if self.strength is not None:
             self.strength.mesh_changed(new_mesh, None if self.partition.whole else self.partition, old.summed_rows)
         if self.tracers is not None:

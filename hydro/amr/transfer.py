@@ -763,11 +763,18 @@ def face_flux_columns(nmat: int, nq_total: int) -> int:
     return 3 * nmat + 4 + nq_total
 
 
-def allocate_face_flux(nblocks: int, padded_shape, ndim: int, nmat: int, nq_total: int) -> np.ndarray:
-    """Zeroed ``face_flux[NB, 2, NQ, N1, N2]`` for :func:`impactpipe.hydro.scheme.directional.sweep`.
+def allocate_face_flux(nblocks: int, padded_shape, ndim: int, nmat: int, nq_total: int, zeros=np.zeros) -> np.ndarray:
+    """Zeroed ``face_flux[NB, 2, NQ, N1, N2]`` for :func:`impactpipe.hydro.scheme.directional.sweep`,
+    from ``zeros(shape)`` (numpy's, or on several MPI ranks a partition's, whose rows of other
+    ranks' blocks commit no memory until written).
 
     N1, N2 are the padded sizes of a sweep's two transverse axes (1 where unused), the same
     for every sweep axis since all used axes have the same padded size.
     """
+    return zeros(face_flux_shape(nblocks, padded_shape, ndim, nmat, nq_total))
+
+
+def face_flux_shape(nblocks: int, padded_shape, ndim: int, nmat: int, nq_total: int) -> tuple[int, ...]:
+    """The shape (NB, 2, NQ, N1, N2) of :func:`allocate_face_flux`'s array."""
     n = max(padded_shape)
-    return np.zeros((nblocks, 2, face_flux_columns(nmat, nq_total), n if ndim > 1 else 1, n if ndim == 3 else 1))
+    return (nblocks, 2, face_flux_columns(nmat, nq_total), n if ndim > 1 else 1, n if ndim == 3 else 1)

@@ -79,11 +79,12 @@ import numpy as np
 from impactpipe.hydro.eos import reference_densities
 from impactpipe.hydro.eos.porosity import ALPHA0, NPOROSITY
 from impactpipe.hydro.amr.regrid import summed_rows
-from impactpipe.hydro.amr.transfer import allocate_face_flux, prolong_field_ghosts, reflux, restrict_ghosts
+from impactpipe.hydro.amr.transfer import face_flux_shape, prolong_field_ghosts, reflux, restrict_ghosts
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import fill_ghosts_where
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.distributed import FieldFill
+from impactpipe.hydro.parallel.owned_memory import lazy_zeros
 from impactpipe.hydro.strength.divergence import apply_stress_divergence, quiet_blocks
 from impactpipe.hydro.strength.face_shear import apply_face_shear, update_face_shear
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
@@ -268,11 +269,11 @@ class MaterialStrength:
         (:func:`impactpipe.hydro.strength.update.update_stress`, step 4)."""
         self.surface_gravity = np.array(gravity, dtype=float).reshape(3)
 
-    def _face_flux_arrays(self, mesh: BlockMesh) -> np.ndarray:
-        """Per-axis coarse/fine face amounts of the stress divergence (empty on a uniform mesh)."""
-        one = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim, self.nmat,
-                                 self.nmat * self.nq)
-        return np.zeros((3,) + one.shape)
+    def _face_flux_arrays(self, mesh: BlockMesh, zeros=np.zeros) -> np.ndarray:
+        """Per-axis coarse/fine face amounts of the stress divergence (empty on a uniform mesh),
+        from ``zeros(shape)``."""
+        return zeros((3,) + face_flux_shape(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim,
+                                            self.nmat, self.nmat * self.nq))
 
     def mesh_changed(self, mesh: BlockMesh, partition=None, summed=summed_rows) -> None:
         """Follow a regrid: new work arrays (the face shear stresses start again from the cells'
@@ -281,7 +282,9 @@ class MaterialStrength:
         :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.summed_rows`).  ``partition``:
         the new mesh's on several ranks, whose :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros`
         hold the work arrays (only its own rows of the face stresses are set: each block reads
-        its own faces only), or None (one process)."""
+        its own faces only), and the coarse/fine face fluxes are in
+        :func:`~impactpipe.hydro.parallel.owned_memory.lazy_zeros` (the kick writes its own
+        blocks' rows, the exchange before a reflux those it reads), or None (one process)."""
         self.mesh = mesh
         zeros = np.zeros if partition is None else partition.zeros
         self.work = zeros((mesh.nblocks, self.work.shape[1]) + mesh.padded_shape)
@@ -293,7 +296,7 @@ class MaterialStrength:
         self.stressed = np.zeros(mesh.nblocks, dtype=np.uint8)
         self._quiet = np.zeros(mesh.nblocks, dtype=np.uint8)
         self._stress_ghosts = np.zeros(mesh.nblocks, dtype=np.uint8)
-        self.face_flux = self._face_flux_arrays(mesh)
+        self.face_flux = self._face_flux_arrays(mesh, np.zeros if partition is None else lazy_zeros)
         self.counts = summed(self.counts, mesh.nblocks)
         self.amounts = summed(self.amounts, mesh.nblocks)
 
