@@ -746,8 +746,9 @@ def distribute(sim, comm) -> None:
     0's state (:func:`~.decomposition.owned_ranges`) and ``sim.partition`` set.  Each rank then
     holds only its own blocks of rank 0's state and the cells its exchanges write
     (:func:`~.owned_memory.receive_owned_blocks`), uniform or adaptive mesh (whose regrids keep
-    it so, :meth:`BlockRanges.regrid`); what it built of the state is dropped unread.  Raises ValueError for what this version does not distribute (:func:`unsupported`) before
-    anything moves.
+    it so, :meth:`BlockRanges.regrid`); what it built of the state is dropped unread.  Raises
+    ValueError for what this version does not distribute (:func:`unsupported`) before anything
+    moves.
     """
     refuse(unsupported(sim, comm.size))
     broadcast_arrays(comm, list(sim._counter_arrays()))
