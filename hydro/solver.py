@@ -639,6 +639,7 @@ class Simulation:
         if plan is None:
             return False
         old = self.partition
+        self._good = {}  # taken again once the state has moved (_keep_good): not held through the move
         new_mesh, self.state, self.partition = old.regrid(self, plan)
         self.mesh = new_mesh
         nb = new_mesh.nblocks
