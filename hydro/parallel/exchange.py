@@ -50,7 +50,8 @@ class Traffic:
     peers' strips (their transfer, and the peers' lateness in reaching the fill);
     ``allreduces`` and ``allreduce_seconds`` (s): the reductions of the time step and the
     failure checks; ``gathers`` and ``gather_seconds`` (s): the sharing of every block before
-    an output (:func:`share_owned_blocks`).
+    an output (:func:`share_owned_blocks`) and, on an adaptive mesh, the regrid's move of the
+    old blocks to the owners of the new blocks made from them (:func:`move_rows`, one each).
     """
 
     bytes_sent: int = 0
