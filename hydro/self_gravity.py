@@ -367,6 +367,8 @@ class SelfGravity:
         threads = numba.config.NUMBA_NUM_THREADS
         self._harm = np.zeros((threads, nh))
         self._phi = np.zeros(0)
+        #: (first, one past the last) block whose rows of ``_phi`` this process writes.
+        self._phi_rows = (0, 0)
         #: Per-thread integer inner and outer shell moments, kept between steps.
         self._moments = np.zeros((2, 0, 0, 0), dtype=np.int64)
         self._rows = np.zeros((0, 5))
@@ -378,10 +380,15 @@ class SelfGravity:
         return {"kind": "self", "order": self.order, "mirror_y": self.mirror_y, "work": self.work}
 
     def _allocate(self, mesh: BlockMesh, partition=None) -> None:
+        """New per-block arrays when the mesh's blocks or the range of them this process advances
+        changed (a regrid): the potential in the partition's zeros (every prepare sets the rows
+        of that range, and no other row is read), the per-block rows in numpy's."""
         nb = mesh.nblocks
-        if self._phi.shape != (nb,) + mesh.padded_shape:
+        rows = (0, nb) if partition is None else tuple(partition.blocks.indices(nb)[:2])
+        if self._phi.shape != (nb,) + mesh.padded_shape or self._phi_rows != rows:
             zeros = np.zeros if partition is None else partition.zeros
             self._phi = zeros((nb,) + mesh.padded_shape)
+            self._phi_rows = rows
             self._rows = np.zeros((nb, 5))
             self._block_work = np.zeros(nb)
             self._block_potential = np.zeros(nb)
