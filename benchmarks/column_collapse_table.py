@@ -18,7 +18,8 @@ collapse"), and the deposit's centroid.
 ``inertial_number_I0``, ``grain_diameter`` D in m; mu_s = tan(phi); docs/strength.md, "mu(I)
 friction").
 ``--room R`` lengthens the mesh to R run-outs of the law beyond the column (a deposit that
-reaches the far edge stops the run with an error).
+reaches the far edge grows the mesh, up to 4 times its first length, then stops the run with an
+error; hydro/problems/column_collapse.py).
 ``--dilation`` adds two columns at the end: the share of the mass in partly filled cells (fill
 below DILATED_FILL) and the share at a pressure below rho0 |g| dx / 2 (the surface-layer pressure
 of a full surface cell, Pa): material that holds void or next to no pressure, which a

@@ -633,7 +633,6 @@ class Simulation:
     def _regrid(self) -> bool:
         """:meth:`regrid`: on several ranks each reads and builds its own blocks only, and every
         rank reaches the same plan (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.regrid`)."""
-        st = self.state
         refine, coarsen = self.refinement_flags()
         plan = plan_leaves(self.mesh, refine, coarsen)
         if plan is None:
@@ -641,23 +640,41 @@ class Simulation:
         old = self.partition
         self._good = {}  # taken again once the state has moved (_keep_good): not held through the move
         new_mesh, self.state, self.partition = old.regrid(self, plan)
+        self.regrids += 1
+        self.blocks_refined += len(plan["children"]) // 2 ** new_mesh.ndim
+        self.blocks_coarsened += len(plan["parents"]) // 2 ** new_mesh.ndim
+        self._adopt_mesh(new_mesh, old)
+        return True
+
+    def mesh_replaced(self, new_mesh: BlockMesh, new_state: HydroState) -> None:
+        """Continue on ``new_mesh`` with ``new_state`` (one process): a mesh a scene changed other
+        than by a regrid (the column collapse's growth along x,
+        :meth:`impactpipe.hydro.problems.column_collapse.ColumnCollapseSimulation.grow`).  The
+        first ghost layer is filled on every axis and the rest follows as after a regrid."""
+        self._good = {}
+        self.state = new_state
+        for axis in range(new_mesh.ndim):
+            self.partition.fill_first_ghost_layer(new_state, new_mesh, axis)
+        self._adopt_mesh(new_mesh, self.partition)
+
+    def _adopt_mesh(self, new_mesh: BlockMesh, old) -> None:
+        """After the state moved onto ``new_mesh`` (``old``: the partition it moved from): the
+        per-block counters' totals in block 0 (``old.summed_rows``), every other per-block array
+        built again for the new blocks, and the last-good copy taken again."""
+        st = self.state
         self.mesh = new_mesh
         nb = new_mesh.nblocks
         self.boundary, self.floors, self.amounts, self.porosity_counts = (
             old.summed_rows(a, nb) for a in (self.boundary, self.floors, self.amounts, self.porosity_counts))
         self._failure = np.zeros((nb, 4), dtype=np.int64)
         self._rate = np.zeros(nb)
-        self._face_flux = allocate_face_flux(nb, new_mesh.padded_shape, new_mesh.ndim, st.nmat, st.arhoq.shape[1],
-                                             self.partition.zeros)
+        self._face_flux = allocate_face_flux(nb if new_mesh.adaptive else 0, new_mesh.padded_shape, new_mesh.ndim,
+                                             st.nmat, st.arhoq.shape[1], self.partition.zeros)
         if self.strength is not None:
             self.strength.mesh_changed(new_mesh, None if self.partition.whole else self.partition, old.summed_rows)
         if self.tracers is not None:
             self.tracers.mesh_changed(new_mesh)
-        self.regrids += 1
-        self.blocks_refined += len(plan["children"]) // 2 ** new_mesh.ndim
-        self.blocks_coarsened += len(plan["parents"]) // 2 ** new_mesh.ndim
         self._keep_good()
-        return True
 
     # ------------------------------------------------------------------ failure handling
 

@@ -40,24 +40,29 @@ sweeps it held the flowing column at zero pressure in more cells the larger the 
 (``Simulation.void_settling``, :mod:`impactpipe.hydro.scheme.settling`).  With ``face_shear`` (off by
 default) each cell face carries an elastic-plastic shear stress against the odd-even modes
 (:mod:`impactpipe.hydro.strength.face_shear`), for use with ``hourglass`` 0.  The mesh spans L0 plus
-``room`` run-outs of the law; :class:`ColumnCollapseSimulation` stops the run with an error
-when the deposit reaches the mesh's far edge.  A strengthless material collapses as a fluid
+``room`` run-outs of the law; when the deposit reaches the mesh's far edge
+:class:`ColumnCollapseSimulation` grows the mesh along x (up to :data:`GROWTH_LIMIT` times its
+first length, on one process and a mesh of one level) or else stops the run with an error.  A strengthless material collapses as a fluid
 (dam break) on a free-slip floor.
 """
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
-from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
+from impactpipe.hydro.amr.regrid import moved_state, refine_initial, rule_from_config
 from impactpipe.hydro.eos import energy_from_pressure, pressure_sound_speed, reference_density
 from impactpipe.hydro.gravity import ExternalGravity
-from impactpipe.hydro.mesh.blocks import BlockMesh
+from impactpipe.hydro.mesh.blocks import BlockMesh, morton_keys
 from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, check_geometry, material_list, merged,
                                               root_cell_multiple, strength_specs, tensile_strengths)
 from impactpipe.hydro.problems.parameters import Parameter, setup_defaults, violations
 from impactpipe.hydro.solver import HydroFailure, Simulation
 from impactpipe.hydro.mesh.state import HydroState
+
+logger = logging.getLogger(__name__)
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-planar',)
@@ -83,9 +88,12 @@ RESUMABLE = False
 #: Hourglass viscosity coefficient C of the scene (:mod:`impactpipe.hydro.strength.hourglass`).
 HOURGLASS_COEFFICIENT = 0.1
 
-#: Material filling this fraction of a cell in the last cell column before x_max stops the run
-#: (:class:`ColumnCollapseSimulation`).
+#: Material filling this fraction of a cell in the last cell column before x_max grows the mesh,
+#: or stops the run where it cannot grow (:class:`ColumnCollapseSimulation`).
 EDGE_FILL = 1.0e-3
+
+#: The mesh grows to at most this many times its first length along x (:meth:`ColumnCollapseSimulation.grow`).
+GROWTH_LIMIT = 4.0
 
 #: The deposit ends where its thickness falls below this fraction of a cell (:func:`deposit`).
 FRONT_THICKNESS_CELLS = 0.5
@@ -160,10 +168,18 @@ def domain(height: float, width: float, cells_per_height: int, block_cells: int 
 
 
 class ColumnCollapseSimulation(Simulation):
-    """The scene's :class:`~impactpipe.hydro.solver.Simulation`: it stops with a
-    :class:`~impactpipe.hydro.solver.HydroFailure` as soon as material fills the last cell column
-    before the outflow face x_max to :data:`EDGE_FILL` or more, instead of losing the deposit's
-    front through that face: the message names the scene key ``room`` that widens the mesh."""
+    """The scene's :class:`~impactpipe.hydro.solver.Simulation`: when material fills the last
+    cell column before the outflow face x_max to :data:`EDGE_FILL` or more after a step, the
+    mesh grows along x (:meth:`grow`) instead of losing the deposit's front through that face.
+    Where it cannot grow (an adaptive mesh, several MPI ranks, or the mesh already
+    :data:`GROWTH_LIMIT` times its first length) the run stops with a
+    :class:`~impactpipe.hydro.solver.HydroFailure` whose message names the scene key ``room``
+    that widens the mesh from the start."""
+
+    #: Times the mesh grew (:meth:`grow`).
+    growths = 0
+    #: The mesh's length along x (m) before it first grew.
+    first_length: float | None = None
 
     def step(self, dt_max: float = np.inf) -> float:
         dt = super().step(dt_max)
@@ -171,11 +187,51 @@ class ColumnCollapseSimulation(Simulation):
         edge = np.flatnonzero(mesh.neighbor[:, 0, 1] < 0)
         fill = mesh.interior(self.state.alpha)[edge, :, -1].sum(axis=1)
         if fill.size and fill.max() >= EDGE_FILL:
-            x_max = float(mesh.block_lo[edge, 0].max() + mesh.interior_shape[0] * mesh.block_dx[edge, 0].max())
-            raise HydroFailure(f"column_collapse: the deposit reached the far edge of the mesh, x = {x_max:g} m, and "
-                               f"would leave it; widen the mesh with scene.room (mesh length beyond the column in "
-                               f"run-outs of the scaling law)", self.time, int(edge[0]), None, {})
+            x_max = float(mesh.domain_hi[0])
+            if not self.grow():
+                raise HydroFailure(f"column_collapse: the deposit reached the far edge of the mesh, x = {x_max:g} m, "
+                                   f"and would leave it; widen the mesh with scene.room (mesh length beyond the "
+                                   f"column in run-outs of the scaling law)", self.time, int(edge[0]), None, {})
+            logger.info("column_collapse: the deposit reached x = %g m at t = %g s; the mesh grows to x = %g m",
+                        x_max, self.time, float(self.mesh.domain_hi[0]))
         return dt
+
+    def grow(self) -> bool:
+        """Add root blocks of void along x beyond x_max: a quarter of the mesh's length, at least
+        one column of blocks; False (nothing changed) on an adaptive mesh, on several MPI ranks
+        or where the mesh would pass :data:`GROWTH_LIMIT` times its first length.
+
+        The old blocks keep their state, ghosts included (``plan["keep"]``); the new ones are
+        void.  The per-block counters' totals go to block 0 and every per-block array is built
+        again for the new mesh, as after a regrid (:meth:`~impactpipe.hydro.solver.Simulation.mesh_replaced`),
+        so the totals and the outflow budget carry on."""
+        mesh = self.mesh
+        if mesh.adaptive or not self.partition.whole:
+            return False
+        if self.first_length is None:
+            self.first_length = float(mesh.domain_hi[0] - mesh.domain_lo[0])
+        nbx = int(mesh.blocks_per_axis[0])
+        added = max(1, nbx // 4)
+        root_dx = (mesh.domain_hi[0] - mesh.domain_lo[0]) / nbx
+        hi = mesh.domain_hi.copy()
+        hi[0] = mesh.domain_lo[0] + (nbx + added) * root_dx
+        if hi[0] - mesh.domain_lo[0] > GROWTH_LIMIT * self.first_length * (1.0 + 1e-12):
+            return False
+        blocks = mesh.blocks_per_axis.copy()
+        blocks[0] = nbx + added
+        grid = np.stack(np.meshgrid(np.arange(nbx, nbx + added), np.arange(blocks[1]), np.arange(blocks[2]),
+                                    indexing="ij"), axis=-1).reshape(-1, 3)
+        index = np.concatenate([mesh.block_index, grid])
+        level = np.zeros(len(index), dtype=np.int64)
+        order = np.argsort(morton_keys(level, index, 0), kind="stable")
+        new_mesh = BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, hi, blocks, mesh.block_cells, mesh.boundaries,
+                                         level[order], index[order], 0)
+        new_of_old = np.argsort(order)[:mesh.nblocks]
+        plan = {"keep": np.column_stack([new_of_old, np.arange(mesh.nblocks)]).astype(np.int64),
+                "children": np.zeros((0, 5), dtype=np.int64), "parents": np.zeros((0, 5), dtype=np.int64)}
+        self.mesh_replaced(new_mesh, moved_state(mesh, new_mesh, self.state, plan, 0, new_mesh.nblocks, np.zeros))
+        self.growths += 1
+        return True
 
 
 def _overlap(lo: np.ndarray, hi: np.ndarray, a: float, b: float) -> np.ndarray:
