@@ -637,30 +637,24 @@ class Simulation:
         plan = plan_leaves(self.mesh, refine, coarsen)
         if plan is None:
             return False
-        old = self.partition
-        self._good = {}  # taken again once the state has moved (_keep_good): not held through the move
-        new_mesh, self.state, self.partition = old.regrid(self, plan)
         self.regrids += 1
-        self.blocks_refined += len(plan["children"]) // 2 ** new_mesh.ndim
-        self.blocks_coarsened += len(plan["parents"]) // 2 ** new_mesh.ndim
-        self._adopt_mesh(new_mesh, old)
+        self.blocks_refined += len(plan["children"]) // 2 ** self.mesh.ndim
+        self.blocks_coarsened += len(plan["parents"]) // 2 ** self.mesh.ndim
+        self.move_to_mesh(plan)
         return True
 
-    def mesh_replaced(self, new_mesh: BlockMesh, new_state: HydroState) -> None:
-        """Continue on ``new_mesh`` with ``new_state`` (one process): a mesh a scene changed other
-        than by a regrid (the column collapse's growth along x,
-        :meth:`impactpipe.hydro.problems.column_collapse.ColumnCollapseSimulation.grow`).  The
-        first ghost layer is filled on every axis and the rest follows as after a regrid."""
-        self._good = {}
-        self.state = new_state
-        for axis in range(new_mesh.ndim):
-            self.partition.fill_first_ghost_layer(new_state, new_mesh, axis)
-        self._adopt_mesh(new_mesh, self.partition)
-
-    def _adopt_mesh(self, new_mesh: BlockMesh, old) -> None:
-        """After the state moved onto ``new_mesh`` (``old``: the partition it moved from): the
-        per-block counters' totals in block 0 (``old.summed_rows``), every other per-block array
-        built again for the new blocks, and the last-good copy taken again."""
+    def move_to_mesh(self, plan: dict, new_mesh: BlockMesh | None = None) -> None:
+        """Move the state onto the new blocks of ``plan`` (:func:`~impactpipe.hydro.amr.regrid.plan_leaves`:
+        ``level``, ``index`` of the new leaves, and rows ``keep``, ``children``, ``parents``) on
+        the mesh of its leaves, or on ``new_mesh`` where a scene changes the root grid (the column
+        collapse's growth along x,
+        :meth:`impactpipe.hydro.problems.column_collapse.ColumnCollapseSimulation.grow`); collective
+        on several ranks (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.regrid`).  The
+        per-block counters' totals go to block 0, every other per-block array is built again for
+        the new blocks and the last-good copy is taken again."""
+        old = self.partition
+        self._good = {}  # taken again once the state has moved (_keep_good): not held through the move
+        new_mesh, self.state, self.partition = old.regrid(self, plan, new_mesh)
         st = self.state
         self.mesh = new_mesh
         nb = new_mesh.nblocks

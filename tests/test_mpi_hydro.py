@@ -168,6 +168,32 @@ cli.main()
 """
 
 
+#: The column collapse of tests/test_column_collapse.py whose mesh grows along x (scene.room 0.01,
+#: 8 cells per height, to 3 tau), shared between the ranks when run under mpiexec; writes the
+#: state's interior cells, the counters and the clock to the file of argument 1 (.npz).
+GROWING_COLUMN = """
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[2])
+from test_column_collapse import HEIGHT, TAU, granular
+from impactpipe.hydro.parallel.distributed import collect, distribute
+from impactpipe.hydro.problems import column_collapse
+from impactpipe.pipeline import ranks
+sim = column_collapse.setup({"material": "sand", "height": HEIGHT, "width": HEIGHT, "cells_per_height": 8,
+                             "room": 0.01}, {"sand": granular(cohesion=0.0)}, block_cells=4, cfl=0.4)
+comm = ranks.join_world()
+if comm is not None:
+    distribute(sim, comm)
+sim.run(3.0 * TAU)
+if comm is not None:
+    collect(sim)
+if comm is None or comm.rank == 0:
+    np.savez(sys.argv[1], growths=sim.growths, clock=np.array([sim.time, sim.step_count]), boundary=sim.boundary,
+             floors=sim.floors, amounts=sim.amounts, block_lo=sim.mesh.block_lo,
+             **{name: sim.mesh.interior(array) for name, array in sim.state.arrays().items()})
+"""
+
+
 def impactpipe_run(config: Path, out: Path, *options: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "impactpipe.pipeline.cli", "run", str(config), "--out", str(out),
                            "--stage", "hydro", "-q", *options], env=ENV, capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S)
@@ -350,6 +376,24 @@ def test_a_killed_rank_stops_every_rank_with_a_clear_message_and_the_same_comman
     assert resumed.returncode == 0, resumed.stderr
     assert "resuming from checkpoint at" in (run_dir / "run.log").read_text()
     assert_same_answer(run_dir, serial["impact_adaptive"])
+
+
+@pytest.mark.parametrize("nranks", [2, 3])
+def test_a_column_collapse_whose_mesh_grows_on_several_ranks_gives_the_single_process_answer(nranks, tmp_path):
+    """The mesh's growth along x (a regrid onto a longer root grid) on several ranks: the state's
+    interior cells, the counters and the clock of the single process bit for bit."""
+    here = str(Path(__file__).resolve().parent)
+    serial = subprocess.run([sys.executable, "-c", GROWING_COLUMN, str(tmp_path / "serial.npz"), here], env=ENV,
+                            capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S)
+    shared = subprocess.run([ranks.mpiexec_path(), "-n", str(nranks), sys.executable, "-c", GROWING_COLUMN,
+                             str(tmp_path / "shared.npz"), here], env=ENV, capture_output=True, text=True,
+                            timeout=SUBPROCESS_TIMEOUT_S)
+    assert serial.returncode == 0 and shared.returncode == 0, serial.stderr + shared.stderr
+    want, got = np.load(tmp_path / "serial.npz"), np.load(tmp_path / "shared.npz")
+    assert want["growths"] >= 1
+    for name in want.files:
+        assert (got[name].dtype, got[name].shape) == (want[name].dtype, want[name].shape), name
+        assert got[name].tobytes() == want[name].tobytes(), name
 
 
 def test_more_ranks_than_blocks_is_a_clear_error(tmp_path):

@@ -33,7 +33,7 @@ import h5py
 import numpy as np
 
 from impactpipe.hydro.amr.plans import axis_plans, first_layer_plans
-from impactpipe.hydro.amr.regrid import moved_state, plan_sources, planned_costs, planned_mesh, remesh, summed_rows
+from impactpipe.hydro.amr.regrid import moved_state, plan_sources, planned_costs, planned_mesh, summed_rows
 from impactpipe.hydro.amr.transfer import (prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts,
                                            restrict_state_ghosts)
 from impactpipe.hydro.mesh.boundary import (
@@ -195,12 +195,14 @@ class WholeMesh:
         (:func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`: what the regrid reads)."""
         fill_first_ghost_layer(state, mesh, axis)
 
-    def regrid(self, sim, plan: dict) -> tuple:
+    def regrid(self, sim, plan: dict, new_mesh=None) -> tuple:
         """(new mesh, new state, new partition) of ``sim`` after the regrid ``plan``
-        (:func:`~impactpipe.hydro.amr.regrid.plan_leaves`): every block moved
-        (:func:`~impactpipe.hydro.amr.regrid.remesh`), the first ghost layer filled on every
-        axis, and this partition (every block again)."""
-        new_mesh, new_state = remesh(sim.mesh, sim.state, plan)
+        (:func:`~impactpipe.hydro.amr.regrid.plan_leaves`; onto ``new_mesh`` where given, else the
+        mesh of the plan's leaves): every block moved (:func:`~impactpipe.hydro.amr.regrid.moved_state`),
+        the first ghost layer filled on every axis, and this partition (every block again)."""
+        if new_mesh is None:
+            new_mesh = planned_mesh(sim.mesh, plan)
+        new_state = moved_state(sim.mesh, new_mesh, sim.state, plan, 0, new_mesh.nblocks, np.zeros)
         for axis in range(new_mesh.ndim):
             fill_first_ghost_layer(new_state, new_mesh, axis)
         return new_mesh, new_state, self
@@ -531,9 +533,10 @@ class BlockRanges(WholeMesh):
             self._plans[key] = mine
         return self._plans[key]
 
-    def regrid(self, sim, plan: dict) -> tuple:
+    def regrid(self, sim, plan: dict, new_mesh=None) -> tuple:
         """(new mesh, new state, new partition) of ``sim`` after the regrid ``plan`` (the same on
-        every rank), no rank holding more than its own blocks and halo before and after.
+        every rank; onto ``new_mesh`` where given, else the mesh of the plan's leaves), no rank
+        holding more than its own blocks and halo before and after.
 
         The new blocks are cut by their estimated cost (:func:`~.decomposition.owned_ranges` of
         :func:`~impactpipe.hydro.amr.regrid.planned_costs`: the old blocks' costs,
@@ -546,7 +549,8 @@ class BlockRanges(WholeMesh):
         (:func:`~impactpipe.hydro.amr.regrid.moved_state`) and fills their first ghost layer on
         every axis through the new partition's exchanges (:meth:`fill_first_ghost_layer`)."""
         mesh, state = sim.mesh, sim.state
-        new_mesh = planned_mesh(mesh, plan)
+        if new_mesh is None:
+            new_mesh = planned_mesh(mesh, plan)
         costs = np.zeros(mesh.nblocks, dtype=np.int64)
         costs[self.blocks] = block_costs(mesh, state.alpha[self.blocks])
         self.share_rows(costs)

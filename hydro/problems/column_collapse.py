@@ -42,8 +42,8 @@ default) each cell face carries an elastic-plastic shear stress against the odd-
 (:mod:`impactpipe.hydro.strength.face_shear`), for use with ``hourglass`` 0.  The mesh spans L0 plus
 ``room`` run-outs of the law; when the deposit reaches the mesh's far edge
 :class:`ColumnCollapseSimulation` grows the mesh along x (up to :data:`GROWTH_LIMIT` times its
-first length, on one process and a mesh of one level) or else stops the run with an error.  A strengthless material collapses as a fluid
-(dam break) on a free-slip floor.
+first length, on a mesh of one level) or else stops the run with an error.  A strengthless
+material collapses as a fluid (dam break) on a free-slip floor.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ import logging
 
 import numpy as np
 
-from impactpipe.hydro.amr.regrid import moved_state, refine_initial, rule_from_config
+from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
 from impactpipe.hydro.eos import energy_from_pressure, pressure_sound_speed, reference_density
 from impactpipe.hydro.gravity import ExternalGravity
 from impactpipe.hydro.mesh.blocks import BlockMesh, morton_keys
@@ -184,29 +184,33 @@ class ColumnCollapseSimulation(Simulation):
     def step(self, dt_max: float = np.inf) -> float:
         dt = super().step(dt_max)
         mesh = self.mesh
-        edge = np.flatnonzero(mesh.neighbor[:, 0, 1] < 0)
+        own = np.arange(mesh.nblocks)[self.partition.blocks]
+        edge = own[mesh.neighbor[own, 0, 1] < 0]
         fill = mesh.interior(self.state.alpha)[edge, :, -1].sum(axis=1)
-        if fill.size and fill.max() >= EDGE_FILL:
+        if self.partition.any(bool(fill.size and fill.max() >= EDGE_FILL)):
             x_max = float(mesh.domain_hi[0])
             if not self.grow():
                 raise HydroFailure(f"column_collapse: the deposit reached the far edge of the mesh, x = {x_max:g} m, "
                                    f"and would leave it; widen the mesh with scene.room (mesh length beyond the "
-                                   f"column in run-outs of the scaling law)", self.time, int(edge[0]), None, {})
-            logger.info("column_collapse: the deposit reached x = %g m at t = %g s; the mesh grows to x = %g m",
-                        x_max, self.time, float(self.mesh.domain_hi[0]))
+                                   f"column in run-outs of the scaling law)", self.time,
+                                   int(edge[0]) if edge.size else -1, None, {})
+            if self.partition.is_root:
+                logger.info("column_collapse: the deposit reached x = %g m at t = %g s; the mesh grows to x = %g m",
+                            x_max, self.time, float(self.mesh.domain_hi[0]))
         return dt
 
     def grow(self) -> bool:
         """Add root blocks of void along x beyond x_max: a quarter of the mesh's length, at least
-        one column of blocks; False (nothing changed) on an adaptive mesh, on several MPI ranks
-        or where the mesh would pass :data:`GROWTH_LIMIT` times its first length.
+        one column of blocks; False (nothing changed) on an adaptive mesh or where the mesh would
+        pass :data:`GROWTH_LIMIT` times its first length.  Collective on several MPI ranks.
 
         The old blocks keep their state, ghosts included (``plan["keep"]``); the new ones are
         void.  The per-block counters' totals go to block 0 and every per-block array is built
-        again for the new mesh, as after a regrid (:meth:`~impactpipe.hydro.solver.Simulation.mesh_replaced`),
-        so the totals and the outflow budget carry on."""
+        again for the new mesh, as after a regrid
+        (:meth:`~impactpipe.hydro.solver.Simulation.move_to_mesh`), so the totals and the outflow
+        budget carry on."""
         mesh = self.mesh
-        if mesh.adaptive or not self.partition.whole:
+        if mesh.adaptive:
             return False
         if self.first_length is None:
             self.first_length = float(mesh.domain_hi[0] - mesh.domain_lo[0])
@@ -227,9 +231,10 @@ class ColumnCollapseSimulation(Simulation):
         new_mesh = BlockMesh.from_leaves(mesh.geometry, mesh.domain_lo, hi, blocks, mesh.block_cells, mesh.boundaries,
                                          level[order], index[order], 0)
         new_of_old = np.argsort(order)[:mesh.nblocks]
-        plan = {"keep": np.column_stack([new_of_old, np.arange(mesh.nblocks)]).astype(np.int64),
+        plan = {"level": new_mesh.block_level, "index": new_mesh.block_index,
+                "keep": np.column_stack([new_of_old, np.arange(mesh.nblocks)]).astype(np.int64),
                 "children": np.zeros((0, 5), dtype=np.int64), "parents": np.zeros((0, 5), dtype=np.int64)}
-        self.mesh_replaced(new_mesh, moved_state(mesh, new_mesh, self.state, plan, 0, new_mesh.nblocks, np.zeros))
+        self.move_to_mesh(plan, new_mesh)
         self.growths += 1
         return True
 
