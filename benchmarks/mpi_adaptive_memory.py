@@ -23,29 +23,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
-from impactpipe.hydro.parallel.distributed import distribute_from_root
-from impactpipe.pipeline import derived, load_config
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from mpi_scaling import reset_peak, resident  # noqa: E402
+
+from impactpipe.hydro.parallel.distributed import distribute_from_root  # noqa: E402
+from impactpipe.pipeline import derived, load_config  # noqa: E402
 
 CONFIG = "tests/configs/mpi/impact_adaptive.yaml"
-
-
-def resident() -> tuple[int, int]:
-    """(resident set, its peak since the last :func:`reset_peak`) of this process (B): VmRSS and
-    VmHWM of ``/proc/self/status``."""
-    fields = {}
-    with open("/proc/self/status") as status:
-        for line in status:
-            name, _, value = line.partition(":")
-            if name in ("VmRSS", "VmHWM"):
-                fields[name] = int(value.split()[0]) * 1024
-    return fields["VmRSS"], fields["VmHWM"]
-
-
-def reset_peak() -> None:
-    """Start VmHWM again from the current resident set (``5`` to ``/proc/self/clear_refs``)."""
-    with open("/proc/self/clear_refs", "w") as refs:
-        refs.write("5")
 
 
 def build(cells_per_radius: int, block_cells: int):
