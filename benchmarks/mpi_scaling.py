@@ -109,7 +109,7 @@ def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
     result; the others return an empty dict)."""
     sim = build(case, quick=False, block_cells=None if case.startswith("2d-cyl") else block_cells) \
         if comm.rank == 0 else None
-    reasons = comm.bcast(unsupported(sim, comm.size) if comm.rank == 0 and comm.size > 1 else [], root=0)
+    reasons = comm.bcast(unsupported(sim.mesh, comm.size) if comm.rank == 0 and comm.size > 1 else [], root=0)
     if reasons and comm.rank != 0:
         return {}
     if reasons:

@@ -39,7 +39,8 @@ from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, 
 from impactpipe.hydro.gravity import gravity_from_spec
 from impactpipe.hydro.mesh.blocks import BlockMesh
 from impactpipe.hydro.output.snapshot import Snapshot
-from impactpipe.hydro.parallel.distributed import WholeMesh
+from impactpipe.hydro.parallel.distributed import WholeMesh, checkpoint_partition
+from impactpipe.hydro.parallel.owned_memory import read_owned_rows, receive_halos
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
 from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, pack_damage
@@ -133,13 +134,22 @@ class Simulation:
             stores to rebuild it) and ``work`` (J): uniform
             (:class:`impactpipe.hydro.gravity.ExternalGravity`) or the bodies' own
             (:class:`impactpipe.hydro.self_gravity.SelfGravity`).
+        partition: which blocks this process advances
+            (:mod:`impactpipe.hydro.parallel.distributed`); None: every block
+            (:class:`~impactpipe.hydro.parallel.distributed.WholeMesh`).  A
+            :class:`~impactpipe.hydro.parallel.distributed.BlockRanges` here needs ``state`` to
+            hold this rank's rows (:meth:`from_checkpoint`); the strength work arrays are the
+            partition's zeros.
+        fill_ghosts: fill the ghost cells of an adaptive mesh's state from its interior; False
+            keeps them as ``state`` holds them (a checkpoint's).
     """
 
     def __init__(self, mesh: BlockMesh, material_names: list[str], eos_specs: list[dict], state: HydroState,
                  cfl: float = 0.4, shear_modulus: Iterable[float] | None = None, time: float = 0.0,
                  tracers=None, tensile_strength: Iterable[float] | None = None,
                  strength: list[dict | None] | None = None, gravity=None,
-                 refinement: RefinementRule | None = None, time_stepping: str = GLOBAL):
+                 refinement: RefinementRule | None = None, time_stepping: str = GLOBAL, partition=None,
+                 fill_ghosts: bool = True):
         self.gravity = gravity
         #: ``"global"`` or ``"per_level"`` (:mod:`impactpipe.hydro.amr.subcycle`); may be changed
         #: between steps, checked by :meth:`check_time_stepping`.
@@ -220,7 +230,7 @@ class Simulation:
         self.observer: Callable[[str, int], None] | None = None
         #: Which blocks this process advances and how it combines with the others
         #: (:mod:`impactpipe.hydro.parallel.distributed`); every block by default.
-        self.partition = WholeMesh()
+        self.partition = WholeMesh() if partition is None else partition
         nb = mesh.nblocks
         self.boundary = np.zeros((nb, BND_MATERIAL + state.nmat))
         self.floors = np.zeros((nb, NFLOOR), dtype=np.int64)
@@ -248,6 +258,8 @@ class Simulation:
         fresh = porous and state.arhoq.shape[1] == 0
         self.strength = MaterialStrength(arrays, mesh, state.nmat, damage, self.porosity) if arrays.enabled else None
         if self.strength is not None:
+            if partition is not None:
+                self.strength.work = partition.zeros(self.strength.work.shape)
             self.strength.prepare_state(state)
             for k, strains in self.strength.flaw_strains.items():  # recorded, so a checkpoint resumes with them
                 self.strength_specs[k] = {**self.strength_specs[k],
@@ -268,7 +280,7 @@ class Simulation:
         self._rate_work = allocate_rate_work(numba.config.NUMBA_NUM_THREADS, mesh.padded_shape)
         self._face_flux = allocate_face_flux(mesh.nblocks if mesh.adaptive else 0, mesh.padded_shape, mesh.ndim,
                                              state.nmat, state.arhoq.shape[1])
-        if mesh.adaptive:
+        if mesh.adaptive and fill_ghosts:
             for axis in range(mesh.ndim):
                 fill_state_ghosts(state, mesh, axis)
         self._keep_good()
@@ -804,19 +816,32 @@ class Simulation:
         momentum budget; ``momentum_conserved`` (3 bools) the components that nothing but the
         fluxes and the counted floors change: every one in 3d and 2d-planar, z alone in
         2d-cylindrical, less those along an external g, none under self-gravity
-        (:func:`impactpipe.hydro.budget.conservation_budget`).  Collective on several ranks
-        (every block is shared first).
+        (:func:`impactpipe.hydro.budget.conservation_budget`).  Collective on several ranks:
+        each process sums its own blocks, every process receives every block's sums
+        (:meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.share_rows`, a row of
+        M + 5 values and one of the boundary counters per block) and adds them up in block
+        order, so any number of ranks gives the same bits and no process gathers the state.
         """
-        self.partition.share(self)
         mesh = self.mesh
-        vol = mesh.cell_volumes()
-        arho = mesh.interior(self.state.arho)
-        material_mass = (arho * vol[:, None]).sum(axis=(0, 2, 3, 4))
-        mom = mesh.interior(self.state.momentum)
-        momentum = (mom * vol[:, None]).sum(axis=(0, 2, 3, 4))
-        magnitude = float((np.sqrt((mom * mom).sum(axis=1)) * vol).sum())
-        energy = float((mesh.interior(self.state.energy)[:, 0] * vol).sum())
-        bnd = self.boundary.sum(axis=0)
+        own = self.partition.blocks
+        nmat = self.state.nmat
+        vol = mesh.cell_volumes(own)[:, None]
+        sums = np.zeros((mesh.nblocks, nmat + 5))
+        sums[own, :nmat] = (mesh.interior(self.state.arho[own]) * vol).sum(axis=(2, 3, 4))
+        mom = mesh.interior(self.state.momentum[own])
+        sums[own, nmat : nmat + 3] = (mom * vol).sum(axis=(2, 3, 4))
+        sums[own, nmat + 3] = (np.sqrt((mom * mom).sum(axis=1)) * vol[:, 0]).sum(axis=(1, 2, 3))
+        sums[own, nmat + 4] = (mesh.interior(self.state.energy[own])[:, 0] * vol[:, 0]).sum(axis=(1, 2, 3))
+        boundary = np.zeros_like(self.boundary)
+        boundary[own] = self.boundary[own]
+        self.partition.share_rows(sums)
+        self.partition.share_rows(boundary)
+        total = sums.sum(axis=0)
+        material_mass = total[:nmat]
+        momentum = total[nmat : nmat + 3]
+        magnitude = float(total[nmat + 3])
+        energy = float(total[nmat + 4])
+        bnd = boundary.sum(axis=0)
         out = {
             "mass": float(material_mass.sum()),
             "material_mass": material_mass,
@@ -980,14 +1005,27 @@ class Simulation:
         }
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path) -> "Simulation":
-        """Rebuild a Simulation written by :meth:`save_checkpoint`; it continues bit for bit."""
+    def from_checkpoint(cls, path: str | Path, comm=None) -> "Simulation":
+        """Rebuild a Simulation written by :meth:`save_checkpoint`; it continues bit for bit.
+
+        With ``comm`` (an MPI communicator; collective) the run is shared between its ranks as
+        :func:`~impactpipe.hydro.parallel.distributed.distribute` would share the whole run,
+        but no rank holds more of the state than its own blocks and their halo: the blocks are
+        cut by the saved state's costs
+        (:func:`~impactpipe.hydro.parallel.distributed.checkpoint_partition`), each rank reads
+        its own rows (:func:`~impactpipe.hydro.parallel.owned_memory.read_owned_rows`) and
+        receives its halo from their owners
+        (:func:`~impactpipe.hydro.parallel.owned_memory.receive_halos`).  Raises ValueError on
+        every rank for a mesh it cannot share (more ranks than blocks)."""
+        if comm is not None:
+            comm.Barrier()  # a checkpoint the ranks have just written is complete (renamed by rank 0)
         with h5py.File(path, "r") as fh:
             mesh_data = dict(fh["mesh"].attrs)
             mesh_data.update({key: fh["mesh"][key][()] for key in fh["mesh"]})
             mesh = BlockMesh.from_arrays(mesh_data)
             nmat = fh["state/alpha"].shape[1]
-            arrays = {name: fh["state"][name][()] for name in FIELDS if name in fh["state"]}
+            partition = None if comm is None else checkpoint_partition(comm, mesh, fh["state/alpha"])
+            arrays = {name: read_owned_rows(fh["state"][name], partition) for name in FIELDS if name in fh["state"]}
             arrays.setdefault("arhoq", np.zeros((mesh.nblocks, 0) + mesh.padded_shape))
             state = HydroState(**arrays)
             strength = json.loads(fh.attrs.get("strength_specs", "null"))
@@ -997,12 +1035,10 @@ class Simulation:
                       tensile_strength=fh["counters/tensile_strength"][()],
                       time=float(fh.attrs["time"]), strength=strength,
                       refinement=_rule_from_json(fh.attrs.get("refinement")),
-                      time_stepping=str(fh.attrs.get("time_stepping", GLOBAL)))
-            if mesh.adaptive:  # the ghosts as saved (the constructor refilled them), so the run continues exactly
-                for name in FIELDS:
-                    if name in fh["state"]:
-                        np.copyto(getattr(sim.state, name), fh["state"][name][()])
-                sim._keep_good()
+                      time_stepping=str(fh.attrs.get("time_stepping", GLOBAL)), partition=partition,
+                      fill_ghosts=False)  # the ghosts as saved, so an adaptive run continues exactly
+            if partition is not None:
+                receive_halos(sim, partition)
             sim.regrids = int(fh.attrs.get("regrids", 0))
             sim.level_step_retakes = int(fh.attrs.get("level_step_retakes", 0))
             sim.settled_cells = int(fh.attrs.get("settled_cells", 0))

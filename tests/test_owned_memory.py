@@ -35,7 +35,9 @@ ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 
 #: Argument 1: the config, which rank 0 alone builds; argument 3: the steps on the ranks (on an
 #: adaptive mesh at least that many, then on until a regrid has refined blocks and one has
-#: coarsened blocks since the sharing began), then a snapshot and a checkpoint; writes, per
+#: coarsened blocks since the sharing began), then a snapshot and a checkpoint (with argument 4
+#: "resume", the run is then resumed from the checkpoint on the ranks, each reading its own
+#: blocks, and takes two more steps and a snapshot: what follows counts that run); writes, per
 #: rank, to OUT.rankR.json (argument 2): the blocks refined and coarsened meanwhile and, for
 #: each array, the values outside the rank's own rows and its halo (the cells of its ghost
 #: fills' strips, of the coarse/fine plans' exchanges on an adaptive mesh and, for the state,
@@ -64,6 +66,12 @@ for step in range(60):
     sim.step()
 sim.snapshot()
 sim.save_checkpoint(sys.argv[2] + ".checkpoint.h5")
+if sys.argv[4:] == ["resume"]:
+    from impactpipe.hydro.solver import Simulation
+    sim = Simulation.from_checkpoint(sys.argv[2] + ".checkpoint.h5", comm)
+    for _ in range(2):
+        sim.step()
+    sim.snapshot()
 part = sim.partition
 strips = [route for routes in part.routes for route in routes]
 if sim.mesh.adaptive:
@@ -135,6 +143,45 @@ with open(f"{sys.argv[3]}.rank{comm.rank}.json", "w") as out:
     out.write(json.dumps({"grown": grown, "whole": whole}))
 """
 
+#: Arguments 1 and 2: a small config and the same scene on a finer mesh, 3: OUT.  For each, rank
+#: 0 builds the run and shares it out, the ranks write a checkpoint, and the run is resumed from
+#: it twice: rank 0 reading the whole state and sharing it out, then every rank reading its own
+#: blocks (:meth:`Simulation.from_checkpoint` with the communicator); the small run first, so
+#: that the kernels are loaded before the measurement.  Writes, per rank, to OUT.rankR.json: how
+#: much the peak resident set (VmHWM, B) grew over the resident set before each resume of the
+#: fine run, and the bytes of its whole state.
+RESUME_PEAK = """
+import gc, json, sys
+from impactpipe.hydro.parallel.distributed import distribute_from_root
+from impactpipe.hydro.solver import Simulation
+from impactpipe.pipeline import derived, load_config, ranks
+from impactpipe.pipeline.adapters.hydro import build_simulation
+def resident(name):
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) * 1024 for line in status if line.startswith(name + ":"))
+def grown(load):
+    gc.collect()
+    with open("/proc/self/clear_refs", "w") as refs:
+        refs.write("5")
+    before = resident("VmRSS")
+    load()
+    return resident("VmHWM") - before
+comm = ranks.join_world()
+for path in sys.argv[1:3]:
+    config = load_config(path)
+    sim = distribute_from_root(build_simulation(config, derived.derive(config)) if comm.rank == 0 else None, comm)
+    checkpoint = sys.argv[3] + ".checkpoint.h5"
+    sim.save_checkpoint(checkpoint)
+    whole = sum(array.nbytes for array in sim.state.arrays().values())
+    del sim
+    out = {"whole": whole,
+           "rank_0_reads": grown(lambda: distribute_from_root(Simulation.from_checkpoint(checkpoint)
+                                                               if comm.rank == 0 else None, comm)),
+           "each_rank_reads": grown(lambda: Simulation.from_checkpoint(checkpoint, comm))}
+with open(f"{sys.argv[3]}.rank{comm.rank}.json", "w") as out_file:
+    out_file.write(json.dumps(out))
+"""
+
 
 def test_lazy_zeros_commits_a_page_only_when_written():
     array = lazy_zeros((4, 3, 1024))
@@ -145,10 +192,11 @@ def test_lazy_zeros_commits_a_page_only_when_written():
     assert lazy_zeros((0, 3)).shape == (0, 3)
 
 
-def unwritten(path: Path, steps: int, out: Path) -> list[dict]:
-    """What :data:`UNWRITTEN` counts on each of 3 ranks for the config at ``path``."""
+def unwritten(path: Path, steps: int, out: Path, *resume: str) -> list[dict]:
+    """What :data:`UNWRITTEN` counts on each of 3 ranks for the config at ``path`` (``resume``:
+    "resume", or nothing)."""
     result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", UNWRITTEN, str(path), str(out),
-                             str(steps)], env=ENV, capture_output=True, text=True, timeout=600)
+                             str(steps), *resume], env=ENV, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     return [json.loads(Path(f"{out}.rank{rank}.json").read_text()) for rank in range(3)]
 
@@ -185,6 +233,17 @@ def test_on_an_adaptive_mesh_a_rank_writes_only_its_own_blocks_and_halo_across_r
     assert_own_blocks_and_halo_only(counted)
 
 
+@pytest.mark.parametrize("config_path", [CONFIG, ADAPTIVE_CONFIG], ids=["uniform", "adaptive"])
+def test_a_run_resumed_on_several_ranks_reads_and_writes_only_each_ranks_own_blocks_and_halo(config_path, tmp_path):
+    """:meth:`~impactpipe.hydro.solver.Simulation.from_checkpoint` on the ranks: rank 0 included,
+    no rank reads the whole state from the checkpoint or writes outside its blocks and halo."""
+    config = yaml.safe_load(config_path.read_text())
+    config["hydro"]["tracers"] = {"enabled": True, "count": 60, "history_interval": 0.01}
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(config))
+    assert_own_blocks_and_halo_only(unwritten(path, 3, tmp_path / "unwritten", "resume"))
+
+
 def test_only_rank_0_holds_the_whole_state_while_the_run_is_shared_out(tmp_path):
     config = yaml.safe_load(CONFIG.read_text())
     paths = []
@@ -204,3 +263,25 @@ def test_only_rank_0_holds_the_whole_state_while_the_run_is_shared_out(tmp_path)
     # rank built the run: 94 MB on each of the 3); a rank holds its own blocks (28 % and 41 % of
     # them here), their last-good copy and work arrays, and the pages of its halo (42 and 52 MB).
     assert max(grown[1:]) < 0.75 * grown[0], grown
+
+
+def test_no_rank_holds_the_whole_state_when_a_run_resumes_on_several_ranks(tmp_path):
+    config = yaml.safe_load(CONFIG.read_text())
+    paths = []
+    for name, cells, block in (("small", 2, 4), ("fine", 24, 16)):
+        config["hydro"].update(cells_per_projectile_radius=cells, block_cells=block)
+        paths.append(tmp_path / f"impact_strength_{name}.yaml")
+        paths[-1].write_text(yaml.safe_dump(config))
+    out = tmp_path / "resume"
+    # glibc's fixed mmap threshold: freed arrays go back to the system, so each resume's growth is its own
+    env = {**ENV, "MALLOC_MMAP_THRESHOLD_": "131072"}
+    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", RESUME_PEAK, *map(str, paths),
+                             str(out)], env=env, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    counted = [json.loads(Path(f"{out}.rank{rank}.json").read_text()) for rank in range(3)]
+    whole = counted[0]["whole"]
+    assert whole > 50e6
+    assert counted[0]["rank_0_reads"] > whole, counted  # rank 0 read the whole state
+    # Each rank reading its own blocks holds them, their last-good copy and work arrays and its
+    # halo's pages, as the ranks other than 0 did before
+    assert max(c["each_rank_reads"] for c in counted) < 0.75 * counted[0]["rank_0_reads"], counted

@@ -347,17 +347,19 @@ class BlockMesh:
             out[:, d] = c.reshape(shape)
         return out
 
-    def cell_volumes(self) -> np.ndarray:
-        """(NB, nx, ny, nz) physical interior cell volumes (m^3), see the module docstring."""
+    def cell_volumes(self, blocks: slice = slice(None)) -> np.ndarray:
+        """(B, nx, ny, nz) physical interior cell volumes (m^3) of the B blocks ``blocks`` (every
+        block by default), see the module docstring."""
         n = self.interior_shape
-        vol = np.ones((self.nblocks,) + n)
+        lo, dx = self.block_lo[blocks], self.block_dx[blocks]
+        vol = np.ones((len(lo),) + n)
         for d in range(self.ndim):
-            edges = self.block_lo[:, d, None] + np.arange(n[d] + 1)[None, :] * self.block_dx[:, d, None]
+            edges = lo[:, d, None] + np.arange(n[d] + 1)[None, :] * dx[:, d, None]
             if self.geometry == "2d-cylindrical" and d == 0:
                 width = np.pi * (edges[:, 1:] ** 2 - edges[:, :-1] ** 2)
             else:
                 width = edges[:, 1:] - edges[:, :-1]
-            shape = [self.nblocks, 1, 1, 1]
+            shape = [len(lo), 1, 1, 1]
             shape[d + 1] = n[d]
             vol = vol * width.reshape(shape)
         return vol

@@ -4,7 +4,8 @@ The Simulation asks its ``partition`` which blocks to advance (``blocks``, a sli
 block order), to fill their ghosts, to combine the time step and the failure checks over
 every process, to regrid its blocks, and to bring every block to the process that writes an
 output, or to open the output with the other processes where they write it together
-(``writes_together``), and (for the totals) to bring every block to every process.
+(``writes_together``), and to give every process every block's rows of small per-block
+arrays (the totals' sums, the refinement indicators).
 :class:`WholeMesh` is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
 of one run (:func:`distribute_from_root` or :func:`distribute` attaches it, :func:`collect`
 ends it).
@@ -219,9 +220,6 @@ class WholeMesh:
     def from_owner(self, block: int, make: Callable[[], Any]) -> Any:
         """``make()`` evaluated by the process that owns ``block``, returned on every process."""
         return make()
-
-    def share(self, sim) -> None:
-        """Bring every block of ``sim`` up to date in this process (nothing to do)."""
 
     def agree(self, value: Any) -> Any:
         """Rank 0's ``value`` on every process."""
@@ -639,11 +637,6 @@ class BlockRanges(WholeMesh):
         owner = int(np.searchsorted(self.cuts, block, side="right")) - 1
         return self.comm.bcast(make() if self.comm.rank == owner else None, root=owner)
 
-    def share(self, sim) -> None:
-        """Every rank receives every rank's owned blocks: state (ghosts included) and per-block counters."""
-        share_owned_blocks(self.comm, list(sim.state.arrays().values()) + list(sim._counter_arrays()), self.cuts,
-                           self.traffic)
-
     def agree(self, value: Any) -> Any:
         return self.comm.bcast(value, root=0)
 
@@ -708,11 +701,11 @@ def parallel_hdf5() -> bool:
     return bool(h5py.get_config().mpi) and os.environ.get(PARALLEL_HDF5_VARIABLE, "1") != "0"
 
 
-def unsupported(sim, nranks: int) -> list[str]:
-    """Why ``sim`` cannot run on ``nranks`` ranks in this version (empty when it can)."""
+def unsupported(mesh, nranks: int) -> list[str]:
+    """Why a run on ``mesh`` cannot share it between ``nranks`` ranks in this version (empty when it can)."""
     reasons = []
-    if nranks > sim.mesh.nblocks:
-        reasons.append(f"more ranks ({nranks}) than blocks ({sim.mesh.nblocks})")
+    if nranks > mesh.nblocks:
+        reasons.append(f"more ranks ({nranks}) than blocks ({mesh.nblocks})")
     return reasons
 
 
@@ -733,7 +726,7 @@ def distribute_from_root(sim, comm):
     state: its memory at the start is its own blocks, its halo and the mesh's per-block
     tables.  Raises ValueError on every rank, before anything else moves, for what
     this version does not distribute (:func:`unsupported`)."""
-    refuse(comm.bcast(unsupported(sim, comm.size) if comm.rank == 0 else None, root=0))
+    refuse(comm.bcast(unsupported(sim.mesh, comm.size) if comm.rank == 0 else None, root=0))
     described = comm.bcast(outline(sim) if comm.rank == 0 else None, root=0)
     if comm.rank != 0:
         sim = from_outline(described)
@@ -754,7 +747,7 @@ def distribute(sim, comm) -> None:
     ValueError for what this version does not distribute (:func:`unsupported`) before anything
     moves.
     """
-    refuse(unsupported(sim, comm.size))
+    refuse(unsupported(sim.mesh, comm.size))
     broadcast_arrays(comm, list(sim._counter_arrays()))
     sim.tracers = comm.bcast(sim.tracers, root=0)
     cuts = comm.bcast(owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size) if comm.rank == 0 else None,
@@ -762,9 +755,44 @@ def distribute(sim, comm) -> None:
     sim.partition = BlockRanges(comm, sim.mesh, cuts)
     receive_owned_blocks(sim, sim.partition)
     sim._keep_good()
+    log_cuts(comm, cuts)
+
+
+def log_cuts(comm, cuts: np.ndarray) -> None:
+    """Rank 0 logs each rank's blocks."""
     if comm.rank == 0:
         log.info("hydro on %d MPI ranks: blocks %s", comm.size,
                  ", ".join(f"{lo}-{hi - 1}" for lo, hi in zip(cuts[:-1], cuts[1:])))
+
+
+#: Blocks whose volume fractions rank 0 reads at a time for the costs of :func:`checkpoint_partition`.
+COST_CHUNK_BLOCKS = 256
+
+
+def checkpoint_partition(comm, mesh, alpha) -> BlockRanges:
+    """The ranks' :class:`BlockRanges` of a checkpoint's ``mesh`` (collective): the blocks cut as
+    :func:`distribute` cuts them, by the costs of the saved volume fractions (the HDF5 dataset
+    ``alpha``, (NB, M, NX, NY, NZ)), which rank 0 reads :data:`COST_CHUNK_BLOCKS` blocks at a time
+    and broadcasts.  Raises ValueError on every rank for what this version does not distribute
+    (:func:`unsupported`)."""
+    refuse(unsupported(mesh, comm.size))
+    cuts = None
+    if comm.rank == 0:
+        costs = np.concatenate([block_costs(mesh, alpha[lo : lo + COST_CHUNK_BLOCKS])
+                                for lo in range(0, mesh.nblocks, COST_CHUNK_BLOCKS)])
+        cuts = owned_ranges(costs, comm.size)
+    cuts = comm.bcast(cuts, root=0)
+    log_cuts(comm, cuts)
+    return BlockRanges(comm, mesh, cuts)
+
+
+def collect_counters(sim) -> None:
+    """End a shared run without gathering its state (collective): rank 0 receives every block's
+    counters (boundary, floors, amounts, porosity and strength counts), from which it reports
+    the floors; the state stays with its owners.  With :meth:`~impactpipe.hydro.solver.Simulation.totals`
+    (collective too, before this) it is what the end of a pipeline run needs, so rank 0 never
+    gathers the whole state.  Nothing to do on one process."""
+    sim.partition.gather_to_root(list(sim._counter_arrays()))
 
 
 def collect(sim) -> None:

@@ -20,7 +20,10 @@ per-block work arrays (one Scatterv each, :func:`~.exchange.scatter_owned_blocks
 cells from their owners (one exchange of strips); whatever whole arrays a rank held are
 dropped.  Nothing but those rows and cells is written afterwards on that rank; on an adaptive
 mesh each regrid builds a rank's new blocks in new such arrays from the old blocks their owners
-send it (:meth:`~.distributed.BlockRanges.regrid`).  tests/test_owned_memory.py checks that no
+send it (:meth:`~.distributed.BlockRanges.regrid`).  A run resumed from a checkpoint on
+several ranks is not built on rank 0 at all: each rank reads its own rows from the file
+(:func:`read_owned_rows`, :meth:`~impactpipe.hydro.solver.Simulation.from_checkpoint`) and
+receives its halo (:func:`receive_halos`).  tests/test_owned_memory.py checks that no
 other page is written, on a uniform mesh and across an adaptive mesh's regrids, and that a
 rank other than 0 never holds the whole state.
 """
@@ -159,20 +162,41 @@ def receive_halo(arrays: list[np.ndarray], partition, routes: list[Route]) -> No
 def receive_owned_blocks(sim, partition) -> None:
     """Replace the per-block arrays of ``sim`` (a Simulation just given its
     ``partition``, a :class:`~.distributed.BlockRanges`) that this rank writes only for its own
-    blocks by :func:`owned_rows` of rank 0's: the state, with the cells of the ghost fills'
-    strips and of the tracers' neighbourhood received from their owners
-    (:attr:`~.distributed.BlockRanges.field_routes`, :attr:`~.distributed.BlockRanges.neighbourhood`),
-    and the strength model's work arrays (with the strips) and face stresses (own rows only:
-    each block updates and reads its own faces, :mod:`impactpipe.hydro.strength.face_shear`)."""
+    blocks by :func:`owned_rows` of rank 0's: the state and the strength model's work arrays,
+    then :func:`receive_halos`, and the face stresses (own rows only: each block updates and
+    reads its own faces, :mod:`impactpipe.hydro.strength.face_shear`)."""
     state = sim.state
     for name in FIELDS:  # one array at a time, each whole one dropped before the next is received
         setattr(state, name, owned_rows(getattr(state, name), partition))
-    fields = list(state.arrays().values())
-    receive_halo(fields, partition, partition.field_routes)
-    receive_halo(fields, partition, partition.neighbourhood)
     strength = sim.strength
     if strength is not None:
         strength.work = owned_rows(strength.work, partition)
-        receive_halo([strength.work], partition, partition.field_routes)
         if strength.face is not None:
             strength.face = owned_rows(strength.face, partition)
+    receive_halos(sim, partition)
+
+
+def receive_halos(sim, partition) -> None:
+    """Receive from their owners the halo cells of ``sim``'s state (the ghost fills' strips and
+    the tracers' neighbourhood: :attr:`~.distributed.BlockRanges.field_routes`,
+    :attr:`~.distributed.BlockRanges.neighbourhood`) and of the strength model's work arrays
+    (the strips), every rank holding its own blocks' rows (collective)."""
+    fields = list(sim.state.arrays().values())
+    receive_halo(fields, partition, partition.field_routes)
+    receive_halo(fields, partition, partition.neighbourhood)
+    if sim.strength is not None:
+        receive_halo([sim.strength.work], partition, partition.field_routes)
+
+
+def read_owned_rows(dataset, partition) -> np.ndarray:
+    """The per-block array of the HDF5 ``dataset`` (NB, ...): whole without a ``partition``; with
+    one (a :class:`~.distributed.BlockRanges`), a :func:`lazy_zeros` array of its shape holding
+    only this rank's rows, read from the file (huge pages within them), the others zero and
+    uncommitted."""
+    if partition is None:
+        return dataset[()]
+    kept = lazy_zeros(dataset.shape, dataset.dtype, (partition.lo, partition.hi))
+    rows = np.s_[partition.lo : partition.hi]
+    if kept.size:
+        dataset.read_direct(kept, rows, rows)
+    return kept

@@ -8,10 +8,14 @@ checkpoint when its config hash is unchanged.  A run that fails (NaN, negative d
 time-step collapse) writes its last good state to the checkpoint and raises.
 
 On several MPI ranks (:mod:`impactpipe.pipeline.ranks`) rank 0 runs this stage as above and
-sends the other ranks its order; rank 0 alone builds the simulation (or reads it from the
-checkpoint) and the other ranks receive their blocks of it (:func:`follow_hydro_stage`,
-:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`), so that on a uniform mesh no
-rank but 0 ever holds the whole state.  Rank 0 decides after
+sends the other ranks its order; rank 0 alone builds a new simulation and the other ranks
+receive their blocks of it (:func:`follow_hydro_stage`,
+:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`), so that no rank but 0
+ever holds the whole state; a resumed run is read from the checkpoint by every rank, each its
+own blocks (:meth:`Simulation.from_checkpoint`), and at the end the ranks sum the totals
+together and send rank 0 only the per-block counters
+(:func:`impactpipe.hydro.parallel.distributed.collect_counters`), so that only the setup of a
+new run holds the whole state on rank 0.  Rank 0 decides after
 every step whether a checkpoint is due or a stop was asked for, and the others follow.
 """
 
@@ -30,7 +34,7 @@ import numpy as np
 from impactpipe import storage
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.output.io import append_snapshot, write_tracers
-from impactpipe.hydro.parallel.distributed import PARALLEL_HDF5_VARIABLE, collect, distribute_from_root
+from impactpipe.hydro.parallel.distributed import PARALLEL_HDF5_VARIABLE, collect_counters, distribute_from_root
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.self_gravity import DEFAULT_ORDER
 from impactpipe.hydro.solver import HydroFailure, Simulation
@@ -145,14 +149,27 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
     if values.get("self_gravity"):
         log.info("hydro: self-gravity on, multipole expansion of order %d about the centre of mass (%s)",
                  DEFAULT_ORDER, values["self_gravity_rule"])
-    sim, initial = _resume_or_start(config, values, work, checkpoint, ctx.stage_hash)
-    times = [t for t in derived.snapshot_times(config, end_time) if t > sim.time]
-    if sim.time == 0.0 and sim.step_count == 0:
-        _append(work, sim.snapshot())
     comm = ranks.world()
+    initial = _resumable(config, work, checkpoint, ctx.stage_hash)
+    if initial is not None:
+        with h5py.File(checkpoint, "r") as f:
+            t_resume = float(f.attrs["time"])
+        times = [t for t in derived.snapshot_times(config, end_time) if t > t_resume]
+        if comm is not None:
+            ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time, "times": times,
+                              "resume": True})
+        sim = Simulation.from_checkpoint(checkpoint, comm)
+        _trim_snapshots(work, sim.time)
+        log.info("hydro: resuming from checkpoint at t = %.6g s (step %d)", sim.time, sim.step_count)
+    else:
+        sim, initial = _start(config, values, work, checkpoint, ctx.stage_hash)
+        times = [t for t in derived.snapshot_times(config, end_time) if t > sim.time]
+        _append(work, sim.snapshot())
+        if comm is not None:
+            ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time,
+                              "times": times, "resume": False})
+            sim = distribute_from_root(sim, comm)
     if comm is not None:
-        ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time, "times": times})
-        sim = distribute_from_root(sim, comm)
         if sim.partition.writes_together:
             log.info("hydro: snapshots and checkpoints written by every rank together, each its own blocks, "
                      "into one file (parallel HDF5, h5py's mpio driver)")
@@ -196,11 +213,10 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         raise
     finally:
         progress.close()
-    if comm is not None:
-        collect(sim)
+    totals = sim.totals()
+    collect_counters(sim)
     wall = time.perf_counter() - t_wall
-    budget = conservation_budget(initial, sim.totals(), sim.floor_amounts,
-                                 sim.gravity.work if sim.gravity is not None else 0.0)
+    budget = conservation_budget(initial, totals, sim.floor_amounts, sim.gravity.work if sim.gravity is not None else 0.0)
     if hasattr(sim.gravity, "potential_energy"):
         budget["gravitational_potential_energy"] = sim.gravity.potential_energy
         log.info("hydro: self-gravity did %.6g J of work; the potential energy of the mass is %.6g J",
@@ -236,18 +252,19 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
 def follow_hydro_stage(comm) -> int:
     """A rank other than 0: take part in rank 0's hydro stage, if it runs one; returns the exit status.
 
-    The simulation is rank 0's (new, or resumed from its checkpoint): this rank receives its
-    outline and its own blocks (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`)
-    and runs to the same times; snapshots, checkpoints and totals are collective, and rank 0
-    alone writes.  0 when the stage finished (or did not run), 1 after a hydro failure, 2
-    when the run cannot be shared, 130 when rank 0 stopped it.
+    The simulation is rank 0's new one, of which this rank receives its outline and its own
+    blocks (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`), or the
+    checkpoint's, of which it reads its own blocks (:meth:`Simulation.from_checkpoint`); it
+    runs to the same times; snapshots, checkpoints and totals are collective, and rank 0
+    writes what the ranks do not write together.  0 when the stage finished (or did not run),
+    1 after a hydro failure, 2 when the run cannot be shared, 130 when rank 0 stopped it.
     """
     order = ranks.wait_for_order(comm)
     if order is None:
         return 0
     checkpoint = Path(order["checkpoint"])
     try:
-        sim = distribute_from_root(None, comm)
+        sim = Simulation.from_checkpoint(checkpoint, comm) if order["resume"] else distribute_from_root(None, comm)
     except ValueError:
         return 2
 
@@ -267,7 +284,8 @@ def follow_hydro_stage(comm) -> int:
         return 1
     except _StoppedByRankZero:
         return 130
-    collect(sim)
+    sim.totals()
+    collect_counters(sim)
     return 0
 
 
@@ -285,21 +303,25 @@ def _append(work: Path, snapshot, partition=None) -> None:
 INITIAL_KEYS = ("mass", "energy", "momentum")
 
 
-def _resume_or_start(config, values, work: Path, checkpoint: Path, stage_hash: str):
-    """(simulation, initial totals): resumed from a checkpoint of the same config, or new at t = 0."""
-    if checkpoint.is_file() and work.is_file():
-        with h5py.File(work, "r") as f:
-            same = f.attrs.get("stage_hash") == stage_hash
-            initial = {key: f.attrs[f"initial_{key}"] for key in INITIAL_KEYS} if same else None
-        if same and not getattr(PROBLEMS[config.scene.problem], "RESUMABLE", True):
-            log.info("hydro: the %s scene restarts from t = 0 (its checkpoints do not carry all of its setup)",
-                     config.scene.problem)
-            same = False
-        if same:
-            sim = Simulation.from_checkpoint(checkpoint)
-            _trim_snapshots(work, sim.time)
-            log.info("hydro: resuming from checkpoint at t = %.6g s (step %d)", sim.time, sim.step_count)
-            return sim, initial
+def _resumable(config, work: Path, checkpoint: Path, stage_hash: str) -> dict | None:
+    """The initial totals of the run that ``checkpoint`` resumes (the working file's), or None
+    where there is no checkpoint of the same config to resume (or the scene cannot resume)."""
+    if not (checkpoint.is_file() and work.is_file()):
+        return None
+    with h5py.File(work, "r") as f:
+        if f.attrs.get("stage_hash") != stage_hash:
+            return None
+        initial = {key: f.attrs[f"initial_{key}"] for key in INITIAL_KEYS}
+    if not getattr(PROBLEMS[config.scene.problem], "RESUMABLE", True):
+        log.info("hydro: the %s scene restarts from t = 0 (its checkpoints do not carry all of its setup)",
+                 config.scene.problem)
+        return None
+    return initial
+
+
+def _start(config, values, work: Path, checkpoint: Path, stage_hash: str):
+    """(simulation, initial totals) of a new run at t = 0; an earlier run's checkpoint and working
+    file are removed, the new working file holds the stage hash and the initial totals."""
     checkpoint.unlink(missing_ok=True)
     work.unlink(missing_ok=True)
     sim = build_simulation(config, values)
