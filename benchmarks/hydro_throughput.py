@@ -80,10 +80,12 @@ def _smooth_box(geometry, cells, block_cells, nmat):
     return Simulation(mesh, ["gas", "heavy"][:nmat], specs, state)
 
 
-def build(case: str, quick: bool, block_cells: int | None = None) -> Simulation:
+def build(case: str, quick: bool, block_cells: int | None = None, comm=None) -> Simulation:
     """The Simulation of a benchmark case; ``block_cells`` replaces the box cases' block edge (by
     default the mesh's own, :func:`impactpipe.hydro.mesh.blocks.uniform_block_cells`: 64 for the 2D
-    box at 512^2 and 32 at 256^2, 16 for the 3D box at 128^3 and 8 at 48^3)."""
+    box at 512^2 and 32 at 256^2, 16 for the 3D box at 128^3 and 8 at 48^3); ``comm``: the MPI
+    ranks that build an impact case together, each its own blocks, as ``impactpipe run`` does
+    (collective; this rank's share of the run)."""
     if case == "2d-ideal-gas":
         n = 256 if quick else 512
         return _smooth_box("2d-planar", [n, n], block_cells, 1)
@@ -96,7 +98,7 @@ def build(case: str, quick: bool, block_cells: int | None = None) -> Simulation:
         params = {"target": {"material": "basalt", "radius": 1000.0},
                   "projectile": {"material": "basalt", "radius": 250.0, "velocity": 2000.0},
                   "cells_per_projectile_radius": 25 if quick else 100}
-        return PROBLEMS["impact"].setup(params, materials)
+        return PROBLEMS["impact"].setup(params, materials, comm=comm)
     if case == "3d-two-material":
         n = 48 if quick else 128
         return _smooth_box("3d", [n, n, n], block_cells, 2)

@@ -19,9 +19,11 @@ needs to recount the bytes exchanged).  A case that
 is reported with ``skipped``, the reasons, and not run; on one rank every case runs as a
 single process.
 
-Rank 0 alone builds each case (the others receive their blocks,
-:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`, as in ``impactpipe run
---ranks N``); it is shared between the ranks, takes two steps, then ``--steps`` timed steps
+As in ``impactpipe run --ranks N``, the ranks build the impact cases together, each its own
+blocks (:func:`impactpipe.hydro.parallel.distributed.shared_simulation`), and rank 0 alone
+builds the boxes (the others receive their blocks,
+:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`; ``--rank-0-builds``: the
+impacts too); each case takes two steps, then ``--steps`` timed steps
 between two barriers, with the ranks' traffic counters
 (:class:`~impactpipe.hydro.parallel.exchange.Traffic`) reset at the start.  Per rank, per step:
 ``bytes_sent``, ``bytes_received`` (B), ``messages_sent``, ``allreduces``; ``wait_s`` (s in
@@ -35,8 +37,8 @@ two or more ranks, ranks 0 and 1 also time a ping-pong (``pingpong``: the one-wa
 8-byte message and the bandwidth of a 16 MiB one, s and B/s).  Rank 0 prints one JSON document.
 
 Memory per rank (B, from ``/proc/self/status``, Linux): ``setup_peak_resident_bytes``, the
-largest resident set through the setup (the build of the initial state on rank 0, the sharing
-on every rank), before any step; ``step_peak_resident_bytes`` and ``resident_bytes``, the largest
+largest resident set through the setup (the build of the initial state, the sharing), before
+any step; ``step_peak_resident_bytes`` and ``resident_bytes``, the largest
 resident set during the timed steps and the resident set after them (the peak reset before
 them, ``/proc/self/clear_refs``), with ``resident_bytes_per_cell`` the latter over the rank's
 interior cells; ``snapshot_peak_resident_bytes``, the largest during the two snapshots;
@@ -103,12 +105,15 @@ def describe(case: str, sim, steps: int) -> dict:
             "materials": sim.state.nmat, "strength": sim.strength is not None, "steps": steps}
 
 
-def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
+def measure(comm, case: str, steps: int, block_cells: int | None, rank_0_builds: bool = False) -> dict:
     """Rate (cell-updates/s) and per-rank traffic of ``steps`` steps of ``case`` shared between
     the ranks of ``comm``; ``skipped`` with the reasons where the ranks cannot share it (rank 0's
-    result; the others return an empty dict)."""
-    sim = build(case, quick=False, block_cells=None if case.startswith("2d-cyl") else block_cells) \
-        if comm.rank == 0 else None
+    result; the others return an empty dict).  ``rank_0_builds``: rank 0 builds an impact case
+    alone and shares it out, as the boxes."""
+    if case.startswith("2d-cyl") and comm.size > 1 and not rank_0_builds:  # as impactpipe run builds an impact
+        sim = build(case, quick=False, comm=comm)
+        return measure_built(comm, case, sim, steps)
+    sim = build(case, quick=False, block_cells=block_cells) if comm.rank == 0 else None
     reasons = comm.bcast(unsupported(sim.mesh, comm.size) if comm.rank == 0 and comm.size > 1 else [], root=0)
     if reasons and comm.rank != 0:
         return {}
@@ -117,6 +122,11 @@ def measure(comm, case: str, steps: int, block_cells: int | None) -> dict:
                                                          f"{'; '.join(reasons)} (hydro.parallel.distributed.unsupported)"}
     if comm.size > 1:
         sim = distribute_from_root(sim, comm)
+    return measure_built(comm, case, sim, steps)
+
+
+def measure_built(comm, case: str, sim, steps: int) -> dict:
+    """:func:`measure` of ``sim``, this rank's share of ``case``'s run."""
     setup_peak = resident()[1]
     result = describe(case, sim, steps)
     for _ in range(2):
@@ -194,12 +204,15 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=10, help="timed steps per case (default 10)")
     parser.add_argument("--block-cells", type=int, help="block edge of the box cases (default: the uniform mesh's own)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
+    parser.add_argument("--rank-0-builds", action="store_true",
+                        help="rank 0 builds the impact cases alone and shares them out (by default the ranks build "
+                             "them together, each its own blocks)")
     args = parser.parse_args()
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
     numba.set_num_threads(1)
-    results = [measure(comm, case, args.steps, args.block_cells) for case in args.cases]
+    results = [measure(comm, case, args.steps, args.block_cells, args.rank_0_builds) for case in args.cases]
     link = pingpong(comm)
     if comm.rank != 0:
         return

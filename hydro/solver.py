@@ -31,7 +31,7 @@ from impactpipe.hydro.amr.regrid import RefinementRule, flag_blocks, plan_leaves
 from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, LevelStepper, finite_blocks,
                                            finite_run, level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
-from impactpipe.hydro.mesh.boundary import NO_RECORD, fill_state_ghosts
+from impactpipe.hydro.mesh.boundary import NO_RECORD
 from impactpipe.hydro.mesh.last_good import block_runs, scalar_clear_blocks, void_blocks
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
@@ -138,8 +138,10 @@ class Simulation:
             (:mod:`impactpipe.hydro.parallel.distributed`); None: every block
             (:class:`~impactpipe.hydro.parallel.distributed.WholeMesh`).  A
             :class:`~impactpipe.hydro.parallel.distributed.BlockRanges` here needs ``state`` to
-            hold this rank's rows (:meth:`from_checkpoint`); the strength work arrays are the
-            partition's zeros.
+            hold this rank's rows (:meth:`from_checkpoint`,
+            :func:`~impactpipe.hydro.parallel.distributed.shared_simulation`); the constructor is
+            then collective, and the strength work arrays and the scalars it adds are the
+            partition's zeros with this rank's rows set.
         fill_ghosts: fill the ghost cells of an adaptive mesh's state from its interior; False
             keeps them as ``state`` holds them (a checkpoint's).
     """
@@ -258,18 +260,18 @@ class Simulation:
         fresh = porous and state.arhoq.shape[1] == 0
         self.strength = MaterialStrength(arrays, mesh, state.nmat, damage, self.porosity) if arrays.enabled else None
         if self.strength is not None:
-            if partition is not None:
-                self.strength.work = partition.zeros(self.strength.work.shape)
-            self.strength.prepare_state(state)
+            self.strength.work = self.partition.zeros(self.strength.work.shape)
+            self.strength.prepare_state(state, self.partition)
             for k, strains in self.strength.flaw_strains.items():  # recorded, so a checkpoint resumes with them
                 self.strength_specs[k] = {**self.strength_specs[k],
                                           "damage": {**self.strength_specs[k]["damage"], "flaw_strains": strains}}
         elif self.grady_kipp is not None:
             raise ValueError("damage model grady_kipp needs a strength model with a yield strength")
         elif porous and fresh:
-            state.arhoq = np.zeros((mesh.nblocks, 2 * state.nmat) + mesh.padded_shape)
+            own = self.partition.blocks
+            state.arhoq = self.partition.zeros((mesh.nblocks, 2 * state.nmat) + mesh.padded_shape)
             for k in range(state.nmat):
-                state.arhoq[:, 2 * k] = self.porosity[k, ALPHA0] * state.arho[:, k]
+                state.arhoq[own, 2 * k] = self.porosity[k, ALPHA0] * state.arho[own, k]
         elif state.arhoq.shape[1] and not porous:
             raise ValueError("the state carries per-material strength scalars but no material has strength")
         nq = state.arhoq.shape[1] // state.nmat
@@ -282,7 +284,7 @@ class Simulation:
                                              state.nmat, state.arhoq.shape[1])
         if mesh.adaptive and fill_ghosts:
             for axis in range(mesh.ndim):
-                fill_state_ghosts(state, mesh, axis)
+                self.partition.fill_ghosts(state, mesh, axis)
         self._keep_good()
         self.check_time_stepping()
 

@@ -5,10 +5,13 @@ across regrids that refine and coarsen, no rank has written a page
 of the state, of the strength model's work arrays or of the last-good copy outside those
 (``/proc/self/pagemap``: present and exclusively mapped; a page only read maps the shared zero
 page), and every other value is still +0.0 (the wall sign flips of the work ghosts that wrote
-other ranks' blocks, -0.0 after one flip and +0.0 after two, fail the page check).  Nor does
-a rank other than 0 ever hold the whole state while the run is shared out: rank 0 alone builds
-it (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`), and the others' peak
-resident memory grows by about their share of it (``/proc/self/status``).
+other ranks' blocks, -0.0 after one flip and +0.0 after two, fail the page check); the same
+holds when the ranks build the run together or resume it from a checkpoint, each its own
+blocks.  Nor does a rank ever hold the whole state while the run starts, but rank 0 where it
+builds the run or reads the checkpoint alone
+(:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`): the others' peak
+resident memory grows by about their share of it (``/proc/self/status``), and every rank's
+when the ranks build or read the run together.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ CONFIG = Path(__file__).resolve().parent / "configs" / "mpi" / "impact_strength.
 ADAPTIVE_CONFIG = CONFIG.parent / "impact_adaptive.yaml"
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 
-#: Argument 1: the config, which rank 0 alone builds; argument 3: the steps on the ranks (on an
+#: Argument 1: the config, which rank 0 alone builds (with argument 4 "together", the ranks
+#: build it together, each its own blocks); argument 3: the steps on the ranks (on an
 #: adaptive mesh at least that many, then on until a regrid has refined blocks and one has
 #: coarsened blocks since the sharing began), then a snapshot and a checkpoint (with argument 4
 #: "resume", the run is then resumed from the checkpoint on the ranks, each reading its own
@@ -51,13 +55,17 @@ from impactpipe.hydro.parallel.distributed import distribute_from_root
 from impactpipe.pipeline import derived, load_config, ranks
 from impactpipe.pipeline.adapters.hydro import add_tracers, build_simulation
 comm = ranks.join_world()
-sim = None
-if comm.rank == 0:
-    config = load_config(sys.argv[1])
-    values = derived.derive(config)
-    sim = build_simulation(config, values)
+config = load_config(sys.argv[1])
+values = derived.derive(config)
+if sys.argv[4:] == ["together"]:
+    sim = build_simulation(config, values, comm)
     add_tracers(sim, config, float(values["end_time"]))
-sim = distribute_from_root(sim, comm)
+else:
+    sim = None
+    if comm.rank == 0:
+        sim = build_simulation(config, values)
+        add_tracers(sim, config, float(values["end_time"]))
+    sim = distribute_from_root(sim, comm)
 refined, coarsened = sim.blocks_refined, sim.blocks_coarsened
 for step in range(60):
     if step >= int(sys.argv[3]) and (not sim.mesh.adaptive or (sim.blocks_refined > refined
@@ -114,43 +122,14 @@ with open(f"{sys.argv[2]}.rank{comm.rank}.json", "w") as fh:
     fh.write(json.dumps(out))
 """
 
-#: Argument 1: a small config, argument 2: the same scene on a finer mesh; argument 3: OUT.  Rank
-#: 0 builds each run and shares it out (the small one first, so that the kernels of the sharing
-#: are loaded before the measurement); writes, per rank, to OUT.rankR.json: how much the peak
-#: resident set (VmHWM, B) grew over the resident set before the fine run was built, and the
-#: bytes of the fine run's whole state.
-SETUP_PEAK = """
-import gc, json, sys
-from impactpipe.hydro.parallel.distributed import distribute_from_root
-from impactpipe.pipeline import derived, load_config, ranks
-from impactpipe.pipeline.adapters.hydro import build_simulation
-def resident(name):
-    with open("/proc/self/status") as status:
-        return next(int(line.split()[1]) * 1024 for line in status if line.startswith(name + ":"))
-def shared(path):
-    config = load_config(path)
-    return distribute_from_root(build_simulation(config, derived.derive(config)) if comm.rank == 0 else None, comm)
-comm = ranks.join_world()
-shared(sys.argv[1])
-gc.collect()
-with open("/proc/self/clear_refs", "w") as refs:
-    refs.write("5")
-before = resident("VmRSS")
-sim = shared(sys.argv[2])
-grown = resident("VmHWM") - before
-whole = sum(array.nbytes for array in sim.state.arrays().values())
-with open(f"{sys.argv[3]}.rank{comm.rank}.json", "w") as out:
-    out.write(json.dumps({"grown": grown, "whole": whole}))
-"""
-
-#: Arguments 1 and 2: a small config and the same scene on a finer mesh, 3: OUT.  For each, rank
-#: 0 builds the run and shares it out, the ranks write a checkpoint, and the run is resumed from
-#: it twice: rank 0 reading the whole state and sharing it out, then every rank reading its own
-#: blocks (:meth:`Simulation.from_checkpoint` with the communicator); the small run first, so
-#: that the kernels are loaded before the measurement.  Writes, per rank, to OUT.rankR.json: how
-#: much the peak resident set (VmHWM, B) grew over the resident set before each resume of the
-#: fine run, and the bytes of its whole state.
-RESUME_PEAK = """
+#: Arguments 1 and 2: a small config and the same scene on a finer mesh, 3: OUT.  For each, the
+#: run starts four ways: rank 0 builds it and shares it out, the ranks build it together (each
+#: its own blocks), rank 0 reads the ranks' checkpoint of it and shares it out, the ranks read
+#: it together (each its own blocks); the small run first, so that the kernels are loaded
+#: before the measurement.  Writes, per rank, to OUT.rankR.json: how much the peak resident
+#: set (VmHWM, B) grew over the resident set before each start of the fine run, and the bytes
+#: of its whole state.
+STARTS = """
 import gc, json, sys
 from impactpipe.hydro.parallel.distributed import distribute_from_root
 from impactpipe.hydro.solver import Simulation
@@ -159,25 +138,29 @@ from impactpipe.pipeline.adapters.hydro import build_simulation
 def resident(name):
     with open("/proc/self/status") as status:
         return next(int(line.split()[1]) * 1024 for line in status if line.startswith(name + ":"))
-def grown(load):
+def grown(start):
     gc.collect()
     with open("/proc/self/clear_refs", "w") as refs:
         refs.write("5")
     before = resident("VmRSS")
-    load()
+    start()
     return resident("VmHWM") - before
 comm = ranks.join_world()
+checkpoint = sys.argv[3] + ".checkpoint.h5"
 for path in sys.argv[1:3]:
     config = load_config(path)
-    sim = distribute_from_root(build_simulation(config, derived.derive(config)) if comm.rank == 0 else None, comm)
-    checkpoint = sys.argv[3] + ".checkpoint.h5"
+    values = derived.derive(config)
+    sim = build_simulation(config, values, comm)
     sim.save_checkpoint(checkpoint)
     whole = sum(array.nbytes for array in sim.state.arrays().values())
     del sim
     out = {"whole": whole,
+           "rank_0_builds": grown(lambda: distribute_from_root(build_simulation(config, values)
+                                                                if comm.rank == 0 else None, comm)),
+           "built_together": grown(lambda: build_simulation(config, values, comm)),
            "rank_0_reads": grown(lambda: distribute_from_root(Simulation.from_checkpoint(checkpoint)
                                                                if comm.rank == 0 else None, comm)),
-           "each_rank_reads": grown(lambda: Simulation.from_checkpoint(checkpoint, comm))}
+           "read_together": grown(lambda: Simulation.from_checkpoint(checkpoint, comm))}
 with open(f"{sys.argv[3]}.rank{comm.rank}.json", "w") as out_file:
     out_file.write(json.dumps(out))
 """
@@ -234,54 +217,42 @@ def test_on_an_adaptive_mesh_a_rank_writes_only_its_own_blocks_and_halo_across_r
 
 
 @pytest.mark.parametrize("config_path", [CONFIG, ADAPTIVE_CONFIG], ids=["uniform", "adaptive"])
-def test_a_run_resumed_on_several_ranks_reads_and_writes_only_each_ranks_own_blocks_and_halo(config_path, tmp_path):
-    """:meth:`~impactpipe.hydro.solver.Simulation.from_checkpoint` on the ranks: rank 0 included,
-    no rank reads the whole state from the checkpoint or writes outside its blocks and halo."""
+@pytest.mark.parametrize("start", ["together", "resume"])
+def test_a_run_built_or_resumed_by_the_ranks_together_writes_only_each_ranks_own_blocks_and_halo(
+        config_path, start, tmp_path):
+    """:func:`~impactpipe.hydro.parallel.distributed.shared_simulation` (the ranks build the run,
+    each its own blocks: the adaptive scene draws Grady-Kipp flaws over them) and
+    :meth:`~impactpipe.hydro.solver.Simulation.from_checkpoint` on the ranks: rank 0 included, no
+    rank sets or reads the whole state or writes outside its blocks and halo."""
     config = yaml.safe_load(config_path.read_text())
     config["hydro"]["tracers"] = {"enabled": True, "count": 60, "history_interval": 0.01}
     path = tmp_path / "scene.yaml"
     path.write_text(yaml.safe_dump(config))
-    assert_own_blocks_and_halo_only(unwritten(path, 3, tmp_path / "unwritten", "resume"))
+    assert_own_blocks_and_halo_only(unwritten(path, 3, tmp_path / "unwritten", start))
 
 
-def test_only_rank_0_holds_the_whole_state_while_the_run_is_shared_out(tmp_path):
+def test_no_rank_but_0_holds_the_whole_state_and_rank_0_only_when_it_builds_or_reads_the_run_alone(tmp_path):
     config = yaml.safe_load(CONFIG.read_text())
     paths = []
     for name, cells, block in (("small", 2, 4), ("fine", 24, 16)):
         config["hydro"].update(cells_per_projectile_radius=cells, block_cells=block)
         paths.append(tmp_path / f"impact_strength_{name}.yaml")
         paths[-1].write_text(yaml.safe_dump(config))
-    out = tmp_path / "setup"
-    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", SETUP_PEAK, *map(str, paths),
-                             str(out)], env=ENV, capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stderr
-    grown = [json.loads(Path(f"{out}.rank{rank}.json").read_text())["grown"] for rank in range(3)]
-    whole = json.loads(Path(f"{out}.rank0.json").read_text())["whole"]
-    assert whole > 50e6  # the state stands well above the other memory the sharing moves
-    assert grown[0] > whole, grown  # rank 0 built the whole run: its state, work arrays, last-good copy
-    # A rank that built or received the whole state would grow as much as rank 0 (when every
-    # rank built the run: 94 MB on each of the 3); a rank holds its own blocks (28 % and 41 % of
-    # them here), their last-good copy and work arrays, and the pages of its halo (42 and 52 MB).
-    assert max(grown[1:]) < 0.75 * grown[0], grown
-
-
-def test_no_rank_holds_the_whole_state_when_a_run_resumes_on_several_ranks(tmp_path):
-    config = yaml.safe_load(CONFIG.read_text())
-    paths = []
-    for name, cells, block in (("small", 2, 4), ("fine", 24, 16)):
-        config["hydro"].update(cells_per_projectile_radius=cells, block_cells=block)
-        paths.append(tmp_path / f"impact_strength_{name}.yaml")
-        paths[-1].write_text(yaml.safe_dump(config))
-    out = tmp_path / "resume"
-    # glibc's fixed mmap threshold: freed arrays go back to the system, so each resume's growth is its own
+    out = tmp_path / "starts"
+    # glibc's fixed mmap threshold: freed arrays go back to the system, so each start's growth is its own
     env = {**ENV, "MALLOC_MMAP_THRESHOLD_": "131072"}
-    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", RESUME_PEAK, *map(str, paths),
+    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", STARTS, *map(str, paths),
                              str(out)], env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     counted = [json.loads(Path(f"{out}.rank{rank}.json").read_text()) for rank in range(3)]
     whole = counted[0]["whole"]
-    assert whole > 50e6
-    assert counted[0]["rank_0_reads"] > whole, counted  # rank 0 read the whole state
-    # Each rank reading its own blocks holds them, their last-good copy and work arrays and its
-    # halo's pages, as the ranks other than 0 did before
-    assert max(c["each_rank_reads"] for c in counted) < 0.75 * counted[0]["rank_0_reads"], counted
+    assert whole > 50e6  # the state stands well above the other memory the starts move
+    alone = [counted[0]["rank_0_builds"], counted[0]["rank_0_reads"]]
+    assert min(alone) > whole, counted  # rank 0 built or read the whole run
+    # A rank that built, read or received the whole state would grow as much as rank 0 alone; a
+    # rank holds its own blocks (28 % to 41 % of them here), their last-good copy and work arrays,
+    # and the pages of its halo
+    for start in ("rank_0_builds", "rank_0_reads"):
+        assert max(c[start] for c in counted[1:]) < 0.75 * min(alone), (start, counted)
+    for start in ("built_together", "read_together"):
+        assert max(c[start] for c in counted) < 0.75 * min(alone), (start, counted)

@@ -17,6 +17,7 @@ from impactpipe.hydro.problems.impact import sphere_fraction
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.flaws import flaw_nodes
 from impactpipe.hydro.strength.parameters import pack_damage
+from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.pipeline.presets import resolve_damage, resolve_strength
 
 M_BASALT, K_BASALT = 8.5, 3.0e39
@@ -56,7 +57,7 @@ def test_porous_body_draws_its_flaws_per_unit_matrix_volume_by_the_weibull_law()
     state.set_material(mesh, fill, 0, eos, reference_densities(eos)[0] / ALPHA0, np.zeros(3), specific_energy=0.0)
     strength = MaterialStrength(pack_strength([material["strength"]]), mesh, 1,
                                 pack_damage([material["strength"]["damage"]]), rows)
-    strength.prepare_state(state)
+    strength.prepare_state(state, WholeMesh())
     nq, ns = strength.nq, strength.ns
     arho = mesh.interior(state.arho)[:, 0]
     q = mesh.interior(state.arhoq)

@@ -19,6 +19,7 @@ from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.parameters import GEO
 from impactpipe.hydro.strength.update import CNT_TENSILE_FAILURE, CNT_YIELD, WK_PHI
 from impactpipe.hydro.strength.yield_strength import equivalent_yield_stress, yield_strength
+from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.pipeline.presets import resolve_strength
 
 BASALT = preset_material("basalt")["eos"]
@@ -49,7 +50,7 @@ def shear_cell_run(matrix_pressure, shear_rate, steps, dt=1.0e-6, chi=0.5):
     state = HydroState.empty(mesh, 1)
     state.set_material(mesh, 1.0, 0, eos, matrix_density(matrix_pressure) / ALPHA0, np.zeros(3), specific_energy=0.0)
     strength = MaterialStrength(pack_strength([WEAK]), mesh, 1, porosity=rows)
-    strength.prepare_state(state)
+    strength.prepare_state(state, WholeMesh())
     nq = strength.nq
     state.arhoq[:, nq - 2] = ALPHA0 * state.arho[:, 0]
     xs = (np.arange(16 + 2 * GHOST) - GHOST + 0.5) * 0.125 - 1.0

@@ -12,6 +12,7 @@ from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength.update import WK_PHI
 from impactpipe.hydro.strength.yield_strength import yield_strength
+from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.pipeline.presets import resolve_strength
 
 
@@ -95,7 +96,7 @@ def test_failed_material_at_zero_pressure_keeps_its_cohesion():
     state = HydroState.empty(mesh, 1)
     state.set_material(mesh, 1.0, 0, eos, spec["rho0"] * (1.0 - 1e-6), np.zeros(3), specific_energy=0.0)
     strength = MaterialStrength(pack_strength([weak]), mesh, 1)
-    strength.prepare_state(state)
+    strength.prepare_state(state, WholeMesh())
     ns = strength.ns
     state.arhoq[:, ns + 1] = state.arho[:, 0]                       # damage 1: failed
     p, _, _ = pressure_sound_speed(eos.kind[0], eos.params[0], eos.table, spec["rho0"] * (1.0 - 1e-6), 0.0)

@@ -13,6 +13,7 @@ from impactpipe.hydro.problems.impact import sphere_fraction
 from impactpipe.hydro.strength import MaterialStrength, pack_strength
 from impactpipe.hydro.strength import model as strength_model
 from impactpipe.hydro.strength.update import NWORK_FACE, WK_PHI, update_stress
+from impactpipe.hydro.parallel.distributed import WholeMesh
 from impactpipe.pipeline.presets import resolve_damage, resolve_strength
 
 STRONG = resolve_strength("geo", "strong", {})
@@ -55,7 +56,7 @@ def _rotation_kernel_run(steps_per_revolution):
     state.set_material(mesh, 1.0, 0, eos, spec["rho0"], velocity, specific_energy=0.0)
     strength = MaterialStrength(pack_strength([{"model": "von_mises", "yield_strength": 1e12, "poisson": 0.25}]),
                                 mesh, 1)
-    strength.prepare_state(state)
+    strength.prepare_state(state, WholeMesh())
     s0 = np.array([3.0e7, -1.0e7, -2.0e7, 1.5e7])         # xx, yy, zz, xy (traceless)
     for j in range(4):
         state.arhoq[:, j] = s0[j] * state.arho[:, 0]

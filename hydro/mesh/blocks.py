@@ -31,7 +31,7 @@ volume pi (r_hi^2 - r_lo^2) dz) and 3d.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -363,6 +363,15 @@ class BlockMesh:
             shape[d + 1] = n[d]
             vol = vol * width.reshape(shape)
         return vol
+
+    def some_blocks(self, blocks: slice) -> "BlockMesh":
+        """The blocks ``blocks`` of this mesh as a mesh of their own, for work that reads only each
+        block's geometry (cell centres and volumes, an initial state set on them): its
+        ``neighbor`` table still numbers the blocks of this mesh."""
+        return replace(self, block_lo=self.block_lo[blocks], block_dx=self.block_dx[blocks],
+                                   block_level=self.block_level[blocks], block_id=self.block_id[blocks],
+                                   neighbor=self.neighbor[blocks], block_index=self.block_index[blocks],
+                                   neighbor_level=self.neighbor_level[blocks], cache={})
 
     def min_cell_size(self) -> float:
         """Smallest cell edge over used axes (m)."""

@@ -41,15 +41,15 @@ from impactpipe.hydro.mesh.boundary import (
     NO_RECORD, every_layer, fill_field_ghosts, fill_first_ghost_layer, fill_ghosts, fill_ghosts_from_ranks_where,
     fill_ghosts_where, fill_state_ghost_layer, fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
-from impactpipe.hydro.mesh.state import FIELDS
+from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.storage import atomic_path, atomic_path_together
 
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
                             neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
-from .exchange import (FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
+from .exchange import (CARRY_TAG, FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
                        StripExchange, Traffic, broadcast_arrays, finish_strips, gather_owned_blocks, gather_rows,
                        move_rows, share_owned_blocks)
-from .owned_memory import from_outline, lazy_zeros, outline, receive_owned_blocks
+from .owned_memory import from_outline, lazy_zeros, outline, placed_rows, receive_halos, receive_owned_blocks
 
 log = logging.getLogger(__name__)
 
@@ -220,6 +220,12 @@ class WholeMesh:
     def from_owner(self, block: int, make: Callable[[], Any]) -> Any:
         """``make()`` evaluated by the process that owns ``block``, returned on every process."""
         return make()
+
+    def carry_through(self, first: Any, step: Callable[[Any], Any]) -> tuple[Any, Any]:
+        """Run ``step`` on every process in the order of their blocks, each on what the step of
+        the process before returned (the first process on ``first``): a running sum over the
+        blocks.  Returns (what this process's step was given, what the last process's returned)."""
+        return first, step(first)
 
     def agree(self, value: Any) -> Any:
         """Rank 0's ``value`` on every process."""
@@ -637,6 +643,15 @@ class BlockRanges(WholeMesh):
         owner = int(np.searchsorted(self.cuts, block, side="right")) - 1
         return self.comm.bcast(make() if self.comm.rank == owner else None, root=owner)
 
+    def carry_through(self, first: Any, step: Callable[[Any], Any]) -> tuple[Any, Any]:
+        """Rank r receives rank r - 1's result, runs ``step`` and sends its own to rank r + 1; the
+        last rank's is broadcast."""
+        given = first if self.rank == 0 else self.comm.recv(source=self.rank - 1, tag=CARRY_TAG)
+        result = step(given)
+        if self.rank + 1 < self.comm.size:
+            self.comm.send(result, dest=self.rank + 1, tag=CARRY_TAG)
+        return given, self.comm.bcast(result, root=self.comm.size - 1)
+
     def agree(self, value: Any) -> Any:
         return self.comm.bcast(value, root=0)
 
@@ -756,6 +771,33 @@ def distribute(sim, comm) -> None:
     receive_owned_blocks(sim, sim.partition)
     sim._keep_good()
     log_cuts(comm, cuts)
+
+
+def shared_simulation(comm, mesh, initial_state: Callable, build: Callable):
+    """A new run built by the ranks of ``comm`` together (collective), each setting its own
+    blocks only, so that no rank ever holds the whole state; returns this rank's Simulation.
+
+    ``initial_state(blocks_mesh)`` sets the problem's :class:`~impactpipe.hydro.mesh.state.HydroState`
+    on a mesh of some of ``mesh``'s blocks (:meth:`~impactpipe.hydro.mesh.blocks.BlockMesh.some_blocks`),
+    from their geometry alone; ``build(state, partition)`` makes the Simulation over ``mesh``
+    (collective: :class:`~impactpipe.hydro.solver.Simulation` with ``partition``).  The blocks
+    are cut as :func:`distribute` cuts a whole state, by the costs of the volume fractions
+    (:func:`~.decomposition.owned_ranges`), which each rank first computes on an equal share of
+    the blocks; each rank then sets its own blocks and keeps them in :func:`~.owned_memory.lazy_zeros`
+    arrays of the whole mesh's shape, builds the Simulation and receives its halo.  Raises
+    ValueError on every rank for what this version does not distribute (:func:`unsupported`)."""
+    refuse(unsupported(mesh, comm.size))
+    even = np.arange(comm.size + 1) * mesh.nblocks // comm.size
+    costs = block_costs(mesh, initial_state(mesh.some_blocks(slice(even[comm.rank], even[comm.rank + 1]))).alpha)
+    cuts = owned_ranges(np.concatenate(comm.allgather(costs)), comm.size)
+    partition = BlockRanges(comm, mesh, cuts)
+    own = initial_state(mesh.some_blocks(partition.blocks))
+    state = HydroState(**{name: placed_rows(array, partition) for name, array in own.arrays().items()})
+    del own
+    sim = build(state, partition)
+    receive_halos(sim, partition)
+    log_cuts(comm, cuts)
+    return sim
 
 
 def log_cuts(comm, cuts: np.ndarray) -> None:

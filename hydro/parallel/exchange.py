@@ -36,6 +36,9 @@ FIELD_TAG = 600
 #: Message tag of the halo cells a rank receives from their owners when the run is shared
 #: (:func:`~.owned_memory.receive_owned_blocks`).
 SETUP_TAG = 700
+#: The tag of the values carried from rank to rank in block order
+#: (:meth:`~.distributed.BlockRanges.carry_through`).
+CARRY_TAG = 800
 
 
 @dataclass

@@ -188,6 +188,15 @@ def receive_halos(sim, partition) -> None:
         receive_halo([sim.strength.work], partition, partition.field_routes)
 
 
+def placed_rows(rows: np.ndarray, partition) -> np.ndarray:
+    """A :func:`lazy_zeros` array (NB, ...) holding ``rows`` (this rank's blocks', (B, ...)) at
+    their place in the mesh (``partition``: a :class:`~.distributed.BlockRanges`; huge pages
+    within them), the other rows zero and uncommitted."""
+    placed = lazy_zeros((partition.nblocks,) + rows.shape[1:], rows.dtype, (partition.lo, partition.hi))
+    placed[partition.blocks] = rows
+    return placed
+
+
 def read_owned_rows(dataset, partition) -> np.ndarray:
     """The per-block array of the HDF5 ``dataset`` (NB, ...): whole without a ``partition``; with
     one (a :class:`~.distributed.BlockRanges`), a :func:`lazy_zeros` array of its shape holding

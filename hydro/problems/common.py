@@ -34,12 +34,13 @@ def material_list(materials: dict[str, dict], used: list[str]):
 
 
 def new_simulation(mesh: BlockMesh, names: list[str], specs: list[dict], state: HydroState, cfl: float,
-                   tensile_strength=None, strength=None, refinement=None, gravity=None) -> Simulation:
+                   tensile_strength=None, strength=None, refinement=None, gravity=None, partition=None) -> Simulation:
     """A :class:`Simulation` over ``state`` with the given materials (``strength``: one resolved spec each;
     ``refinement``: the :class:`~impactpipe.hydro.amr.regrid.RefinementRule` of an adaptive mesh;
-    ``gravity``: the scene's gravity object or None)."""
+    ``gravity``: the scene's gravity object or None; ``partition``: this MPI rank's blocks, whose
+    rows alone ``state`` holds, or None)."""
     return Simulation(mesh, names, specs, state, cfl=cfl, tensile_strength=tensile_strength, strength=strength,
-                      refinement=refinement, gravity=gravity)
+                      refinement=refinement, gravity=gravity, partition=partition)
 
 
 def tensile_strengths(materials: dict[str, dict], used: list[str]) -> list[float]:

@@ -65,6 +65,7 @@ from impactpipe.hydro.problems.common import (
 )
 from impactpipe.hydro.problems.parameters import Parameter, Record
 from impactpipe.hydro.mesh.state import HydroState
+from impactpipe.hydro.parallel.distributed import shared_simulation
 from impactpipe.hydro.self_gravity import DEFAULT_ORDER, G, SelfGravity
 from impactpipe.hydro.tracers.placement import place_on_grid, place_on_rays
 
@@ -73,6 +74,8 @@ PROJECTILE_MATERIAL = 1
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 #: A sphere of one material.
 BODY = {
@@ -205,8 +208,12 @@ def sphere_fraction(mesh: BlockMesh, center, radius: float, subsamples: int) -> 
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "2d-cylindrical"):
-    """Build the impact :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring)."""
+          geometry: str = "2d-cylindrical", comm=None):
+    """Build the impact :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`;
+    :data:`SHARED_SETUP`), and the Simulation returned is this rank's share of it."""
     check_geometry("impact", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     tgt, prj = p["target"], p["projectile"]
@@ -232,21 +239,33 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     bodies = ((tgt, np.zeros(3), np.zeros(3)), (prj, centre, velocity))
     mesh = refine_to(mesh, lambda m: np.where(
         np.logical_or.reduce([surface_crosses(m, c, body["radius"]) for body, c, _ in bodies]), levels - 1, 0))
-    state = HydroState.empty(mesh, len(names))
-    for k, (body, body_centre, body_velocity) in enumerate(bodies):
-        rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table)) / initial_distension(specs[k])
-        frac = sphere_fraction(mesh, body_centre, body["radius"], p["subsamples"])
-        if k == 0 and p["self_gravity"]:
-            set_lithostatic_sphere(state, mesh, frac, k, eos, rho0, body["radius"], initial_distension(specs[k]))
-        else:
-            state.set_material(mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
+
+    def initial_state(blocks_mesh: BlockMesh) -> HydroState:
+        """The two bodies set on the cells of ``blocks_mesh`` (all of ``mesh``'s blocks, or some)."""
+        state = HydroState.empty(blocks_mesh, len(names))
+        for k, (body, body_centre, body_velocity) in enumerate(bodies):
+            rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table)) / initial_distension(specs[k])
+            frac = sphere_fraction(blocks_mesh, body_centre, body["radius"], p["subsamples"])
+            if k == 0 and p["self_gravity"]:
+                set_lithostatic_sphere(state, blocks_mesh, frac, k, eos, rho0, body["radius"],
+                                       initial_distension(specs[k]))
+            else:
+                state.set_material(blocks_mesh, frac, k, eos, rho0, body_velocity, specific_energy=0.0)
+        return state
+
     strengths = tensile_strengths(materials, [tgt["material"], prj["material"]])
     gravity = None
     if p["self_gravity"]:
         gravity = SelfGravity(mesh, order=p["self_gravity_order"], mirror_y=box["half_domain"])
-    return new_simulation(mesh, names, specs, state, cfl, strengths,
-                          strength_specs(materials, [tgt["material"], prj["material"]]),
-                          refinement=rule_from_config(p["refinement"]), gravity=gravity)
+
+    def build(state: HydroState, partition=None):
+        return new_simulation(mesh, names, specs, state, cfl, strengths,
+                              strength_specs(materials, [tgt["material"], prj["material"]]),
+                              refinement=rule_from_config(p["refinement"]), gravity=gravity, partition=partition)
+
+    if comm is None:
+        return build(initial_state(mesh))
+    return shared_simulation(comm, mesh, initial_state, build)
 
 
 def lithostatic_pressure(density: float, radius: float, distance):

@@ -89,9 +89,28 @@ def flaw_nodes(body_volume: float, n_flaws: int, weibull_m: float, weibull_k: fl
     return activation_strain(j, body_volume, weibull_m, weibull_k)
 
 
+class BodyShare(NamedTuple):
+    """The cells of a body that one of several processes holds, the body's cells being numbered
+    in the processes' order: ``before``, the running sum of the cells' weights (m^3) up to its
+    first cell, ``total``, the whole body's running sum (its last value), and ``ends``, whether
+    its cells end the body.  Each process draws every flaw (one random sequence) and keeps those
+    that fall in its cells, so the flaws do not depend on how the body is shared."""
+
+    before: float
+    total: float
+    ends: bool
+
+
+def running_sum(weights: np.ndarray, before: float = 0.0) -> np.ndarray:
+    """before + w_0, before + w_0 + w_1, ...: the running sum of ``weights`` continued from
+    ``before``, added one weight at a time (the same bits however the weights are split)."""
+    return np.cumsum(np.concatenate(([before], weights)))[1:]
+
+
 def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, weibull_k: float,
                  rng: np.random.Generator, fill: np.ndarray | None = None,
-                 n_flaws: int | None = None, node_strains: np.ndarray | None = None) -> CellFlaws:
+                 n_flaws: int | None = None, node_strains: np.ndarray | None = None,
+                 share: BodyShare | None = None) -> CellFlaws:
     """Draw the body's flaws and assign each to a cell weighted by its material volume.
 
     Args:
@@ -103,6 +122,8 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
         fill: optional (N,) fraction of each cell the body fills (0 .. 1); 1 when omitted.
         n_flaws: number of flaws n_tot; :func:`default_flaw_count` (N ln N) when omitted.
         node_strains: optional (J,) increasing strains; each cell's flaws at or below each are counted.
+        share: where these cells are one process's part of the body (:class:`BodyShare`), that
+            part; ``n_flaws`` must then be given.  None: the whole body.
 
     Returns:
         :class:`CellFlaws` with each cell's eps_min, eps_max, flaw count (and counts below the nodes).
@@ -118,8 +139,13 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
     n_tot = default_flaw_count(n_cells) if n_flaws is None else int(n_flaws)
     if n_tot < 1:
         raise ValueError(f"a body needs at least one flaw (got {n_tot})")
-    cumulative = np.cumsum(weight)
-    cumulative /= cumulative[-1]
+    if share is None:
+        cumulative = running_sum(weight)
+        share = BodyShare(0.0, float(cumulative[-1]), True)
+    else:
+        cumulative = running_sum(weight, share.before)
+    cumulative /= share.total
+    lowest = share.before / share.total
     first = np.full(n_cells, n_tot + 1, dtype=np.int64)
     last = np.zeros(n_cells, dtype=np.int64)
     count = np.zeros(n_cells, dtype=np.int64)
@@ -129,7 +155,11 @@ def assign_flaws(cell_volume: np.ndarray, body_volume: float, weibull_m: float, 
     below = None if node_rank is None else np.zeros((n_cells, node_rank.size), dtype=np.int64)
     for start in range(1, n_tot + 1, CHUNK):
         j = np.arange(start, min(start + CHUNK, n_tot + 1), dtype=np.int64)
-        cell = np.searchsorted(cumulative, rng.random(j.size), side="right")
+        u = rng.random(j.size)
+        cell = np.searchsorted(cumulative, u, side="right")
+        if share.before > 0.0 or not share.ends:  # the draws that fall in these cells
+            kept = ((cell > 0) | (u >= lowest)) & ((cell < n_cells) | share.ends)
+            cell, j = cell[kept], j[kept]
         np.minimum(cell, n_cells - 1, out=cell)
         count += np.bincount(cell, minlength=n_cells)
         np.minimum.at(first, cell, j)

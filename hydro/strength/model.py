@@ -88,7 +88,8 @@ from impactpipe.hydro.parallel.owned_memory import lazy_zeros
 from impactpipe.hydro.strength.divergence import apply_stress_divergence, quiet_blocks
 from impactpipe.hydro.strength.face_shear import apply_face_shear, update_face_shear
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
-from impactpipe.hydro.strength.flaws import assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes
+from impactpipe.hydro.strength.flaws import (BodyShare, assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes,
+                                             running_sum)
 from impactpipe.hydro.strength.parameters import (
     DAMAGE0, GRADY_KIPP, NODE0, NONE, WEIBULL_K, WEIBULL_M, DamageArrays, StrengthArrays, pack_damage,
 )
@@ -300,58 +301,75 @@ class MaterialStrength:
         self.counts = summed(self.counts, mesh.nblocks)
         self.amounts = summed(self.amounts, mesh.nblocks)
 
-    def prepare_state(self, state: HydroState) -> None:
+    def prepare_state(self, state: HydroState, partition) -> None:
         """Give ``state`` its per-material stress, plastic strain and damage columns (zero stress,
         initial damage from the parameters), in a porous scene each material's distension column
         (its initial distension alpha_0, 1 for a compact material, :mod:`impactpipe.hydro.eos.porosity`)
         and, with Grady-Kipp fracture, the flaws of each Grady-Kipp material drawn over its cells
-        (module docstring), unless it already has them (a checkpoint)."""
+        (module docstring), unless it already has them (a checkpoint).  ``partition``
+        (:mod:`impactpipe.hydro.parallel.distributed`): the blocks this process sets (its
+        ``blocks``; collective over several MPI ranks, whose flaws are those of one process)."""
         want = self.nmat * self.nq
         if state.arhoq.shape[1] == want:
             return
-        state.arhoq = np.zeros((self.mesh.nblocks, want) + self.mesh.padded_shape)
+        own = partition.blocks
+        state.arhoq = partition.zeros((self.mesh.nblocks, want) + self.mesh.padded_shape)
         for k in range(self.nmat):
-            state.arhoq[:, k * self.nq + self.nq - 1] = self.arrays.params[k, DAMAGE0] * state.arho[:, k]
+            state.arhoq[own, k * self.nq + self.nq - 1] = self.arrays.params[k, DAMAGE0] * state.arho[own, k]
             if self.porosity is not None:
-                state.arhoq[:, k * self.nq + self.nq - 2] = self.porosity[k, ALPHA0] * state.arho[:, k]
+                state.arhoq[own, k * self.nq + self.nq - 2] = self.porosity[k, ALPHA0] * state.arho[own, k]
         for k in np.flatnonzero(self.damage.model == GRADY_KIPP):
-            self._draw_flaws(state, int(k))
+            self._draw_flaws(state, int(k), partition)
 
-    def _draw_flaws(self, state: HydroState, k: int) -> None:
-        """Flaws of material k over the cells it fills, as mass-weighted cumulative flaw laws in
-        ``state.arhoq``; the node strains are the block's ``flaw_strains`` or, without them,
-        :func:`impactpipe.hydro.strength.flaws.flaw_nodes` of this draw (then recorded in
-        :attr:`flaw_strains` and the damage parameters).  The Weibull law counts flaws per unit
-        volume of matrix (m^-3): a porous material's cell i holds the matrix volume
-        v_i alpha_k / alpha_dist (m^3), its distension alpha_dist from ``state.arhoq``."""
+    def _draw_flaws(self, state: HydroState, k: int, partition) -> None:
+        """Flaws of material k over the cells it fills (of ``partition``'s blocks), as
+        mass-weighted cumulative flaw laws in ``state.arhoq``; the node strains are the block's
+        ``flaw_strains`` or, without them, :func:`impactpipe.hydro.strength.flaws.flaw_nodes` of
+        this draw (then recorded in :attr:`flaw_strains` and the damage parameters).  The
+        Weibull law counts flaws per unit volume of matrix (m^-3): a porous material's cell i
+        holds the matrix volume v_i alpha_k / alpha_dist (m^3), its distension alpha_dist from
+        ``state.arhoq``.  The body's volume V is the running sum of its cells' in block order
+        (:func:`~impactpipe.hydro.strength.flaws.running_sum`), carried from process to process
+        on several MPI ranks (:meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.carry_through`),
+        so every process draws the single process's flaws (:class:`~impactpipe.hydro.strength.flaws.BodyShare`)."""
         mesh = self.mesh
-        fill = mesh.interior(state.alpha)[:, k]
-        mass = mesh.interior(state.arho)[:, k]
-        volume = mesh.cell_volumes() * (self.damage.cross_section[k] if mesh.ndim == 1 else 1.0)
+        own = partition.blocks
+        fill = mesh.interior(state.alpha[own])[:, k]
+        mass = mesh.interior(state.arho[own])[:, k]
+        volume = mesh.cell_volumes(own) * (self.damage.cross_section[k] if mesh.ndim == 1 else 1.0)
         cells = np.flatnonzero((fill > 0.0) & (mass > 0.0))
-        if cells.size == 0:
-            return
-        m, kw = self.damage.params[k, WEIBULL_M], self.damage.params[k, WEIBULL_K]
         material_volume = volume.ravel()[cells] * fill.ravel()[cells]
         if self.porosity is not None and self.porosity[k, ALPHA0] > 1.0:
-            distension = mesh.interior(state.arhoq)[:, k * self.nq + self.nq - 2].ravel()[cells] / mass.ravel()[cells]
+            distension = (mesh.interior(state.arhoq[own])[:, k * self.nq + self.nq - 2].ravel()[cells]
+                          / mass.ravel()[cells])
             material_volume = material_volume / distension
-        body_volume = float(material_volume.sum())
-        n_tot = int(self.damage.flaw_count[k]) or default_flaw_count(cells.size)
+
+        def after_these(carried: tuple[float, int]) -> tuple[float, int]:
+            running = running_sum(material_volume, carried[0])
+            return (float(running[-1]) if running.size else carried[0]), carried[1] + cells.size
+
+        (before, cells_before), (body_volume, n_cells) = partition.carry_through((0.0, 0), after_these)
+        if n_cells == 0:
+            return
+        m, kw = self.damage.params[k, WEIBULL_M], self.damage.params[k, WEIBULL_K]
+        n_tot = int(self.damage.flaw_count[k]) or default_flaw_count(n_cells)
         if (self.damage.params[k, NODE0:] > 0.0).all():
             strains = self.damage.params[k, NODE0:] ** (1.0 / m)
         else:
             strains = flaw_nodes(body_volume, n_tot, m, kw)
             self.damage.params[k, NODE0:] = strains ** m
         self.flaw_strains[k] = [float(e) for e in strains]
+        if cells.size == 0:
+            return
         flaws = assign_flaws(material_volume, body_volume, m, kw, np.random.default_rng([int(self.damage.seed[k]), k]),
-                             n_flaws=n_tot, node_strains=strains)
+                             n_flaws=n_tot, node_strains=strains,
+                             share=BodyShare(before, body_volume, cells_before + cells.size == n_cells))
         law = flaw_law_per_mass(flaws, volume.ravel()[cells] * mass.ravel()[cells])
         first = k * self.nq + self.ns + 1
         for j in range(NFLAW):
             amount = np.zeros(fill.size)
             amount[cells] = law[:, j] * mass.ravel()[cells]
-            mesh.interior(state.arhoq)[:, first + j] = amount.reshape(fill.shape)
+            mesh.interior(state.arhoq[own])[:, first + j] = amount.reshape(fill.shape)
 
     def load_stress(self, state: HydroState, eos, partition, level: LevelBlocks | None = None) -> None:
         """Cell velocities, fills and the transported mixture stress S^n (from ``arhoq``) of the

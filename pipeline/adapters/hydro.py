@@ -8,14 +8,14 @@ checkpoint when its config hash is unchanged.  A run that fails (NaN, negative d
 time-step collapse) writes its last good state to the checkpoint and raises.
 
 On several MPI ranks (:mod:`impactpipe.pipeline.ranks`) rank 0 runs this stage as above and
-sends the other ranks its order; rank 0 alone builds a new simulation and the other ranks
-receive their blocks of it (:func:`follow_hydro_stage`,
-:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`), so that no rank but 0
-ever holds the whole state; a resumed run is read from the checkpoint by every rank, each its
-own blocks (:meth:`Simulation.from_checkpoint`), and at the end the ranks sum the totals
-together and send rank 0 only the per-block counters
-(:func:`impactpipe.hydro.parallel.distributed.collect_counters`), so that only the setup of a
-new run holds the whole state on rank 0.  Rank 0 decides after
+sends the other ranks its order, and no rank ever holds the whole state where the ranks write
+their outputs together (parallel HDF5): the ranks build a new impact together, each its own
+blocks (:func:`impactpipe.hydro.parallel.distributed.shared_simulation`), a resumed run is
+read from the checkpoint by every rank, each its own blocks (:meth:`Simulation.from_checkpoint`),
+and at the end the ranks sum the totals together and send rank 0 only the per-block counters
+(:func:`impactpipe.hydro.parallel.distributed.collect_counters`).  The other scenes are built
+by rank 0 alone, which sends the other ranks their blocks
+(:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`).  Rank 0 decides after
 every step whether a checkpoint is due or a stop was asked for, and the others follow.
 """
 
@@ -81,8 +81,9 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
     return {**scene.model_dump(exclude={"problem", "geometry"}), **mesh}
 
 
-def build_simulation(config, values: dict[str, Any]) -> Simulation:
-    """The Simulation of the config's scene, at t = 0."""
+def build_simulation(config, values: dict[str, Any], comm=None) -> Simulation:
+    """The Simulation of the config's scene, at t = 0; with ``comm`` (a problem with
+    ``SHARED_SETUP``; collective) this rank's share of the run the ranks build together."""
     materials = config.resolved_materials()
     if config.scene.problem == "impact":
         for mat in materials.values():
@@ -91,6 +92,8 @@ def build_simulation(config, values: dict[str, Any]) -> Simulation:
     options: dict[str, Any] = {"cfl": config.hydro.cfl, "geometry": values["geometry"]}
     if config.hydro.block_cells is not None:
         options["block_cells"] = config.hydro.block_cells
+    if comm is not None:
+        options["comm"] = comm
     sim = PROBLEMS[config.scene.problem].setup(problem_parameters(config, values), materials, **options)
     sim.time_stepping = config.hydro.time_stepping
     sim.check_time_stepping()
@@ -157,17 +160,20 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         times = [t for t in derived.snapshot_times(config, end_time) if t > t_resume]
         if comm is not None:
             ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time, "times": times,
-                              "resume": True})
+                              "resume": True, "built_together": None})
         sim = Simulation.from_checkpoint(checkpoint, comm)
         _trim_snapshots(work, sim.time)
         log.info("hydro: resuming from checkpoint at t = %.6g s (step %d)", sim.time, sim.step_count)
     else:
-        sim, initial = _start(config, values, work, checkpoint, ctx.stage_hash)
-        times = [t for t in derived.snapshot_times(config, end_time) if t > sim.time]
-        _append(work, sim.snapshot())
+        times = [t for t in derived.snapshot_times(config, end_time) if t > 0.0]
+        together = comm is not None and getattr(PROBLEMS[config.scene.problem], "SHARED_SETUP", False)
         if comm is not None:
             ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time,
-                              "times": times, "resume": False})
+                              "times": times, "resume": False,
+                              "built_together": {"config": config, "values": values} if together else None})
+        sim, initial = _start(config, values, work, checkpoint, ctx.stage_hash, comm if together else None)
+        _append(work, sim.snapshot(), sim.partition)
+        if comm is not None and not together:
             sim = distribute_from_root(sim, comm)
     if comm is not None:
         if sim.partition.writes_together:
@@ -252,10 +258,12 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
 def follow_hydro_stage(comm) -> int:
     """A rank other than 0: take part in rank 0's hydro stage, if it runs one; returns the exit status.
 
-    The simulation is rank 0's new one, of which this rank receives its outline and its own
-    blocks (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`), or the
-    checkpoint's, of which it reads its own blocks (:meth:`Simulation.from_checkpoint`); it
-    runs to the same times; snapshots, checkpoints and totals are collective, and rank 0
+    The simulation is a new one that the ranks build together, each its own blocks (a problem
+    with ``SHARED_SETUP``, :func:`~impactpipe.hydro.parallel.distributed.shared_simulation`),
+    rank 0's new one, of which this rank receives its outline and its own blocks
+    (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`), or the checkpoint's,
+    of which it reads its own blocks (:meth:`Simulation.from_checkpoint`); it runs to the same
+    times; snapshots, checkpoints and totals are collective, and rank 0
     writes what the ranks do not write together.  0 when the stage finished (or did not run),
     1 after a hydro failure, 2 when the run cannot be shared, 130 when rank 0 stopped it.
     """
@@ -263,8 +271,16 @@ def follow_hydro_stage(comm) -> int:
     if order is None:
         return 0
     checkpoint = Path(order["checkpoint"])
+    together = order["built_together"]
     try:
-        sim = Simulation.from_checkpoint(checkpoint, comm) if order["resume"] else distribute_from_root(None, comm)
+        if order["resume"]:
+            sim = Simulation.from_checkpoint(checkpoint, comm)
+        elif together is not None:
+            sim = _new_run(together["config"], together["values"], comm)
+            sim.totals()
+            _append(Path(order["work"]), sim.snapshot(), sim.partition)
+        else:
+            sim = distribute_from_root(None, comm)
     except ValueError:
         return 2
 
@@ -289,15 +305,12 @@ def follow_hydro_stage(comm) -> int:
     return 0
 
 
-def _append(work: Path, snapshot, partition=None) -> None:
-    """Append ``snapshot`` to the working file: this process alone, or, where the ranks of
-    ``partition`` write together, every rank its own blocks' rows."""
-    if partition is not None and partition.writes_together:
+def _append(work: Path, snapshot, partition) -> None:
+    """Append ``snapshot`` to the working file: the process that writes alone, or, where the
+    ranks of ``partition`` write together, every rank its own blocks' rows."""
+    if partition.writes_together or partition.is_root:
         with partition.output_file(work, "a") as f:
-            append_snapshot(f, snapshot, partition.blocks)
-    elif partition is None or partition.is_root:
-        with h5py.File(work, "a") as f:
-            append_snapshot(f, snapshot)
+            append_snapshot(f, snapshot, partition.blocks if partition.writes_together else None)
 
 
 INITIAL_KEYS = ("mass", "energy", "momentum")
@@ -319,20 +332,28 @@ def _resumable(config, work: Path, checkpoint: Path, stage_hash: str) -> dict | 
     return initial
 
 
-def _start(config, values, work: Path, checkpoint: Path, stage_hash: str):
-    """(simulation, initial totals) of a new run at t = 0; an earlier run's checkpoint and working
-    file are removed, the new working file holds the stage hash and the initial totals."""
+def _start(config, values, work: Path, checkpoint: Path, stage_hash: str, comm=None):
+    """(simulation, initial totals) of a new run at t = 0 (:func:`_new_run`; collective with
+    ``comm``); an earlier run's checkpoint and working file are removed, the new working file
+    holds the stage hash and the initial totals."""
     checkpoint.unlink(missing_ok=True)
     work.unlink(missing_ok=True)
-    sim = build_simulation(config, values)
-    if values["tracers"]:
-        add_tracers(sim, config, float(values["end_time"]))
+    sim = _new_run(config, values, comm)
     initial = sim.totals()
     with h5py.File(work, "w") as f:
         f.attrs["stage_hash"] = stage_hash
         for key in INITIAL_KEYS:
             f.attrs[f"initial_{key}"] = initial[key]
     return sim, initial
+
+
+def _new_run(config, values, comm=None) -> Simulation:
+    """The config's run at t = 0 with its tracers: built by this process, or with ``comm`` by
+    the ranks together, each its own blocks (collective; the problem's ``SHARED_SETUP``)."""
+    sim = build_simulation(config, values, comm)
+    if values["tracers"]:
+        add_tracers(sim, config, float(values["end_time"]))
+    return sim
 
 
 def _trim_snapshots(work: Path, t_resume: float) -> None:
