@@ -1,7 +1,7 @@
 """The hydro stage shared between 2, 3 and 4 MPI ranks (oversubscribed) gives the single-process
 answer bit for bit, on uniform and adaptive meshes, in r-z and in 3d, with and without
-strength and tracers, with external gravity (the column collapse), and with a porous target with
-strength and self-gravity:
+strength and tracers, with external gravity (the column collapse), with a porous target with
+strength and self-gravity, and a Sedov blast whose ranks refine its initial mesh together:
 every dataset of hydro.h5 (the snapshots, the tracers and their history),
 the hydro budget, the stage's counters and the summary's tracer counts; tracers that move into
 another rank's blocks keep their records; a run checkpointed on 2 ranks resumes on 3 or on
@@ -34,7 +34,7 @@ CONFIGS = Path(__file__).resolve().parent / "configs" / "mpi"
 SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml",
           "impact-strength": CONFIGS / "impact_strength.yaml", "impact_tracers": CONFIGS / "impact_tracers.yaml",
           "impact_adaptive": CONFIGS / "impact_adaptive.yaml", "impact_3d": CONFIGS / "impact_3d.yaml",
-          "column_collapse": CONFIGS / "column_collapse.yaml"}
+          "column_collapse": CONFIGS / "column_collapse.yaml", "sedov_adaptive": CONFIGS / "sedov_adaptive.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 #: Seconds a run may take: the first one in a fresh environment compiles every kernel it calls

@@ -364,8 +364,9 @@ class BlockMesh:
             vol = vol * width.reshape(shape)
         return vol
 
-    def some_blocks(self, blocks: slice) -> "BlockMesh":
-        """The blocks ``blocks`` of this mesh as a mesh of their own, for work that reads only each
+    def some_blocks(self, blocks: slice | np.ndarray) -> "BlockMesh":
+        """The blocks ``blocks`` (a slice or block indices) of this mesh as a mesh of their own, in
+        their order here, for work that reads only each
         block's geometry (cell centres and volumes, an initial state set on them): its
         ``neighbor`` table still numbers the blocks of this mesh."""
         return replace(self, block_lo=self.block_lo[blocks], block_dx=self.block_dx[blocks],

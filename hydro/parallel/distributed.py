@@ -777,9 +777,10 @@ def shared_simulation(comm, mesh, initial_state: Callable, build: Callable):
     """A new run built by the ranks of ``comm`` together (collective), each setting its own
     blocks only, so that no rank ever holds the whole state; returns this rank's Simulation.
 
-    ``initial_state(blocks_mesh)`` sets the problem's :class:`~impactpipe.hydro.mesh.state.HydroState`
-    on a mesh of some of ``mesh``'s blocks (:meth:`~impactpipe.hydro.mesh.blocks.BlockMesh.some_blocks`),
-    from their geometry alone; ``build(state, partition)`` makes the Simulation over ``mesh``
+    ``initial_state(mesh, blocks)`` sets the problem's :class:`~impactpipe.hydro.mesh.state.HydroState`
+    on the blocks ``blocks`` (a slice) of ``mesh`` alone (an array of those blocks' rows, for
+    instance on :meth:`~impactpipe.hydro.mesh.blocks.BlockMesh.some_blocks`, whatever the
+    other blocks hold); ``build(state, partition)`` makes the Simulation over ``mesh``
     (collective: :class:`~impactpipe.hydro.solver.Simulation` with ``partition``).  The blocks
     are cut as :func:`distribute` cuts a whole state, by the costs of the volume fractions
     (:func:`~.decomposition.owned_ranges`), which each rank first computes on an equal share of
@@ -788,10 +789,10 @@ def shared_simulation(comm, mesh, initial_state: Callable, build: Callable):
     ValueError on every rank for what this version does not distribute (:func:`unsupported`)."""
     refuse(unsupported(mesh, comm.size))
     even = np.arange(comm.size + 1) * mesh.nblocks // comm.size
-    costs = block_costs(mesh, initial_state(mesh.some_blocks(slice(even[comm.rank], even[comm.rank + 1]))).alpha)
+    costs = block_costs(mesh, initial_state(mesh, slice(even[comm.rank], even[comm.rank + 1])).alpha)
     cuts = owned_ranges(np.concatenate(comm.allgather(costs)), comm.size)
     partition = BlockRanges(comm, mesh, cuts)
-    own = initial_state(mesh.some_blocks(partition.blocks))
+    own = initial_state(mesh, partition.blocks)
     state = HydroState(**{name: placed_rows(array, partition) for name, array in own.arrays().items()})
     del own
     sim = build(state, partition)

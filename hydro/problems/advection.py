@@ -21,6 +21,8 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 PARAMETERS = {
     "material": Parameter(kind=str, description="material name", example="gas"),
@@ -44,18 +46,24 @@ def exact_density(p: dict, x: np.ndarray, t: float) -> np.ndarray:
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "1d-planar"):
-    """Build the advection :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+          geometry: str = "1d-planar", comm=None):
+    """Build the advection :class:`~impactpipe.hydro.solver.Simulation` (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["material"]])
     mesh = tube_mesh(geometry, p["length"], p["cells"], ("periodic", "periodic"), block_cells, p["levels"])
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, eos), names, specs, cfl, p["refinement"])
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, p, eos, blocks), names, specs, cfl, p["refinement"],
+                               comm=comm)
 
 
-def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
+def initial_state(mesh: BlockMesh, p: dict, eos, blocks: slice = slice(None)) -> HydroState:
     """The density wave (kg/m^3, cell averages of the sine over each cell's own width) at ``velocity``
-    (m/s) and ``pressure`` (Pa)."""
+    (m/s) and ``pressure`` (Pa), in the blocks ``blocks`` of ``mesh``."""
+    mesh = mesh.some_blocks(blocks)
     x = mesh.cell_centers()[:, 0]
     dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
     k = 2.0 * np.pi / p["length"]

@@ -10,6 +10,7 @@ from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
 from impactpipe.hydro.eos import SPECIFIC_HEAT_DEFAULTS, pack_eos
 from impactpipe.hydro.mesh.blocks import DEFAULT_BLOCK_CELLS, BlockMesh
 from impactpipe.hydro.output.snapshot import GEOMETRY_DIMENSIONS
+from impactpipe.hydro.parallel.distributed import shared_simulation
 from impactpipe.hydro.solver import Simulation
 from impactpipe.hydro.mesh.state import HydroState
 
@@ -129,15 +130,25 @@ def tube_mesh(geometry: str, length: float, cells: int, ends, block_cells: int |
 
 
 def adaptive_simulation(mesh: BlockMesh, initial_state, names: list[str], specs: list[dict], cfl: float,
-                        refinement: dict | None, wanted_level=None, **options) -> Simulation:
+                        refinement: dict | None, wanted_level=None, comm=None, **options) -> Simulation:
     """The Simulation of a problem on ``mesh`` (:func:`adaptive_mesh`), refined where its initial state asks.
 
-    ``initial_state(mesh)`` sets the problem's :class:`HydroState` on a mesh; ``refinement``
-    is the ``hydro.refinement`` mapping; ``options`` go to :func:`new_simulation`
-    (``tensile_strength``, ``strength``).  The mesh refines from its root level where the
-    refinement rule flags the initial state (and to ``wanted_level``), the state being set
-    again on each finer mesh (:func:`impactpipe.hydro.amr.regrid.refine_initial`).
+    ``initial_state(mesh, blocks)`` sets the problem's :class:`HydroState` on the blocks
+    ``blocks`` (a slice) of a mesh; ``refinement`` is the ``hydro.refinement`` mapping;
+    ``options`` go to :func:`new_simulation` (``tensile_strength``, ``strength``, ``gravity``).
+    The mesh refines from its root level where the refinement rule flags the initial state
+    (and to ``wanted_level``), the state being set again on each finer mesh
+    (:func:`impactpipe.hydro.amr.regrid.refine_initial`).  With ``comm`` (collective) the ranks
+    build each mesh's run together, each its own blocks
+    (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`; the flags are the
+    ranks' together), and the Simulation returned is this rank's share.
     """
     rule = rule_from_config(refinement)
-    return refine_initial(mesh, lambda m: new_simulation(m, names, specs, initial_state(m), cfl, refinement=rule,
-                                                         **options), wanted_level)
+
+    def build(m: BlockMesh) -> Simulation:
+        if comm is None:
+            return new_simulation(m, names, specs, initial_state(m, slice(None)), cfl, refinement=rule, **options)
+        return shared_simulation(comm, m, initial_state, lambda state, partition: new_simulation(
+            m, names, specs, state, cfl, refinement=rule, partition=partition, **options))
+
+    return refine_initial(mesh, build, wanted_level)

@@ -38,6 +38,8 @@ from impactpipe.hydro.self_gravity import DEFAULT_ORDER, SelfGravity
 
 #: Geometries this problem runs in.
 GEOMETRIES = ("2d-cylindrical", "3d")
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 PARAMETERS = {
     "body": Record("Body", {
@@ -56,8 +58,12 @@ DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "2d-cylindrical"):
-    """Build the :class:`~impactpipe.hydro.solver.Simulation` of the module docstring (SI units)."""
+          geometry: str = "2d-cylindrical", comm=None):
+    """Build the :class:`~impactpipe.hydro.solver.Simulation` of the module docstring (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("hydrostatic_body", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     body = p["body"]
@@ -78,14 +84,16 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     distension = initial_distension(specs[0])
     rho0 = float(reference_density(eos.kind[0], eos.params[0], eos.table)) / distension
     gravity = SelfGravity(mesh, order=p["order"], mirror_y=geometry == "3d")
-    return adaptive_simulation(mesh, lambda m: initial_state(m, eos, rho0, body["radius"], distension), names,
-                               specs, cfl, p["refinement"], tensile_strength=tensile_strengths(materials, names),
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, eos, rho0, body["radius"], distension, blocks),
+                               names, specs, cfl, p["refinement"], comm=comm, tensile_strength=tensile_strengths(materials, names),
                                strength=strength_specs(materials, names), gravity=gravity)
 
 
-def initial_state(mesh: BlockMesh, eos, density: float, radius: float, distension: float = 1.0) -> HydroState:
+def initial_state(mesh: BlockMesh, eos, density: float, radius: float, distension: float = 1.0,
+                  blocks: slice = slice(None)) -> HydroState:
     """The sphere of ``radius`` (m) at bulk ``density`` (kg/m^3), ``distension`` (-) and the
-    lithostatic pressure, at rest."""
+    lithostatic pressure, at rest, in the blocks ``blocks`` of ``mesh``."""
+    mesh = mesh.some_blocks(blocks)
     state = HydroState.empty(mesh, 1)
     fill = sphere_fraction(mesh, (0.0, 0.0, 0.0), radius, 4)
     set_lithostatic_sphere(state, mesh, fill, 0, eos, density, radius, distension)

@@ -240,8 +240,9 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     mesh = refine_to(mesh, lambda m: np.where(
         np.logical_or.reduce([surface_crosses(m, c, body["radius"]) for body, c, _ in bodies]), levels - 1, 0))
 
-    def initial_state(blocks_mesh: BlockMesh) -> HydroState:
-        """The two bodies set on the cells of ``blocks_mesh`` (all of ``mesh``'s blocks, or some)."""
+    def initial_state(whole: BlockMesh, blocks: slice = slice(None)) -> HydroState:
+        """The two bodies set on the cells of the blocks ``blocks`` of ``whole`` (``mesh``)."""
+        blocks_mesh = whole.some_blocks(blocks)
         state = HydroState.empty(blocks_mesh, len(names))
         for k, (body, body_centre, body_velocity) in enumerate(bodies):
             rho0 = float(reference_density(eos.kind[k], eos.params[k], eos.table)) / initial_distension(specs[k])

@@ -23,6 +23,8 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 #: A region of one material.
 REGION = {
@@ -49,19 +51,25 @@ DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "1d-planar"):
-    """Build the interface-advection :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+          geometry: str = "1d-planar", comm=None):
+    """Build the interface-advection :class:`~impactpipe.hydro.solver.Simulation` (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("interface_advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     used = [p["inner"]["material"]] + ([p["outer"]["material"]] if p["outer"] is not None else [])
     names, specs, eos = material_list(materials, used)
     mesh = tube_mesh(geometry, p["length"], p["cells"], ("periodic", "periodic"), block_cells, p["levels"])
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos), names, specs, cfl, p["refinement"])
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, p, names, eos, blocks), names, specs, cfl,
+                               p["refinement"], comm=comm)
 
 
-def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState:
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos, blocks: slice = slice(None)) -> HydroState:
     """``inner`` in the cells whose centre lies in [slab_lo, slab_hi) (m), ``outer`` (or void) in the
-    others, all at ``velocity`` (m/s) and ``pressure`` (Pa)."""
+    others, all at ``velocity`` (m/s) and ``pressure`` (Pa), in the blocks ``blocks`` of ``mesh``."""
+    mesh = mesh.some_blocks(blocks)
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
     inside = (x >= p["slab_lo"]) & (x < p["slab_hi"])

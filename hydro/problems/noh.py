@@ -25,6 +25,8 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-cylindrical')
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 PARAMETERS = {
     "material": Parameter(kind=str, description="material name", example="gas"),
@@ -41,8 +43,12 @@ DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "1d-planar"):
-    """Build the Noh :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+          geometry: str = "1d-planar", comm=None):
+    """Build the Noh :class:`~impactpipe.hydro.solver.Simulation` (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("noh", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["material"]])
@@ -50,7 +56,8 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     mesh = adaptive_mesh(geometry, [0.0] * ndim, [p["extent"]] * ndim, [p["cells"]] * ndim,
                          [("reflecting", "outflow")] * ndim, block_cells, p["levels"])
     refinement = origin_box(p["refinement"], ndim, mesh.block_cells * p["extent"] / p["cells"], mesh.max_level)
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, eos), names, specs, cfl, refinement)
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, p, eos, blocks), names, specs, cfl, refinement,
+                               comm=comm)
 
 
 def origin_box(refinement: dict | None, ndim: int, block_width: float, finest: int) -> dict:
@@ -68,8 +75,10 @@ def origin_box(refinement: dict | None, ndim: int, block_width: float, finest: i
     return values
 
 
-def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
-    """The gas at ``density`` (kg/m^3) and ``pressure`` (Pa) streaming at ``velocity`` (m/s) towards the origin."""
+def initial_state(mesh: BlockMesh, p: dict, eos, blocks: slice = slice(None)) -> HydroState:
+    """The gas at ``density`` (kg/m^3) and ``pressure`` (Pa) streaming at ``velocity`` (m/s) towards the
+    origin, in the blocks ``blocks`` of ``mesh``."""
+    mesh = mesh.some_blocks(blocks)
     ndim = mesh.ndim
     centers = mesh.cell_centers()
     radius = np.sqrt((centers[:, :ndim] ** 2).sum(axis=1))

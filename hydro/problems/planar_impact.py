@@ -25,6 +25,8 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar',)
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 #: A plate.
 SLAB = {
@@ -54,24 +56,31 @@ def domain(p: dict) -> tuple[float, float]:
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "1d-planar"):
-    """Build the planar-impact :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+          geometry: str = "1d-planar", comm=None):
+    """Build the planar-impact :class:`~impactpipe.hydro.solver.Simulation` (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("planar_impact", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["flyer"]["material"], p["target"]["material"]])
     lo, hi = domain(p)
     mesh = adaptive_mesh(geometry, [lo], [hi], [p["cells"]], [("outflow", "outflow")], block_cells, p["levels"])
     distension = [initial_distension(spec) for spec in specs]
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos, distension), names, specs, cfl,
-                               p["refinement"],
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, p, names, eos, distension, blocks), names,
+                               specs, cfl, p["refinement"], comm=comm,
                                tensile_strength=tensile_strengths(materials, names),
                                strength=strength_specs(materials, names))
 
 
-def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos, distension=None) -> HydroState:
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos, distension=None,
+                  blocks: slice = slice(None)) -> HydroState:
     """Both plates at their reference density (kg/m^3) with e = 0, the flyer at its ``velocity`` (m/s);
     each cell's volume fractions are the lengths of the plates inside it over its width.  A porous
-    material (``distension[k]`` = alpha0 > 1) starts at its bulk density rho0 / alpha0."""
+    material (``distension[k]`` = alpha0 > 1) starts at its bulk density rho0 / alpha0.  In the
+    blocks ``blocks`` of ``mesh``."""
+    mesh = mesh.some_blocks(blocks)
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
     dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)

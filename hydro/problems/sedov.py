@@ -29,6 +29,8 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 PARAMETERS = {
     "energy": Parameter(gt=0, units="J", description="blast energy of the whole sphere", example=1.0),
@@ -49,8 +51,12 @@ DEFAULTS = {**setup_defaults(PARAMETERS), **ADAPTIVE_DEFAULTS}
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "2d-cylindrical"):
-    """Build the Sedov :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+          geometry: str = "2d-cylindrical", comm=None):
+    """Build the Sedov :class:`~impactpipe.hydro.solver.Simulation` (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("sedov", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["ambient"]["material"]])
@@ -59,26 +65,41 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
                          [("reflecting", "outflow")] * ndim, block_cells, p["levels"])
     source = (p["deposit_cells"] + 2) * p["extent"] / p["cells"]
     finest = mesh.max_level
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, eos), names, specs, cfl, p["refinement"],
-                               lambda m: np.where((m.block_lo[:, :ndim] < source).all(axis=1), finest, 0))
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, p, eos, blocks), names, specs, cfl,
+                               p["refinement"],
+                               lambda m: np.where((m.block_lo[:, :ndim] < source).all(axis=1), finest, 0),
+                               comm=comm)
 
 
-def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
-    """The ambient gas at rest with ``energy`` (J, of the whole sphere) in the cells within the deposit.
+def initial_state(mesh: BlockMesh, p: dict, eos, blocks: slice = slice(None)) -> HydroState:
+    """The ambient gas at rest with ``energy`` (J, of the whole sphere) in the cells within the
+    deposit, in the blocks ``blocks`` of ``mesh``.
 
     The deposit holds the cells whose centres lie within ``deposit_cells`` finest cell sizes
     (extent / cells, m) of the origin; the domain holds the share 1/2 (2d-cylindrical) or 1/8
-    (3d) of the sphere's energy, spread uniformly per volume over them.
+    (3d) of the sphere's energy, spread uniformly per volume over them (the volume summed over
+    the whole mesh's deposit, :func:`deposit_volume`).
     """
-    ndim = mesh.ndim
     amb = p["ambient"]
     share = 0.5 if mesh.geometry == "2d-cylindrical" else 0.125
-    radius = np.sqrt((mesh.cell_centers()[:, :ndim] ** 2).sum(axis=1))
-    hot = radius < p["deposit_cells"] * p["extent"] / p["cells"]
-    vol = mesh.cell_volumes()
+    deposit = p["deposit_cells"] * p["extent"] / p["cells"]
     e_amb = energy_from_pressure(eos.kind[0], eos.params[0], eos.table, amb["density"], amb["pressure"])
-    e_hot = e_amb + share * p["energy"] / (amb["density"] * vol[hot].sum())
-    state = HydroState.empty(mesh, 1)
-    state.set_material(mesh, 1.0, 0, eos, amb["density"], np.zeros(3),
-                       specific_energy=np.where(hot, e_hot, e_amb))
+    e_hot = e_amb + share * p["energy"] / (amb["density"] * deposit_volume(mesh, deposit))
+    some = mesh.some_blocks(blocks)
+    state = HydroState.empty(some, 1)
+    state.set_material(some, 1.0, 0, eos, amb["density"], np.zeros(3),
+                       specific_energy=np.where(hot_cells(some, deposit), e_hot, e_amb))
     return state
+
+
+def hot_cells(mesh: BlockMesh, deposit: float) -> np.ndarray:
+    """(NB, nx, ny, nz) True for the cells whose centre lies within ``deposit`` (m) of the origin."""
+    return np.sqrt((mesh.cell_centers()[:, :mesh.ndim] ** 2).sum(axis=1)) < deposit
+
+
+def deposit_volume(mesh: BlockMesh, deposit: float) -> float:
+    """The summed volume (m^3) of ``mesh``'s cells whose centre lies within ``deposit`` (m) of the
+    origin, in block order: the blocks whose lower corner lies within ``deposit`` along every axis
+    hold all of them (the domain starts at the origin)."""
+    near = mesh.some_blocks(np.flatnonzero((mesh.block_lo[:, :mesh.ndim] < deposit).all(axis=1)))
+    return float(near.cell_volumes()[hot_cells(near, deposit)].sum())

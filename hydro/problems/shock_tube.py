@@ -22,6 +22,8 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
+#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
+SHARED_SETUP = True
 
 #: A uniform state on one side of the diaphragm.
 FLUID_STATE = {
@@ -54,8 +56,12 @@ def check_parameters(p: dict) -> list[str]:
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = 0.4,
-          geometry: str = "1d-planar"):
-    """Build the shock-tube :class:`~impactpipe.hydro.solver.Simulation` (SI units)."""
+          geometry: str = "1d-planar", comm=None):
+    """Build the shock-tube :class:`~impactpipe.hydro.solver.Simulation` (SI units).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
+    share of it."""
     check_geometry("shock_tube", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     errors = check_parameters(p)
@@ -63,12 +69,14 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
         raise ValueError("; ".join(errors))
     names, specs, eos = material_list(materials, [p["left"]["material"], p["right"]["material"]])
     mesh = tube_mesh(geometry, p["length"], p["cells"], ("outflow", "outflow"), block_cells, p["levels"])
-    return adaptive_simulation(mesh, lambda m: initial_state(m, p, names, eos), names, specs, cfl, p["refinement"])
+    return adaptive_simulation(mesh, lambda m, blocks: initial_state(m, p, names, eos, blocks), names, specs, cfl,
+                               p["refinement"], comm=comm)
 
 
-def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos) -> HydroState:
+def initial_state(mesh: BlockMesh, p: dict, names: list[str], eos, blocks: slice = slice(None)) -> HydroState:
     """The ``left`` state (density kg/m^3, velocity m/s, pressure Pa) in the cells whose centre lies
-    left of ``interface`` (m), the ``right`` state in the others."""
+    left of ``interface`` (m), the ``right`` state in the others, in the blocks ``blocks`` of ``mesh``."""
+    mesh = mesh.some_blocks(blocks)
     state = HydroState.empty(mesh, len(names))
     x = mesh.cell_centers()[:, 0]
     for side, sel in (("left", x < p["interface"]), ("right", x >= p["interface"])):

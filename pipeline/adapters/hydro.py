@@ -9,12 +9,13 @@ time-step collapse) writes its last good state to the checkpoint and raises.
 
 On several MPI ranks (:mod:`impactpipe.pipeline.ranks`) rank 0 runs this stage as above and
 sends the other ranks its order, and no rank ever holds the whole state where the ranks write
-their outputs together (parallel HDF5): the ranks build a new impact together, each its own
-blocks (:func:`impactpipe.hydro.parallel.distributed.shared_simulation`), a resumed run is
+their outputs together (parallel HDF5): the ranks build a new run together, each its own
+blocks (:func:`impactpipe.hydro.parallel.distributed.shared_simulation`; a problem with
+``SHARED_SETUP``, every one but the column collapse), a resumed run is
 read from the checkpoint by every rank, each its own blocks (:meth:`Simulation.from_checkpoint`),
 and at the end the ranks sum the totals together and send rank 0 only the per-block counters
-(:func:`impactpipe.hydro.parallel.distributed.collect_counters`).  The other scenes are built
-by rank 0 alone, which sends the other ranks their blocks
+(:func:`impactpipe.hydro.parallel.distributed.collect_counters`).  The column collapse is
+built by rank 0 alone, which sends the other ranks their blocks
 (:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`).  Rank 0 decides after
 every step whether a checkpoint is due or a stop was asked for, and the others follow.
 """
