@@ -21,8 +21,6 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
-#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
-SHARED_SETUP = True
 
 PARAMETERS = {
     "material": Parameter(kind=str, description="material name", example="gas"),
@@ -50,8 +48,8 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the advection :class:`~impactpipe.hydro.solver.Simulation` (SI units).
 
     With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
-    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
-    share of it."""
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`), and
+    the Simulation returned is this rank's share of it."""
     check_geometry("advection", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["material"]])

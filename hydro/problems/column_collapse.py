@@ -56,6 +56,7 @@ from impactpipe.hydro.amr.regrid import refine_initial, rule_from_config
 from impactpipe.hydro.eos import energy_from_pressure, pressure_sound_speed, reference_density
 from impactpipe.hydro.gravity import ExternalGravity
 from impactpipe.hydro.mesh.blocks import BlockMesh, morton_keys
+from impactpipe.hydro.parallel.distributed import shared_simulation
 from impactpipe.hydro.problems.common import (ADAPTIVE_DEFAULTS, adaptive_mesh, check_geometry, material_list, merged,
                                               root_cell_multiple, strength_specs, tensile_strengths)
 from impactpipe.hydro.problems.parameters import Parameter, setup_defaults, violations
@@ -245,8 +246,12 @@ def _overlap(lo: np.ndarray, hi: np.ndarray, a: float, b: float) -> np.ndarray:
 
 
 def setup(params: dict, materials: dict[str, dict], block_cells: int | None = None, cfl: float = MAX_CFL,
-          geometry: str = "2d-planar") -> Simulation:
-    """Build the column-collapse :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring)."""
+          geometry: str = "2d-planar", comm=None) -> Simulation:
+    """Build the column-collapse :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring).
+
+    With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`),
+    and the Simulation returned is this rank's share of it."""
     check_geometry("column_collapse", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     errors = violations(PARAMETERS, p)
@@ -260,11 +265,12 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
                          p["levels"])
     rule = rule_from_config(p["refinement"])
 
-    def build(m: BlockMesh) -> Simulation:
-        sim = ColumnCollapseSimulation(m, names, specs, initial_state(m, p, eos), cfl=cfl,
-                         tensile_strength=tensile_strengths(materials, names),
-                         strength=strength_specs(materials, names),
-                         gravity=ExternalGravity([0.0, -p["gravity"], 0.0], m), refinement=rule)
+    def simulation(m: BlockMesh, state: HydroState, partition=None) -> Simulation:
+        sim = ColumnCollapseSimulation(m, names, specs, state, cfl=cfl,
+                                       tensile_strength=tensile_strengths(materials, names),
+                                       strength=strength_specs(materials, names),
+                                       gravity=ExternalGravity([0.0, -p["gravity"], 0.0], m), refinement=rule,
+                                       partition=partition)
         sim.bulk_pressure_predictor = True
         sim.step_tensile_limit = True
         sim.void_settling = p["settling"]
@@ -274,8 +280,14 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
             if p["hourglass"] > 0.0:
                 sim.strength.set_hourglass_viscosity(p["hourglass"], impedance(eos, sim.shear_modulus[0]))
             if p["face_shear"]:
-                sim.strength.set_face_shear(shear_modulus(eos, sim.shear_modulus[0]))
+                sim.strength.set_face_shear(shear_modulus(eos, sim.shear_modulus[0]), partition)
         return sim
+
+    def build(m: BlockMesh) -> Simulation:
+        if comm is None:
+            return simulation(m, initial_state(m, p, eos))
+        return shared_simulation(comm, m, lambda whole, blocks: initial_state(whole, p, eos, blocks),
+                                 lambda state, partition: simulation(m, state, partition))
 
     return refine_initial(mesh, build)
 
@@ -303,12 +315,14 @@ def shear_modulus(eos, shear: np.ndarray) -> float:
     return _at_rest(eos, shear)[2]
 
 
-def initial_state(mesh: BlockMesh, p: dict, eos) -> HydroState:
-    """The column at rest at its reference density (kg/m^3) in hydrostatic equilibrium, void elsewhere.
+def initial_state(mesh: BlockMesh, p: dict, eos, blocks: slice = slice(None)) -> HydroState:
+    """The column at rest at its reference density (kg/m^3) in hydrostatic equilibrium, void
+    elsewhere, in the blocks ``blocks`` of ``mesh``.
 
     Each cell's volume fraction is the area of the column inside it over its own; its pressure
     rho0 g (H0 - z_m) (Pa) is taken at the centroid height z_m (m) of the material in it.
     """
+    mesh = mesh.some_blocks(blocks)
     dx = mesh.block_dx[:, 0].reshape(-1, 1, 1, 1)
     centres = mesh.cell_centers()
     x, z = centres[:, 0], centres[:, 1]

@@ -38,8 +38,6 @@ from impactpipe.hydro.self_gravity import DEFAULT_ORDER, SelfGravity
 
 #: Geometries this problem runs in.
 GEOMETRIES = ("2d-cylindrical", "3d")
-#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
-SHARED_SETUP = True
 
 PARAMETERS = {
     "body": Record("Body", {
@@ -62,8 +60,8 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the :class:`~impactpipe.hydro.solver.Simulation` of the module docstring (SI units).
 
     With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
-    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
-    share of it."""
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`), and
+    the Simulation returned is this rank's share of it."""
     check_geometry("hydrostatic_body", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     body = p["body"]

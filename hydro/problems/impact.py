@@ -74,8 +74,6 @@ PROJECTILE_MATERIAL = 1
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
-#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
-SHARED_SETUP = True
 
 #: A sphere of one material.
 BODY = {
@@ -212,8 +210,8 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the impact :class:`~impactpipe.hydro.solver.Simulation` (SI units; module docstring).
 
     With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
-    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`;
-    :data:`SHARED_SETUP`), and the Simulation returned is this rank's share of it."""
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`), and
+    the Simulation returned is this rank's share of it."""
     check_geometry("impact", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     tgt, prj = p["target"], p["projectile"]

@@ -29,8 +29,6 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('2d-cylindrical', '3d')
-#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
-SHARED_SETUP = True
 
 PARAMETERS = {
     "energy": Parameter(gt=0, units="J", description="blast energy of the whole sphere", example=1.0),
@@ -55,8 +53,8 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the Sedov :class:`~impactpipe.hydro.solver.Simulation` (SI units).
 
     With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
-    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
-    share of it."""
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`), and
+    the Simulation returned is this rank's share of it."""
     check_geometry("sedov", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     names, specs, eos = material_list(materials, [p["ambient"]["material"]])

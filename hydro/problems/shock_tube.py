@@ -22,8 +22,6 @@ from impactpipe.hydro.mesh.state import HydroState
 
 #: Geometries this problem runs in.
 GEOMETRIES = ('1d-planar', '2d-planar', '3d')
-#: :func:`setup` takes ``comm``: the MPI ranks of a run build it together, each its own blocks.
-SHARED_SETUP = True
 
 #: A uniform state on one side of the diaphragm.
 FLUID_STATE = {
@@ -60,8 +58,8 @@ def setup(params: dict, materials: dict[str, dict], block_cells: int | None = No
     """Build the shock-tube :class:`~impactpipe.hydro.solver.Simulation` (SI units).
 
     With ``comm`` (an MPI communicator; collective) the ranks build the run together, each
-    setting its own blocks (:data:`SHARED_SETUP`), and the Simulation returned is this rank's
-    share of it."""
+    setting its own blocks (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`), and
+    the Simulation returned is this rank's share of it."""
     check_geometry("shock_tube", GEOMETRIES, geometry)
     p = merged(DEFAULTS, params)
     errors = check_parameters(p)

@@ -248,12 +248,14 @@ class MaterialStrength:
                              f"{impedance})")
         self.hourglass = (float(coefficient), float(impedance))
 
-    def set_face_shear(self, modulus: float) -> None:
+    def set_face_shear(self, modulus: float, partition=None) -> None:
         """Give each cell face the elastic-plastic shear stress of
         :mod:`impactpipe.hydro.strength.face_shear` against the odd-even velocity modes (planar
         meshes on one level); ``modulus`` G (Pa), the material's shear modulus.  The work arrays
         get the slots ``WK_Y`` and ``WK_L`` for the cells' shear strength and off-diagonal velocity
-        gradients (NWORK_FACE in all)."""
+        gradients (NWORK_FACE in all).  ``partition``: on several MPI ranks this rank's, whose
+        :meth:`~impactpipe.hydro.parallel.distributed.WholeMesh.zeros` hold the arrays (the face
+        stresses NaN in its own rows only: each block reads its own faces); None: one process."""
         if self.mesh.geometry_code == CYLINDRICAL or self.mesh.ndim < 2:
             raise ValueError("the face shear stress is implemented on 2-D and 3-D planar meshes only")
         if self.mesh.adaptive:
@@ -261,8 +263,10 @@ class MaterialStrength:
         if not modulus > 0.0:
             raise ValueError(f"face shear stress: the shear modulus must be > 0 (got {modulus})")
         self.face_modulus = float(modulus)
-        self.work = np.zeros((self.mesh.nblocks, NWORK_FACE) + self.mesh.padded_shape)
-        self.face = np.full((self.mesh.nblocks, self.mesh.ndim ** 2) + self.mesh.padded_shape, np.nan)
+        zeros = np.zeros if partition is None else partition.zeros
+        self.work = zeros((self.mesh.nblocks, NWORK_FACE) + self.mesh.padded_shape)
+        self.face = zeros((self.mesh.nblocks, self.mesh.ndim ** 2) + self.mesh.padded_shape)
+        self.face[slice(None) if partition is None else partition.blocks] = np.nan
 
     def set_surface_layer_pressure(self, gravity) -> None:
         """Let the yield strength of material in a cell with void see at least the pressure at

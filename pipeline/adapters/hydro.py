@@ -10,13 +10,10 @@ time-step collapse) writes its last good state to the checkpoint and raises.
 On several MPI ranks (:mod:`impactpipe.pipeline.ranks`) rank 0 runs this stage as above and
 sends the other ranks its order, and no rank ever holds the whole state where the ranks write
 their outputs together (parallel HDF5): the ranks build a new run together, each its own
-blocks (:func:`impactpipe.hydro.parallel.distributed.shared_simulation`; a problem with
-``SHARED_SETUP``, every one but the column collapse), a resumed run is
+blocks (:func:`impactpipe.hydro.parallel.distributed.shared_simulation`), a resumed run is
 read from the checkpoint by every rank, each its own blocks (:meth:`Simulation.from_checkpoint`),
 and at the end the ranks sum the totals together and send rank 0 only the per-block counters
-(:func:`impactpipe.hydro.parallel.distributed.collect_counters`).  The column collapse is
-built by rank 0 alone, which sends the other ranks their blocks
-(:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`).  Rank 0 decides after
+(:func:`impactpipe.hydro.parallel.distributed.collect_counters`).  Rank 0 decides after
 every step whether a checkpoint is due or a stop was asked for, and the others follow.
 """
 
@@ -35,7 +32,7 @@ import numpy as np
 from impactpipe import storage
 from impactpipe.hydro.budget import conservation_budget
 from impactpipe.hydro.output.io import append_snapshot, write_tracers
-from impactpipe.hydro.parallel.distributed import PARALLEL_HDF5_VARIABLE, collect_counters, distribute_from_root
+from impactpipe.hydro.parallel.distributed import PARALLEL_HDF5_VARIABLE, collect_counters
 from impactpipe.hydro.problems import PROBLEMS, impact
 from impactpipe.hydro.self_gravity import DEFAULT_ORDER
 from impactpipe.hydro.solver import HydroFailure, Simulation
@@ -83,8 +80,8 @@ def problem_parameters(config, values: dict[str, Any]) -> dict[str, Any]:
 
 
 def build_simulation(config, values: dict[str, Any], comm=None) -> Simulation:
-    """The Simulation of the config's scene, at t = 0; with ``comm`` (a problem with
-    ``SHARED_SETUP``; collective) this rank's share of the run the ranks build together."""
+    """The Simulation of the config's scene, at t = 0; with ``comm`` (collective) this rank's
+    share of the run the ranks build together, each its own blocks."""
     materials = config.resolved_materials()
     if config.scene.problem == "impact":
         for mat in materials.values():
@@ -161,21 +158,17 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
         times = [t for t in derived.snapshot_times(config, end_time) if t > t_resume]
         if comm is not None:
             ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time, "times": times,
-                              "resume": True, "built_together": None})
+                              "resume": True})
         sim = Simulation.from_checkpoint(checkpoint, comm)
         _trim_snapshots(work, sim.time)
         log.info("hydro: resuming from checkpoint at t = %.6g s (step %d)", sim.time, sim.step_count)
     else:
         times = [t for t in derived.snapshot_times(config, end_time) if t > 0.0]
-        together = comm is not None and getattr(PROBLEMS[config.scene.problem], "SHARED_SETUP", False)
         if comm is not None:
             ranks.send_order({"checkpoint": str(checkpoint), "work": str(work), "end_time": end_time,
-                              "times": times, "resume": False,
-                              "built_together": {"config": config, "values": values} if together else None})
-        sim, initial = _start(config, values, work, checkpoint, ctx.stage_hash, comm if together else None)
+                              "times": times, "resume": False, "config": config, "values": values})
+        sim, initial = _start(config, values, work, checkpoint, ctx.stage_hash, comm)
         _append(work, sim.snapshot(), sim.partition)
-        if comm is not None and not together:
-            sim = distribute_from_root(sim, comm)
     if comm is not None:
         if sim.partition.writes_together:
             log.info("hydro: snapshots and checkpoints written by every rank together, each its own blocks, "
@@ -259,11 +252,9 @@ def run_hydro_stage(ctx: StageContext) -> dict[str, Any]:
 def follow_hydro_stage(comm) -> int:
     """A rank other than 0: take part in rank 0's hydro stage, if it runs one; returns the exit status.
 
-    The simulation is a new one that the ranks build together, each its own blocks (a problem
-    with ``SHARED_SETUP``, :func:`~impactpipe.hydro.parallel.distributed.shared_simulation`),
-    rank 0's new one, of which this rank receives its outline and its own blocks
-    (:func:`~impactpipe.hydro.parallel.distributed.distribute_from_root`), or the checkpoint's,
-    of which it reads its own blocks (:meth:`Simulation.from_checkpoint`); it runs to the same
+    The simulation is a new one that the ranks build together, each its own blocks
+    (:func:`~impactpipe.hydro.parallel.distributed.shared_simulation`), or the checkpoint's, of
+    which it reads its own blocks (:meth:`Simulation.from_checkpoint`); it runs to the same
     times; snapshots, checkpoints and totals are collective, and rank 0
     writes what the ranks do not write together.  0 when the stage finished (or did not run),
     1 after a hydro failure, 2 when the run cannot be shared, 130 when rank 0 stopped it.
@@ -272,16 +263,13 @@ def follow_hydro_stage(comm) -> int:
     if order is None:
         return 0
     checkpoint = Path(order["checkpoint"])
-    together = order["built_together"]
     try:
         if order["resume"]:
             sim = Simulation.from_checkpoint(checkpoint, comm)
-        elif together is not None:
-            sim = _new_run(together["config"], together["values"], comm)
+        else:
+            sim = _new_run(order["config"], order["values"], comm)
             sim.totals()
             _append(Path(order["work"]), sim.snapshot(), sim.partition)
-        else:
-            sim = distribute_from_root(None, comm)
     except ValueError:
         return 2
 
@@ -350,7 +338,7 @@ def _start(config, values, work: Path, checkpoint: Path, stage_hash: str, comm=N
 
 def _new_run(config, values, comm=None) -> Simulation:
     """The config's run at t = 0 with its tracers: built by this process, or with ``comm`` by
-    the ranks together, each its own blocks (collective; the problem's ``SHARED_SETUP``)."""
+    the ranks together, each its own blocks (collective)."""
     sim = build_simulation(config, values, comm)
     if values["tracers"]:
         add_tracers(sim, config, float(values["end_time"]))
