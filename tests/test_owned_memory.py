@@ -16,6 +16,7 @@ when the ranks build or read the run together.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -27,6 +28,11 @@ import pytest
 import yaml
 
 from impactpipe.hydro.parallel.owned_memory import lazy_zeros
+
+_spec = importlib.util.spec_from_file_location(
+    "mpi_start_memory", Path(__file__).resolve().parent.parent / "benchmarks" / "mpi_start_memory.py")
+mpi_start_memory = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(mpi_start_memory)
 
 pytest.importorskip("mpi4py")
 
@@ -122,50 +128,6 @@ with open(f"{sys.argv[2]}.rank{comm.rank}.json", "w") as fh:
     fh.write(json.dumps(out))
 """
 
-#: Arguments 1 and 2: a small config and the same scene on a finer mesh, 3: OUT.  For each, the
-#: run starts four ways: rank 0 builds it and shares it out, the ranks build it together (each
-#: its own blocks), rank 0 reads the ranks' checkpoint of it and shares it out, the ranks read
-#: it together (each its own blocks); the small run first, so that the kernels are loaded
-#: before the measurement.  Writes, per rank, to OUT.rankR.json: how much the peak resident
-#: set (VmHWM, B) grew over the resident set before each start of the fine run, and the bytes
-#: of its whole state.
-STARTS = """
-import gc, json, sys
-from impactpipe.hydro.parallel.distributed import distribute_from_root
-from impactpipe.hydro.solver import Simulation
-from impactpipe.pipeline import derived, load_config, ranks
-from impactpipe.pipeline.adapters.hydro import build_simulation
-def resident(name):
-    with open("/proc/self/status") as status:
-        return next(int(line.split()[1]) * 1024 for line in status if line.startswith(name + ":"))
-def grown(start):
-    gc.collect()
-    with open("/proc/self/clear_refs", "w") as refs:
-        refs.write("5")
-    before = resident("VmRSS")
-    start()
-    return resident("VmHWM") - before
-comm = ranks.join_world()
-checkpoint = sys.argv[3] + ".checkpoint.h5"
-for path in sys.argv[1:3]:
-    config = load_config(path)
-    values = derived.derive(config)
-    sim = build_simulation(config, values, comm)
-    sim.save_checkpoint(checkpoint)
-    whole = sum(array.nbytes for array in sim.state.arrays().values())
-    del sim
-    out = {"whole": whole,
-           "rank_0_builds": grown(lambda: distribute_from_root(build_simulation(config, values)
-                                                                if comm.rank == 0 else None, comm)),
-           "built_together": grown(lambda: build_simulation(config, values, comm)),
-           "rank_0_reads": grown(lambda: distribute_from_root(Simulation.from_checkpoint(checkpoint)
-                                                               if comm.rank == 0 else None, comm)),
-           "read_together": grown(lambda: Simulation.from_checkpoint(checkpoint, comm))}
-with open(f"{sys.argv[3]}.rank{comm.rank}.json", "w") as out_file:
-    out_file.write(json.dumps(out))
-"""
-
-
 def test_lazy_zeros_commits_a_page_only_when_written():
     array = lazy_zeros((4, 3, 1024))
     assert array.dtype == np.float64 and array.flags.c_contiguous and array.flags.writeable
@@ -232,19 +194,9 @@ def test_a_run_built_or_resumed_by_the_ranks_together_writes_only_each_ranks_own
 
 
 def test_no_rank_but_0_holds_the_whole_state_and_rank_0_only_when_it_builds_or_reads_the_run_alone(tmp_path):
-    config = yaml.safe_load(CONFIG.read_text())
-    paths = []
-    for name, cells, block in (("small", 2, 4), ("fine", 24, 16)):
-        config["hydro"].update(cells_per_projectile_radius=cells, block_cells=block)
-        paths.append(tmp_path / f"impact_strength_{name}.yaml")
-        paths[-1].write_text(yaml.safe_dump(config))
-    out = tmp_path / "starts"
-    # glibc's fixed mmap threshold: freed arrays go back to the system, so each start's growth is its own
-    env = {**ENV, "MALLOC_MMAP_THRESHOLD_": "131072"}
-    result = subprocess.run([ranks.mpiexec_path(), "-n", "3", sys.executable, "-c", STARTS, *map(str, paths),
-                             str(out)], env=env, capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stderr
-    counted = [json.loads(Path(f"{out}.rank{rank}.json").read_text()) for rank in range(3)]
+    """The four starts of benchmarks/mpi_start_memory.py on 3 ranks (the r-z impact with strength at
+    24 cells per projectile radius, a state of about 55 MB)."""
+    counted = mpi_start_memory.start_peaks(tmp_path, 24, 3)
     whole = counted[0]["whole"]
     assert whole > 50e6  # the state stands well above the other memory the starts move
     alone = [counted[0]["rank_0_builds"], counted[0]["rank_0_reads"]]
