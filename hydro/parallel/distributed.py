@@ -7,8 +7,10 @@ output, or to open the output with the other processes where they write it toget
 (``writes_together``), and to give every process every block's rows of small per-block
 arrays (the totals' sums, the refinement indicators).
 :class:`WholeMesh` is the single process (every block, nothing to combine); :class:`BlockRanges` the MPI ranks
-of one run (:func:`distribute_from_root` or :func:`distribute` attaches it, :func:`collect`
-ends it).
+of one run (:func:`shared_simulation`, :meth:`~impactpipe.hydro.solver.Simulation.from_checkpoint`
+with a communicator, :func:`distribute_from_root` or :func:`distribute` attaches it;
+:func:`collect_counters` ends a run without moving its state, :func:`collect` gathers the
+state on rank 0 for a script that compares it).
 
 Tracers (:class:`~impactpipe.hydro.tracers.motion.Tracers`) ask the partition which process
 samples each tracer (the owner of the block holding the point, :meth:`WholeMesh.block_owners`),

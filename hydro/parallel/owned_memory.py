@@ -11,8 +11,10 @@ private mapping (Linux, macOS) a page is committed when it is first written, and
 read maps the system's shared zero page; so an array whose other rows are never written holds
 about the rank's own rows and its halo in memory, whatever its shape.
 
-Only rank 0 needs to build the run's initial state.  It sends the other ranks the outline of
-its Simulation (:func:`outline`: everything but the per-block arrays of cells, which travel as
+The ranks of a run build it together, each its own blocks
+(:func:`~.distributed.shared_simulation`, which places them with :func:`placed_rows`), or
+rank 0 alone builds it (a script's run, :func:`~.distributed.distribute_from_root`) and sends
+the other ranks the outline of its Simulation (:func:`outline`: everything but the per-block arrays of cells, which travel as
 their shapes only), from which each rank builds its own Simulation with arrays of zeros that
 hold no memory yet (:func:`from_outline`).  :func:`receive_owned_blocks` then gives each rank,
 in such arrays, the rows of its own blocks of rank 0's state and of the strength model's
@@ -24,8 +26,9 @@ send it (:meth:`~.distributed.BlockRanges.regrid`).  A run resumed from a checkp
 several ranks is not built on rank 0 at all: each rank reads its own rows from the file
 (:func:`read_owned_rows`, :meth:`~impactpipe.hydro.solver.Simulation.from_checkpoint`) and
 receives its halo (:func:`receive_halos`).  tests/test_owned_memory.py checks that no
-other page is written, on a uniform mesh and across an adaptive mesh's regrids, and that a
-rank other than 0 never holds the whole state.
+other page is written, on a uniform mesh and across an adaptive mesh's regrids, for a run
+built or resumed by the ranks together too, and that no rank holds the whole state but rank 0
+where it builds or reads the run alone.
 """
 
 from __future__ import annotations
