@@ -7,15 +7,16 @@ Run under mpiexec, one numba thread per rank:
 The r-z impact of benchmarks/hydro_throughput.py (``2d-cyl-tillotson``: 100 cells per
 projectile radius, 2400 blocks of 16^2; ``--quick``: 25, 150 blocks) with the impact scene's
 900 tracers, built on rank 0 and shared between the ranks before the first step
-(:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`).  On several ranks the tracers add
-per step one exchange of the cells within one cell of each rank's blocks
-(:meth:`BlockRanges.share_neighbourhood`) and three gathers of the sampled rows (v_n, v_{n+1},
-the peaks; :meth:`BlockRanges.gather_tracers`).  Rank 0 prints the wall time of a step with
-tracers and without them (``--steps`` steps each, between barriers), of the tracers' messages
-timed alone and, for scale, of the ghost fills of one step with their strip exchanges
-(``--repeats`` times each, the mean).
+(:func:`impactpipe.hydro.parallel.distributed.distribute_from_root`); each rank then holds the
+tracers in its own blocks.  On several ranks the tracers add per step one exchange of the
+cells within one cell of each rank's blocks (:meth:`BlockRanges.share_neighbourhood`) and two
+hand-overs of the tracers that moved into another rank's blocks (after the predictor and after
+the corrector; :meth:`BlockRanges.hand_over`, counted in the partition's traffic).  Rank 0
+prints the wall time of a step with tracers and without them (``--steps`` steps each, between
+barriers), the hand-overs per step (the tracers sent, summed over the ranks, and rank 0's wall
+time inside them), the neighbourhood exchange timed alone and, for scale, the ghost fills of
+one step with their strip exchanges (``--repeats`` times each, the mean).
 """
-
 from __future__ import annotations
 
 import argparse
@@ -70,23 +71,23 @@ def measure(comm, quick: bool, steps: int, repeats: int) -> dict:
         sim = distribute_from_root(sim, comm)
     sim.step()
     sim.step()
+    traffic = sim.partition.traffic
+    traffic.reset()
     with_tracers = step_seconds(comm, sim, steps)
-    tracers = sim.tracers
-    owner = np.empty(len(tracers), dtype=np.int64)
-    sim.partition.block_owners(tracers.owning_block, owner)
-    rows = [np.zeros((len(tracers), 3)), np.zeros((len(tracers), 3)), np.zeros(len(tracers)),
-            np.zeros(len(tracers)), np.zeros(len(tracers))]
+    handovers = traffic.handovers / steps
+    handed_over = comm.allreduce(traffic.items_handed_over) / steps
+    handover_seconds = traffic.handover_seconds / steps
+    held = comm.allgather(len(sim.tracers))
     neighbourhood = message_seconds(comm, repeats, lambda: sim.partition.share_neighbourhood(sim.state))
-    gathers = message_seconds(comm, repeats, lambda: (sim.partition.gather_tracers(owner, rows[:1]),
-                                                      sim.partition.gather_tracers(owner, rows[1:2]),
-                                                      sim.partition.gather_tracers(owner, rows[2:])))
     ghost_fills = message_seconds(comm, repeats, lambda: [sim.partition.fill_ghosts(sim.state, sim.mesh, axis)
                                                           for axis in range(sim.mesh.ndim)])
     sim.tracers = None
     without_tracers = step_seconds(comm, sim, steps)
-    return {"cells": sim.mesh.ncells, "blocks": sim.mesh.nblocks, "tracers": len(tracers), "steps": steps,
-            "step_with_tracers_s": with_tracers, "step_without_tracers_s": without_tracers,
-            "neighbourhood_exchange_s": neighbourhood, "three_gathers_s": gathers, "ghost_fills_s": ghost_fills}
+    return {"cells": sim.mesh.ncells, "blocks": sim.mesh.nblocks, "tracers": sum(held), "tracers_per_rank": held,
+            "steps": steps, "step_with_tracers_s": with_tracers, "step_without_tracers_s": without_tracers,
+            "handovers_per_step": handovers, "tracers_handed_over_per_step": handed_over,
+            "handover_s_per_step": handover_seconds, "neighbourhood_exchange_s": neighbourhood,
+            "ghost_fills_s": ghost_fills}
 
 
 def main() -> None:
@@ -108,8 +109,10 @@ def main() -> None:
     else:
         print(f"{comm.size} ranks, {result['blocks']} blocks, {result['tracers']} tracers: step "
               f"{result['step_with_tracers_s'] * 1e3:.3g} ms with tracers, "
-              f"{result['step_without_tracers_s'] * 1e3:.3g} ms without; neighbourhood exchange {result['neighbourhood_exchange_s'] * 1e6:.3g} us, three gathers "
-              f"{result['three_gathers_s'] * 1e6:.3g} us; ghost fills of a step {result['ghost_fills_s'] * 1e6:.3g} us")
+              f"{result['step_without_tracers_s'] * 1e3:.3g} ms without; {result['handovers_per_step']:.3g} hand-overs "
+              f"per step ({result['tracers_handed_over_per_step']:.3g} tracers, "
+              f"{result['handover_s_per_step'] * 1e6:.3g} us); neighbourhood exchange "
+              f"{result['neighbourhood_exchange_s'] * 1e6:.3g} us; ghost fills of a step {result['ghost_fills_s'] * 1e6:.3g} us")
 
 
 if __name__ == "__main__":

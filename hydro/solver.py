@@ -744,7 +744,7 @@ class Simulation:
         self._failure[:] = 0
         if self.tracers is not None:
             self.partition.share_neighbourhood(self.state)
-            self.tracers.restore_good()
+            self.tracers.restore_good(self.partition)
 
     def _strength_counters(self) -> tuple:
         if self.strength is None:
@@ -947,6 +947,7 @@ class Simulation:
         """
         part = self.partition
         attrs = self._checkpoint_attributes()
+        tracers = None if self.tracers is None else self.tracers.assembled(part, everywhere=part.writes_together)
         if part.writes_together:
             attrs = part.agree(attrs)
             state = {name: getattr(self.state, name) for name in FIELDS}
@@ -981,8 +982,8 @@ class Simulation:
                 if self.strength is not None:
                     store_array(ctr, "strength_counts", counters["strength_counts"], rows)
                     store_array(ctr, "strength_amounts", counters["strength_amounts"], rows)
-                if self.tracers is not None:
-                    self.tracers.save(fh.create_group("tracers"))
+                if tracers is not None:
+                    tracers.save(fh.create_group("tracers"))
 
     def _checkpoint_attributes(self) -> dict:
         """The scalars of a checkpoint: clock, counts, the scene's settings (JSON where not a number)."""

@@ -12,11 +12,12 @@ with a communicator, :func:`distribute_from_root` or :func:`distribute` attaches
 :func:`collect_counters` ends a run without moving its state, :func:`collect` gathers the
 state on rank 0 for a script that compares it).
 
-Tracers (:class:`~impactpipe.hydro.tracers.motion.Tracers`) ask the partition which process
-samples each tracer (the owner of the block holding the point, :meth:`WholeMesh.block_owners`),
-to bring the cells around its blocks up to date before they sample
-(:meth:`WholeMesh.share_neighbourhood`) and to give every process the sampled rows
-(:meth:`WholeMesh.gather_tracers`), so every process holds every tracer's records.
+Tracers (:class:`~impactpipe.hydro.tracers.motion.Tracers`) are held by the process that owns
+the block holding them: they ask the partition which process that is
+(:meth:`WholeMesh.block_owners`), to hand a tracer's records to it when the tracer moves into
+another process's blocks (:meth:`WholeMesh.hand_over`), to bring the cells around its blocks
+up to date before they sample (:meth:`WholeMesh.share_neighbourhood`), and to gather every
+tracer for an output (:meth:`WholeMesh.gather_items`).
 
 The last-good copy of a step (:meth:`Simulation.restore_last_good`) is kept by each rank
 over its own blocks only: only those are advanced, and a restore on every rank followed by
@@ -49,8 +50,8 @@ from impactpipe.storage import atomic_path, atomic_path_together
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
                             neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
 from .exchange import (CARRY_TAG, FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
-                       StripExchange, Traffic, broadcast_arrays, finish_strips, gather_owned_blocks, gather_rows,
-                       move_rows, share_owned_blocks)
+                       StripExchange, Traffic, broadcast_arrays, finish_strips, gather_item_rows, gather_owned_blocks,
+                       hand_over_rows, move_rows, share_owned_blocks)
 from .owned_memory import from_outline, lazy_zeros, outline, placed_rows, receive_halos, receive_owned_blocks
 
 log = logging.getLogger(__name__)
@@ -269,8 +270,17 @@ class WholeMesh:
         """Bring the cells within :data:`~.decomposition.TRACER_REACH` of this process's blocks up
         to date (they are)."""
 
-    def gather_tracers(self, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
-        """Row t of each of ``arrays`` from process ``owner[t]`` on every process (this one holds them)."""
+    def hand_over(self, destination: np.ndarray, arrays: list[np.ndarray]) -> list[np.ndarray] | None:
+        """The rows of per-item arrays (tracers, each (N, ...)) this process holds after row t
+        went to process ``destination[t]``, None where none came or went
+        (:func:`~.exchange.hand_over_rows`): here none moves."""
+        return None
+
+    def gather_items(self, arrays: list[np.ndarray], everywhere: bool = False) -> list[np.ndarray] | None:
+        """Every process's rows of per-item arrays side by side, by process, on the process that
+        writes (every process with ``everywhere``), None elsewhere (:func:`~.exchange.gather_item_rows`):
+        here this process's."""
+        return arrays
 
 
 class BlockRanges(WholeMesh):
@@ -699,10 +709,22 @@ class BlockRanges(WholeMesh):
         the tracers read (volume fractions, partial densities and internal energies, momentum)."""
         self.neighbourhood_strips.exchange((state.alpha, state.arho, state.arhoe, state.momentum), self.traffic)
 
-    def gather_tracers(self, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
-        """Row t of each of ``arrays`` from rank ``owner[t]`` on every rank (one Allgatherv,
-        :func:`~.exchange.gather_rows`)."""
-        gather_rows(self.comm, owner, arrays)
+    def hand_over(self, destination: np.ndarray, arrays: list[np.ndarray]) -> list[np.ndarray] | None:
+        """Row t of each of ``arrays`` to rank ``destination[t]``; returns the rows this rank holds
+        afterwards, None where none came or went (collective; one Alltoall of the counts and a
+        message to and from each rank rows go to or come from, :func:`~.exchange.hand_over_rows`,
+        counted in :attr:`traffic`)."""
+        started = time.perf_counter()
+        held = hand_over_rows(self.comm, destination, arrays)
+        self.traffic.handovers += 1
+        self.traffic.items_handed_over += int(np.count_nonzero(destination != self.rank))
+        self.traffic.handover_seconds += time.perf_counter() - started
+        return held
+
+    def gather_items(self, arrays: list[np.ndarray], everywhere: bool = False) -> list[np.ndarray] | None:
+        """Every rank's rows of per-item arrays side by side, by rank, on rank 0 (on every rank
+        with ``everywhere``), None elsewhere (collective, :func:`~.exchange.gather_item_rows`)."""
+        return gather_item_rows(self.comm, arrays, everywhere)
 
 
 #: Set to "0" to have the ranks gather each snapshot and checkpoint on rank 0 even where h5py
@@ -767,6 +789,8 @@ def distribute(sim, comm) -> None:
     refuse(unsupported(sim.mesh, comm.size))
     broadcast_arrays(comm, list(sim._counter_arrays()))
     sim.tracers = comm.bcast(sim.tracers, root=0)
+    if sim.tracers is not None:
+        sim.tracers.held_by_every_process()
     cuts = comm.bcast(owned_ranges(block_costs(sim.mesh, sim.state.alpha), comm.size) if comm.rank == 0 else None,
                       root=0)
     sim.partition = BlockRanges(comm, sim.mesh, cuts)
@@ -836,8 +860,11 @@ def collect_counters(sim) -> None:
     counters (boundary, floors, amounts, porosity and strength counts), from which it reports
     the floors; the state stays with its owners.  With :meth:`~impactpipe.hydro.solver.Simulation.totals`
     (collective too, before this) it is what the end of a pipeline run needs, so rank 0 never
-    gathers the whole state.  Nothing to do on one process."""
+    gathers the whole state.  Rank 0 receives the tracers too (in their order), and the other
+    ranks drop theirs.  Nothing to do on one process."""
     sim.partition.gather_to_root(list(sim._counter_arrays()))
+    if sim.tracers is not None:
+        sim.tracers = sim.tracers.assembled(sim.partition)
 
 
 def collect(sim) -> None:
@@ -847,4 +874,6 @@ def collect(sim) -> None:
     ever holds the whole state), and its partition is None."""
     partition = sim.partition
     partition.gather_to_root(list(sim.state.arrays().values()) + list(sim._counter_arrays()))
+    if sim.tracers is not None:
+        sim.tracers = sim.tracers.assembled(partition)
     sim.partition = WholeMesh() if partition.is_root else None

@@ -1,5 +1,6 @@
 """The messages between ranks: strips before a ghost fill or a tracer sample, owned blocks
-before an output and from rank 0 at the start, tracer rows after a tracer sample.
+before an output and from rank 0 at the start, tracers handed to the rank whose blocks hold
+them and gathered for an output.
 
 All fields are float64 arrays (NB, C, NX, NY, NZ), C-contiguous, so a block's values are one
 contiguous run and a strip is a fixed set of flat indices (:class:`~.decomposition.Strips`).
@@ -39,6 +40,8 @@ SETUP_TAG = 700
 #: The tag of the values carried from rank to rank in block order
 #: (:meth:`~.distributed.BlockRanges.carry_through`).
 CARRY_TAG = 800
+#: The tag of the tracers handed to the rank whose blocks they moved into (:func:`hand_over_rows`).
+HANDOVER_TAG = 900
 
 
 @dataclass
@@ -54,7 +57,10 @@ class Traffic:
     ``allreduces`` and ``allreduce_seconds`` (s): the reductions of the time step and the
     failure checks; ``gathers`` and ``gather_seconds`` (s): the sharing of every block before
     an output (:func:`share_owned_blocks`) and, on an adaptive mesh, the regrid's move of the
-    old blocks to the owners of the new blocks made from them (:func:`move_rows`, one each).
+    old blocks to the owners of the new blocks made from them (:func:`move_rows`, one each);
+    ``handovers``, ``items_handed_over`` and ``handover_seconds`` (s): the hand-overs of
+    tracers to the ranks whose blocks they moved into (:func:`hand_over_rows`, one each, the
+    tracers this rank sent).
     """
 
     bytes_sent: int = 0
@@ -68,6 +74,9 @@ class Traffic:
     allreduce_seconds: float = 0.0
     gathers: int = 0
     gather_seconds: float = 0.0
+    handovers: int = 0
+    items_handed_over: int = 0
+    handover_seconds: float = 0.0
 
     def reset(self) -> None:
         """Every counter back to zero."""
@@ -342,26 +351,73 @@ def scatter_owned_blocks(comm, source: np.ndarray | None, target: np.ndarray, cu
         comm.Scatterv(None, received, root=0)
 
 
-def gather_rows(comm, owner: np.ndarray, arrays: list[np.ndarray]) -> None:
-    """Row t of every float64 array in ``arrays`` (each (N, ...), C-contiguous) from rank
-    ``owner[t]`` on every rank, in place; rows with ``owner`` -1 stay as they are.  One
-    Allgatherv of each rank's rows side by side, by rank, then by row (the values are copied,
-    NaN and -0.0 included)."""
+def _row_bytes(arrays: list[np.ndarray]) -> np.ndarray:
+    """The rows of ``arrays`` (each (N, ...), of any dtype) side by side as bytes, (N, W) uint8."""
+    n = len(arrays[0])
+    return np.concatenate([np.ascontiguousarray(array).reshape(n, int(np.prod(array.shape[1:], dtype=np.int64)))
+                           .view(np.uint8) for array in arrays], axis=1)
+
+
+def _rows_from_bytes(rows: np.ndarray, like: list[np.ndarray]) -> list[np.ndarray]:
+    """Arrays shaped and typed as ``like`` (rows beyond the first axis) from the bytes of :func:`_row_bytes`."""
+    out, start = [], 0
+    for array in like:
+        width = int(np.prod(array.shape[1:], dtype=np.int64)) * array.itemsize
+        part = np.ascontiguousarray(rows[:, start:start + width])
+        out.append(part.view(array.dtype).reshape((len(rows),) + array.shape[1:]))
+        start += width
+    return out
+
+
+def hand_over_rows(comm, destination: np.ndarray, arrays: list[np.ndarray]) -> list[np.ndarray] | None:
+    """Rows of per-item arrays (tracers) to other ranks: row t of each of ``arrays`` (each
+    (N, ...), any dtype, the same N) goes to rank ``destination[t]``.  Returns the arrays of
+    the rows this rank holds afterwards: those it kept, in their order, then those it
+    received, by sending rank and in that rank's order (the bytes copied, NaN and -0.0
+    included); None where it neither sends nor receives a row (it keeps ``arrays``).  One
+    Alltoall of the counts, then one message (tag :data:`HANDOVER_TAG`) to each rank it sends
+    rows to and from each it receives rows from, the rows as bytes."""
     from mpi4py import MPI
 
-    n = len(owner)
-    rows = [_flat(array).reshape(n, -1) for array in arrays]
-    width = sum(row.shape[1] for row in rows)
-    sent = np.concatenate([row[owner == comm.rank] for row in rows], axis=1)
-    counts = np.bincount(owner[owner >= 0], minlength=comm.size) * width
-    order = np.argsort(owner, kind="stable")[n - int(counts.sum()) // width:]
-    received = np.empty((len(order), width))
-    displacements = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    comm.Allgatherv([sent, MPI.DOUBLE], [received, (counts.tolist(), displacements.tolist()), MPI.DOUBLE])
-    start = 0
-    for row in rows:
-        row[order] = received[:, start:start + row.shape[1]]
-        start += row.shape[1]
+    leaving = destination != comm.rank
+    send_counts = np.bincount(destination[leaving], minlength=comm.size).astype(np.int64)
+    receive_counts = np.empty(comm.size, dtype=np.int64)
+    comm.Alltoall(send_counts, receive_counts)
+    if not leaving.any() and not receive_counts.any():
+        return None
+    order = np.flatnonzero(leaving)[np.argsort(destination[leaving], kind="stable")]
+    outgoing = _row_bytes([array[order] for array in arrays])
+    width = outgoing.shape[1]
+    incoming = np.empty((int(receive_counts.sum()), width), dtype=np.uint8)
+    requests = []
+    for peer, start, count in zip(range(comm.size), _starts(receive_counts), receive_counts):
+        if count:
+            requests.append(comm.Irecv([incoming[start:start + count], MPI.BYTE], source=peer, tag=HANDOVER_TAG))
+    for peer, start, count in zip(range(comm.size), _starts(send_counts), send_counts):
+        if count:
+            requests.append(comm.Isend([outgoing[start:start + count], MPI.BYTE], dest=peer, tag=HANDOVER_TAG))
+    MPI.Request.Waitall(requests)
+    return [np.concatenate([array[~leaving], received])
+            for array, received in zip(arrays, _rows_from_bytes(incoming, arrays))]
+
+
+def gather_item_rows(comm, arrays: list[np.ndarray], everywhere: bool) -> list[np.ndarray] | None:
+    """Every rank's rows of per-item arrays (tracers; each (N_rank, ...), any dtype) side by
+    side, by rank: on rank 0 (one Gatherv of the rows as bytes), or on every rank with
+    ``everywhere`` (one Allgatherv); None on the other ranks."""
+    from mpi4py import MPI
+
+    rows = _row_bytes(arrays)
+    width = rows.shape[1]
+    counts = np.array(comm.allgather(len(rows)), dtype=np.int64) * width
+    received = (np.empty((int(counts.sum()) // max(width, 1), width), dtype=np.uint8)
+                if everywhere or comm.rank == 0 else None)
+    spec = [received, (counts.tolist(), _starts(counts)), MPI.BYTE]
+    if everywhere:
+        comm.Allgatherv([rows, MPI.BYTE], spec)
+    else:
+        comm.Gatherv([rows, MPI.BYTE], spec if comm.rank == 0 else None, root=0)
+    return None if received is None else _rows_from_bytes(received, arrays)
 
 
 def move_rows(comm, arrays: list[np.ndarray], sent: list[np.ndarray], received: list[np.ndarray]) -> None:

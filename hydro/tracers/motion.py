@@ -56,12 +56,19 @@ T_k = T_k(rho_k, e_k) with rho_k = arho_k / alpha_k and e_k = arhoe_k / arho_k
 The peak pressure (Pa), its time (s) and the peak temperature (K) are the running maxima
 (NaN until the first record).
 
-**Several processes** (MPI ranks, :mod:`impactpipe.hydro.parallel`): each sample (v_n at x_n,
-v_{n+1} at x*, the peaks at x_{n+1}) is taken by the rank that owns the block holding the
-point, whose stencil then reads only its own blocks and the cells within one cell of them
-(brought up to date after the sweeps); every rank then receives every sampled row, and the
-corrector, exits and history run on every rank for every tracer.  Each tracer's arithmetic
-is the single process's, so the records are the same bit for bit on any number of ranks.
+**Several processes** (MPI ranks, :mod:`impactpipe.hydro.parallel`): a tracer is held by the
+rank that owns the block holding it, and moves between ranks with its material.  Each sample
+(v_n at x_n, v_{n+1} at x*, the peaks at x_{n+1}) is taken by the rank that owns the block
+holding the point, whose stencil then reads only its own blocks and the cells within one cell
+of them (brought up to date after the sweeps): a tracer whose predictor point x* lies in
+another rank's blocks is handed to that rank before v_{n+1} is sampled, and one whose new
+position x_{n+1} does, before its peaks are recorded, with everything it carries (its records,
+v_n, its last-good records and its history samples).  An exited tracer stays where it is.
+Each tracer's arithmetic is the single process's, so the records are the same bit for bit on
+any number of ranks; an output gathers them in the order they were given in
+(:meth:`Tracers.assembled`).  Every rank starts with every tracer (built or read the same way
+on each) and keeps those in its own blocks at the first step, and after every regrid the
+tracers go to the owners of their new blocks.
 
 **Time stepping per level** (``time_stepping = "per_level"``, :mod:`impactpipe.hydro.amr.subcycle`):
 a Simulation step is one root step dt_0, in which level l advances in 2^l substeps of
@@ -84,12 +91,16 @@ peak pressures agree with the global step's to a median 0.78 % (98 % of the trac
 10 %); recorded at the root steps' ends only they were 2.7 % off (85 % within 10 %).
 
 **History** (optional): every ``history_interval`` seconds of simulated time the first step
-that reaches k * history_interval appends (time, all positions) to arrays preallocated for
-``end_time`` and doubled when full; 24 bytes per tracer and sample.
+that reaches k * history_interval appends (time, all positions): the times to an array
+preallocated for ``end_time`` and doubled when full, the positions to a log of (tracer,
+position) entries that each process keeps for the tracers it holds at the sample (doubled
+when full; 32 bytes per tracer and sample), which stays where it was written when a tracer
+moves to another process and is put in order for an output (:attr:`Tracers.history`).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -262,8 +273,35 @@ class Tracers:
         if self.history_interval is not None and end_time is not None:
             capacity = int(end_time // self.history_interval) + 2
         self._allocate_history(capacity if self.history_interval is not None else 0)
-        # scratch (no allocation per step)
+        #: (N,) each tracer's index in the order it was given in: the order of every output.
+        self.slot = np.arange(n, dtype=np.int64)
+        #: The history's positions as a log: entry e is tracer ``_log_slot[e]`` at ``_log_position[e]``
+        #: (m); sample k's entries are ``_log_start[k]`` .. ``_log_start[k + 1] - 1``.
+        self._log_slot = np.zeros(0, dtype=np.int64)
+        self._log_position = np.zeros((0, 3))
         self._v_start = np.zeros((n, 3))
+        self._scratch(n)
+        self._t_start = 0.0
+        self._missing = n  # tracers on the mesh without a peak record (recounted after each step)
+        self._good = {name: getattr(self, name).copy() for name in self._MUTABLE}
+        self._good_counts = (0, 0.0)
+        self._mesh = None
+        self._nmat = None
+        #: Whether every process holds every tracer (as built or loaded on each), until the first
+        #: step on several processes keeps each tracer on the owner of its block (:meth:`_place`).
+        self._every_process_holds_all = True
+        #: Whether each tracer is held by the process owning its block on the bound mesh.
+        self._placed = False
+
+    #: Arrays that a step changes (kept at the start of each step for :meth:`restore_good`).
+    _MUTABLE = ("position", "velocity", "peak_pressure", "peak_pressure_time", "peak_temperature", "exited",
+                "exit_time")
+    #: The per-tracer arrays a tracer takes with it to another process, with its last-good
+    #: records and its history.
+    _CARRIED = ("id", "slot", "material", "initial_position", *_MUTABLE, "_v_start")
+
+    def _scratch(self, n: int) -> None:
+        """The per-step work arrays of ``n`` tracers (no allocation per step)."""
         self._v_end = np.zeros((n, 3))
         self._trial = np.zeros((n, 3))
         self._sign = np.ones((n, 3))
@@ -274,23 +312,13 @@ class Tracers:
         self._path_sign = np.ones((n, 3))
         self._path_block = np.full(n, -1, dtype=np.int64)
         self._path_skip = np.ones(n, dtype=np.bool_)
-        self._t_start = 0.0
-        self._missing = n  # tracers on the mesh without a peak record (recounted after each step)
-        self._good = {name: getattr(self, name).copy() for name in self._MUTABLE}
-        self._good_counts = (0, 0.0, n)
-        self._mesh = None
-        self._nmat = None
-
-    #: Arrays that a step changes (kept at the start of each step for :meth:`restore_good`).
-    _MUTABLE = ("position", "velocity", "peak_pressure", "peak_pressure_time", "peak_temperature", "exited",
-                "exit_time")
 
     def __len__(self) -> int:
         return int(self.id.shape[0])
 
     def _allocate_history(self, capacity: int) -> None:
         self.history_time = np.zeros(capacity)
-        self.history_position = np.zeros((capacity, len(self), 3))
+        self._log_start = np.zeros(capacity + 1, dtype=np.int64)
 
     # ------------------------------------------------------------------ mesh binding
 
@@ -327,6 +355,7 @@ class Tracers:
         self._locate = BlockLocator(mesh)
         self._mesh = mesh
         self._locate(self.position, self.exited, self._block)
+        self._placed = False
 
     @property
     def owning_block(self) -> np.ndarray:
@@ -348,6 +377,97 @@ class Tracers:
         """``self._owner`` from ``self._block``; ``self._skip``: the tracers this process does not sample."""
         partition.block_owners(self._block, self._owner)
         np.not_equal(self._owner, partition.rank, out=self._skip)
+
+    # ------------------------------------------------------------------ several processes
+
+    def _rows(self) -> list[np.ndarray]:
+        """Every per-tracer array a tracer takes to another process (:data:`_CARRIED` and the
+        last-good records; its history entries stay in the log where they were written)."""
+        return [getattr(self, name) for name in self._CARRIED] + [self._good[name] for name in self._MUTABLE]
+
+    def _set_rows(self, rows: list[np.ndarray]) -> None:
+        """Hold the tracers of ``rows`` (as :meth:`_rows` gives them) instead; the work arrays are
+        new, so the blocks must be found again."""
+        carried = len(self._CARRIED)
+        for name, array in zip(self._CARRIED, rows[:carried]):
+            setattr(self, name, array)
+        self._good = dict(zip(self._MUTABLE, rows[carried:]))
+        self._scratch(len(rows[0]))
+        self._count_missing()
+
+    def _log_samples(self) -> np.ndarray:
+        """(E,) the sample k of each history log entry."""
+        k = self.history_count
+        return np.repeat(np.arange(k, dtype=np.int64), np.diff(self._log_start[:k + 1]))
+
+    def _set_log(self, slots: np.ndarray, samples: np.ndarray, positions: np.ndarray) -> None:
+        """The history log from its entries, in the order of their samples."""
+        order = np.argsort(samples, kind="stable")
+        self._log_slot = np.ascontiguousarray(slots[order])
+        self._log_position = np.ascontiguousarray(positions[order])
+        counts = np.bincount(samples, minlength=self._log_start.shape[0] - 1)
+        self._log_start[:] = np.concatenate([[0], np.cumsum(counts)])
+    def _count_missing(self) -> None:
+        self._missing = int(np.count_nonzero(np.isnan(self.peak_pressure_time) & ~self.exited))
+
+    def _place(self, partition) -> None:
+        """Each tracer on the mesh to the process owning its block (on a new mesh, and at the first
+        step, when every process holds every tracer: each then keeps its own, and rank 0 the
+        exited ones); an exited tracer stays where it is.  Collective on several processes."""
+        self._locate(self.position, self.exited, self._block)
+        self._assign(partition)
+        if not partition.whole:
+            if self._every_process_holds_all:
+                kept = (self._owner == partition.rank) | (self.exited & partition.is_root)
+                entries = self._log_start[self.history_count]
+                logged = np.isin(self._log_slot[:entries], self.slot[kept])
+                self._set_log(self._log_slot[:entries][logged], self._log_samples()[logged],
+                              self._log_position[:entries][logged])
+                self._set_rows([row[kept] for row in self._rows()])
+                self._every_process_holds_all = False
+                self._locate(self.position, self.exited, self._block)
+                self._assign(partition)
+            elif self._hand_over(partition):
+                self._locate(self.position, self.exited, self._block)
+                self._assign(partition)
+        self._placed = True
+
+    def _hand_over(self, partition) -> bool:
+        """Send each tracer whose point (``self._owner``) lies in another process's blocks to that
+        process, with everything it carries (:meth:`_rows`), and hold those sent here
+        (collective; :meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.hand_over`).
+        Whether tracers came or went: their work arrays are then new, the blocks unknown."""
+        destination = np.where(self._owner >= 0, self._owner, partition.rank)
+        held = partition.hand_over(destination, self._rows())
+        if held is not None:
+            self._set_rows(held)
+        return held is not None
+    def held_by_every_process(self) -> None:
+        """Say that every process now holds every tracer (after a broadcast of one process's
+        tracers): at the next step each keeps those in its own blocks."""
+        self._every_process_holds_all = True
+        self._placed = False
+
+    def assembled(self, partition, everywhere: bool = False) -> "Tracers | None":
+        """Every tracer, in the order they were given in, on the process that writes (rank 0; every
+        process with ``everywhere``), None on the others: for an output or the end of a shared
+        run (collective on several processes).  This object itself on one process."""
+        if partition.whole or self._every_process_holds_all:
+            return self if everywhere or partition.is_root else None
+        rows = partition.gather_items(self._rows(), everywhere)
+        entries = self._log_start[self.history_count]
+        log = partition.gather_items([self._log_slot[:entries], self._log_samples(), self._log_position[:entries]],
+                                     everywhere)
+        if rows is None:
+            return None
+        order = np.argsort(rows[self._CARRIED.index("slot")], kind="stable")
+        whole = copy.copy(self)
+        whole._log_start = self._log_start.copy()
+        whole._set_log(*log)
+        whole._set_rows([row[order] for row in rows])
+        whole._every_process_holds_all = True
+        whole._placed = False
+        return whole
 
     def _sample(self, sim, out: np.ndarray) -> None:
         """Velocity at the points ``self._trial`` of the tracers this process samples into ``out``."""
@@ -371,55 +491,67 @@ class Tracers:
                       None if sim.porosity is None else st.arhoq, sim.porosity)
 
     def _sample_history(self, time: float) -> None:
-        if self.history_count == self.history_time.shape[0]:
-            old_t, old_x = self.history_time, self.history_position
+        k = self.history_count
+        if k == self.history_time.shape[0]:
+            old_t, old_start = self.history_time, self._log_start
             self._allocate_history(max(2 * old_t.shape[0], HISTORY_CHUNK))
-            self.history_time[: old_t.shape[0]] = old_t
-            self.history_position[: old_t.shape[0]] = old_x
-        self.history_time[self.history_count] = time
-        self.history_position[self.history_count] = self.position
+            self.history_time[:k] = old_t
+            self._log_start[:k + 1] = old_start
+        start, n = self._log_start[k], len(self)
+        if start + n > self._log_slot.shape[0]:
+            size = max(2 * self._log_slot.shape[0], start + n)
+            self._log_slot = np.concatenate([self._log_slot[:start], np.zeros(size - start, dtype=np.int64)])
+            self._log_position = np.concatenate([self._log_position[:start], np.zeros((size - start, 3))])
+        self.history_time[k] = time
+        self._log_slot[start:start + n] = self.slot
+        self._log_position[start:start + n] = self.position
+        self._log_start[k + 1] = start + n
         self.history_count += 1
         self.history_next = (math.floor(time / self.history_interval) + 1.0) * self.history_interval
 
     # ------------------------------------------------------------------ Simulation hooks
 
     def before_step(self, sim) -> None:
-        """Keep the records for :meth:`restore_good` and sample v_n(x_n) from ``sim.state`` at t_n."""
+        """Keep the records for :meth:`restore_good` and sample v_n(x_n) from ``sim.state`` at t_n
+        (on several processes each holds the tracers in its blocks, placed first on a new mesh)."""
         self._bind(sim.mesh, sim.state.nmat)
+        if not self._placed:
+            self._place(sim.partition)
         for name in self._MUTABLE:
             np.copyto(self._good[name], getattr(self, name))
-        self._good_counts = (self.history_count, self.history_next, self._missing)
+        self._good_counts = (self.history_count, self.history_next)
         self._t_start = sim.time
         self._fold_and_locate(sim, 0.0)
         self._sample(sim, self._v_start)
-        sampled = [self._v_start]
         if self._missing:
             self._record(sim, unrecorded_only=True)  # self._block holds the blocks of the positions
-            sampled += self._peaks()
-        sim.partition.gather_tracers(self._owner, sampled)
         if self.history_interval is not None and self.history_count == 0:
             self._sample_history(sim.time)
 
     def after_step(self, sim, dt: float) -> None:
         """Heun step over ``dt`` (s) with the field after the sweeps; faces, exits and peak records.
 
-        On several processes each samples the tracers whose point lies in its blocks, and every
-        process receives every sample before the next use (:meth:`WholeMesh.gather_tracers
-        <impactpipe.hydro.parallel.distributed.WholeMesh.gather_tracers>`); the corrector and
-        the exits run on every process for every tracer.
+        On several processes a tracer whose predictor point x* lies in another process's blocks
+        is handed to that process before v_{n+1}(x*) is sampled, and one whose new position
+        x_{n+1} does after the corrector, before its peaks are recorded
+        (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.hand_over`).
         """
         mesh = sim.mesh
+        partition = sim.partition
         self._fold_and_locate(sim, dt)
+        if not partition.whole and self._hand_over(partition):
+            self._fold_and_locate(sim, dt)
         self._sample(sim, self._v_end)
-        sim.partition.gather_tracers(self._owner, [self._v_end])
         _correct(self.position, self._v_start, self._v_end, self.exited, dt, self._t_start, mesh.domain_lo,
                  mesh.domain_hi, self._codes, mesh.ndim, mesh.geometry == "2d-cylindrical", self.velocity,
                  self.exit_time)
         self._locate(self.position, self.exited, self._block)
-        self._assign(sim.partition)
+        self._assign(partition)
+        if not partition.whole and self._hand_over(partition):
+            self._locate(self.position, self.exited, self._block)
+            self._assign(partition)
         self._record(sim, unrecorded_only=False)
-        sim.partition.gather_tracers(self._owner, self._peaks())
-        self._missing = int(np.count_nonzero(np.isnan(self.peak_pressure_time) & ~self.exited))
+        self._count_missing()
         if self.history_interval is not None and sim.time >= self.history_next * (1.0 - 1e-12):
             self._sample_history(sim.time)
 
@@ -450,25 +582,33 @@ class Tracers:
                      eos.kind, eos.params, eos.table, self.peak_pressure, self.peak_pressure_time,
                      self.peak_temperature, None if sim.porosity is None else st.arhoq, sim.porosity)
 
-    def _peaks(self) -> list[np.ndarray]:
-        """The running peak records (pressure, its time, temperature)."""
-        return [self.peak_pressure, self.peak_pressure_time, self.peak_temperature]
-
-    def restore_good(self) -> None:
-        """Put back the records from the start of the last step (after a failed step)."""
+    def restore_good(self, partition=None) -> None:
+        """Put back the records from the start of the last step (after a failed step); on the
+        processes of ``partition`` (collective) each tracer goes back to the owner of its block."""
         for name in self._MUTABLE:
             np.copyto(getattr(self, name), self._good[name])
-        self.history_count, self.history_next, self._missing = self._good_counts
+        self.history_count, self.history_next = self._good_counts
+        if partition is not None and not partition.whole and self._placed:
+            self._locate(self.position, self.exited, self._block)
+            self._assign(partition)
+            self._hand_over(partition)  # the next step finds the blocks again
+        self._count_missing()
 
     # ------------------------------------------------------------------ output and checkpoints
 
     @property
     def history(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(times (K,) s, positions (K, N, 3) m) of the trajectory samples, or None without history."""
+        """(times (K,) s, positions (K, N, 3) m) of the trajectory samples, or None without history;
+        of the tracers this object holds, every tracer on one process or after :meth:`assembled`."""
         if self.history_interval is None:
             return None
         k = self.history_count
-        return self.history_time[:k].copy(), self.history_position[:k].copy()
+        entries = self._log_start[k]
+        positions = np.zeros((k, len(self), 3))
+        column = np.empty(int(self.slot.max(initial=-1)) + 1, dtype=np.int64)
+        column[self.slot] = np.arange(len(self))
+        positions[self._log_samples(), column[self._log_slot[:entries]]] = self._log_position[:entries]
+        return self.history_time[:k].copy(), positions
 
     def to_tracer_set(self) -> TracerSet:
         """The records as a :class:`~impactpipe.hydro.output.snapshot.TracerSet` (copies)."""
@@ -484,8 +624,9 @@ class Tracers:
         group.attrs["history_capacity"] = self.history_time.shape[0]
         if self.history_interval is not None:
             k = self.history_count
-            write_dataset(group, "history_time", self.history_time[:k], *HISTORY_UNITS["history_time"])
-            write_dataset(group, "history_position", self.history_position[:k], *HISTORY_UNITS["history_position"])
+            times, positions = self.history
+            write_dataset(group, "history_time", times, *HISTORY_UNITS["history_time"])
+            write_dataset(group, "history_position", positions, *HISTORY_UNITS["history_position"])
 
     @classmethod
     def load(cls, group) -> "Tracers":
@@ -499,8 +640,10 @@ class Tracers:
             k = int(group.attrs["history_count"])
             tracers._allocate_history(int(group.attrs["history_capacity"]))
             tracers.history_time[:k] = group["history_time"][()]
-            tracers.history_position[:k] = group["history_position"][()]
             tracers.history_count = k
+            n = len(tracers)
+            tracers._set_log(np.tile(tracers.slot, k), np.repeat(np.arange(k, dtype=np.int64), n),
+                             group["history_position"][()].reshape(k * n, 3))
             tracers.history_next = float(group.attrs["history_next"])
         return tracers
 
