@@ -16,10 +16,12 @@ from impactpipe.hydro.parallel.decomposition import (
     every_axis_routes,
     exchange_routes,
     field_overlap_groups,
+    level_field_routes,
     neighbourhood_routes,
     overlap_groups,
     owned_ranges,
     owners,
+    restriction_stencil,
     touching_blocks,
 )
 from impactpipe.hydro.problems.common import adaptive_mesh
@@ -148,6 +150,17 @@ def test_the_stress_step_s_inner_blocks_have_no_face_towards_another_rank_on_any
     assert sum(field_overlap_groups(mesh, cuts, rank)[0].size for rank in range(3)) > 0
 
 
+def corner_refined_mesh():
+    """2d-planar, 32^2 cells at the finest of three levels in blocks of 4^2 cells (2 x 2 root
+    blocks), refined twice at the corner block at the origin: 10 blocks."""
+    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 1.0], [32, 32], [("outflow", "outflow")] * 2, 4, 3)
+    for _ in range(2):
+        refine = np.zeros(mesh.nblocks, dtype=bool)
+        refine[np.argmin(mesh.block_lo[:, :2].sum(axis=1))] = True
+        mesh, _ = remesh(mesh, HydroState.empty(mesh, 1), plan_leaves(mesh, refine, np.zeros_like(refine)))
+    return mesh
+
+
 def test_on_an_adaptive_mesh_the_blocks_of_the_coarse_fine_plans_are_swept_after_the_strips():
     """2d-planar, two levels around one corner block, on 3 ranks: a rank's edge blocks along an
     axis are those with a neighbour of another rank along it and those a row of the axis's
@@ -171,6 +184,61 @@ def test_on_an_adaptive_mesh_the_blocks_of_the_coarse_fine_plans_are_swept_after
                 assert (b - cuts[rank] in edge) == (foreign or b in touched)
             assert inner.size + edge.size == cuts[rank + 1] - cuts[rank]
         assert touched and sum(overlap_groups(mesh, cuts, rank)[axis][0].size for rank in range(3)) > 0
+
+
+def received_keys(mesh, routes) -> dict[int, set[int]]:
+    """Per peer: block * (cells per block) + padded flat cell of every cell a rank receives."""
+    per_block = int(np.prod(mesh.padded_shape))
+    return {route.peer: set((route.receive.blocks * per_block + route.receive.cells).tolist()) for route in routes}
+
+
+def read_keys(mesh, plan: np.ndarray, stencil: np.ndarray) -> np.ndarray:
+    """(rows, stencil) block * (cells per block) + padded flat cell of every cell a plan's rows read."""
+    padded = np.array(mesh.padded_shape)
+    cells = plan[:, None, 5:8] + stencil[None, :, :]
+    return plan[:, 4:5] * int(padded.prod()) + (cells[..., 0] * padded[1] + cells[..., 1]) * padded[2] + cells[..., 2]
+
+
+def interior(mesh, keys: np.ndarray, axes) -> np.ndarray:
+    """Whether each cell of ``keys`` lies in the interior along every axis of ``axes``."""
+    padded = np.array(mesh.padded_shape)
+    flat = np.asarray(keys) % int(padded.prod())
+    index = [flat // (padded[1] * padded[2]), flat // padded[2] % padded[1], flat % padded[2]]
+    return np.all([(index[d] >= mesh.ghost[d]) & (index[d] < padded[d] - mesh.ghost[d]) for d in axes], axis=0)
+
+
+def test_on_an_adaptive_mesh_the_stress_step_s_inner_blocks_need_no_other_rank_s_cells():
+    """Two levels around one corner block, on 3 ranks: a rank's edge blocks for the stress step
+    are those with a neighbour of another rank across a face between blocks of one level and
+    those that a row of a restriction or prolongation fills from another rank's block; some are
+    inner.  The one message per peer of a derived field's fills (level_field_routes) holds only
+    interior cells, and every cell that such a row reads: the restriction's fine cells, the
+    coarse cell a fine ghost copies."""
+    mesh = corner_refined_mesh()
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    owner = owners(cuts)
+    inner_blocks = 0
+    for rank in range(3):
+        routes = level_field_routes(mesh, cuts, rank, exchange_routes(mesh, cuts, rank))
+        received = received_keys(mesh, routes)
+        remote_rows = set()
+        for axis in range(2):
+            plans = axis_plans(mesh, axis)
+            for name, stencil in (("restrict", restriction_stencil(mesh)), ("prolong", np.zeros((1, 3), int))):
+                rows = plans[name][(owner[plans[name][:, 0]] == rank) & (owner[plans[name][:, 4]] != rank)]
+                remote_rows |= set(rows[:, 0].tolist())
+                for row, keys in zip(rows, read_keys(mesh, rows, stencil)):
+                    assert set(keys.tolist()) <= received[owner[row[4]]]
+        for keys in received.values():
+            assert interior(mesh, sorted(keys), range(2)).all()
+        inner, edge = field_overlap_groups(mesh, cuts, rank)
+        assert np.array_equal(np.sort(np.concatenate([inner, edge])), np.arange(cuts[rank], cuts[rank + 1]))
+        for b in range(cuts[rank], cuts[rank + 1]):
+            foreign = any(n >= 0 and owner[n] != rank and level == 0
+                          for n, level in zip(mesh.neighbor[b, :2].ravel(), mesh.neighbor_level[b, :2].ravel()))
+            assert (b in edge) == (foreign or b in remote_rows)
+        inner_blocks += inner.size
+    assert inner_blocks > 0
 
 
 @pytest.mark.parametrize("geometry", ["2d-planar", "3d"])

@@ -145,11 +145,12 @@ def exchange_routes(mesh, cuts: np.ndarray, rank: int) -> list[list[Route]]:
 
 
 def every_axis_routes(routes: list[list[Route]]) -> list[Route]:
-    """The routes of :func:`exchange_routes` (per axis, by peer) joined into one per peer rank:
-    its strips along every axis, axis after axis (each axis's in its own order).  A fill of a
-    field along every axis whose strips are interior cells (none a ghost that another axis's
-    fill writes) sends them in one message per peer; a cell beside faces along two axes is
-    sent once per face."""
+    """Lists of routes by peer (those of :func:`exchange_routes`, per axis, or of other exchanges
+    before a fill) joined into one route per peer rank: its cells of every list, list after
+    list (each list's in its own order).  A fill of a field along every axis whose strips are
+    interior cells (none a ghost that another axis's fill writes) sends them in one message per
+    peer; a cell beside faces along two axes is sent once per face, a cell in two lists once
+    per list."""
     peers = sorted({route.peer for axis_routes in routes for route in axis_routes})
     joined = []
     for peer in peers:
@@ -201,22 +202,41 @@ def _in_level_plans(plans: dict, lo: int, hi: int) -> np.ndarray:
     return touched
 
 
+def _filled_from_ranks(mesh, cuts: np.ndarray, rank: int, axes: list[int]) -> np.ndarray:
+    """(hi - lo,) bool for the blocks ``lo .. hi - 1`` of ``rank``: whether a ghost fill along one
+    of the ``axes`` copies into block lo + i the cells of another rank's block: beside a face
+    (between blocks of one level on an adaptive mesh), or by a row of the axis's restriction or
+    prolongation (:func:`impactpipe.hydro.amr.plans.axis_plans`) whose source block another rank
+    owns."""
+    lo, hi = int(cuts[rank]), int(cuts[rank + 1])
+    nbr = mesh.neighbor[lo:hi][:, axes, :]
+    across = (nbr >= 0) & ((nbr < lo) | (nbr >= hi))
+    if not mesh.adaptive:
+        return across.any(axis=(1, 2))
+    remote = (across & (mesh.neighbor_level[lo:hi][:, axes, :] == 0)).any(axis=(1, 2))
+    owner = owners(cuts)
+    for axis in axes:
+        plans = axis_plans(mesh, axis)
+        for name in ("restrict", "prolong"):
+            rows = plans[name][(owner[plans[name][:, 0]] == rank) & (owner[plans[name][:, 4]] != rank)]
+            remote[rows[:, 0] - lo] = True
+    return remote
+
+
 def field_overlap_groups(mesh, cuts: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(inner, edge)``: the blocks of ``rank`` (block numbers, int64) none of whose faces along
-    any used axis has another rank's block beside it (inner), and the rest (edge).
+    """``(inner, edge)``: the blocks of ``rank`` (block numbers, int64) whose ghosts along every
+    used axis a fill of a derived field completes from this rank's cells alone (inner), and the
+    rest (edge).
 
     The stress step's kernels read the ghosts along every axis at once, filled by one ghost fill
     per axis: while the strips of those fills travel they can advance the inner blocks, the
-    edge blocks after (:meth:`~impactpipe.hydro.strength.model.MaterialStrength.kick`).  On an
-    adaptive mesh every block is an edge block (its work arrays' coarse/fine ghosts are filled
-    before the kernels)."""
-    lo, hi = int(cuts[rank]), int(cuts[rank + 1])
-    owned = np.arange(lo, hi, dtype=np.int64)
-    if mesh.adaptive:
-        return owned[:0], owned
-    used = [axis for axis in range(3) if mesh.ghost[axis] > 0]
-    nbr = mesh.neighbor[lo:hi][:, used, :]
-    remote = ((nbr >= 0) & ((nbr < lo) | (nbr >= hi))).any(axis=(1, 2))
+    edge blocks after (:meth:`~impactpipe.hydro.strength.model.MaterialStrength.kick`).  On a
+    uniform mesh an edge block has another rank's block beside one of its faces; on an adaptive
+    mesh, beside a face between blocks of one level, or it is the destination of a row of a
+    coarse/fine plan (:func:`impactpipe.hydro.amr.plans.axis_plans`: restriction, prolongation)
+    whose source block another rank owns."""
+    owned = np.arange(int(cuts[rank]), int(cuts[rank + 1]), dtype=np.int64)
+    remote = _filled_from_ranks(mesh, cuts, rank, [axis for axis in range(3) if mesh.ghost[axis] > 0])
     return owned[~remote], owned[remote]
 
 
@@ -279,6 +299,25 @@ def neighbourhood_routes(mesh, cuts: np.ndarray, rank: int, reach: int = TRACER_
     return _routes(*(np.concatenate(a) for a in (keys, senders, receivers)), rank, per_block)
 
 
+def restriction_stencil(mesh) -> np.ndarray:
+    """(S, 3) offsets from the lowest of the 2^ndim fine cells of a restriction to each of them
+    (0 or 1 along every used axis)."""
+    used = [d for d in range(3) if mesh.ghost[d] > 0]
+    return np.array([[a, j, k] for a in (0, 1) for j in (0, 1) for k in (0, 1)
+                     if (a == 0 or 0 in used) and (j == 0 or 1 in used) and (k == 0 or 2 in used)])
+
+
+def prolongation_stencil(mesh) -> np.ndarray:
+    """(S, 3) offsets from the coarse cell of a state's prolongation to the cells it reads: itself
+    and its neighbours along every used axis (the limited slopes)."""
+    used = [d for d in range(3) if mesh.ghost[d] > 0]
+    return np.array([np.zeros(3, int)] + [sign * np.eye(3, dtype=int)[d] for d in used for sign in (-1, 1)])
+
+
+#: The offsets of a derived field's prolongation, which copies the coarse cell alone.
+COPY_STENCIL = np.zeros((1, 3), dtype=np.int64)
+
+
 def plan_routes(mesh, cuts: np.ndarray, rank: int, plan: np.ndarray, stencil: np.ndarray) -> list[Route]:
     """The routes of ``rank`` that bring to the owner of each row's destination block
     (``plan[:, 0]``) the cells its kernel reads in the row's source block (``plan[:, 4]``):
@@ -293,6 +332,23 @@ def plan_routes(mesh, cuts: np.ndarray, rank: int, plan: np.ndarray, stencil: np
     senders = np.repeat(owner[plan[:, 4]], len(stencil))
     receivers = np.repeat(owner[plan[:, 0]], len(stencil))
     return _routes(keys, senders, receivers, rank, per_block)
+
+
+def level_field_routes(mesh, cuts: np.ndarray, rank: int, routes: list[list[Route]]) -> list[Route]:
+    """The routes of ``rank``, one per peer rank, of a derived field's ghost fills along every
+    used axis of an adaptive mesh: for each axis in turn, the strips of ``routes`` (those of
+    :func:`exchange_routes`), the fine cells of the restrictions and the coarse cells that the
+    prolongations copy (:func:`plan_routes` of the axis's coarse/fine plans).  All are interior
+    cells, which none of these fills writes, so every axis's cells travel in one message per
+    peer (:func:`every_axis_routes`)."""
+    parts = []
+    for axis in range(3):
+        if mesh.ghost[axis] == 0:
+            continue
+        plans = axis_plans(mesh, axis)
+        parts += [routes[axis], plan_routes(mesh, cuts, rank, plans["restrict"], restriction_stencil(mesh)),
+                  plan_routes(mesh, cuts, rank, plans["prolong"], COPY_STENCIL)]
+    return every_axis_routes(parts)
 
 
 def block_routes(cuts: np.ndarray, rank: int, receiver_blocks: np.ndarray, sender_blocks: np.ndarray,

@@ -48,7 +48,8 @@ from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.storage import atomic_path, atomic_path_together
 
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
-                            neighbourhood_routes, overlap_groups, owned_ranges, owners, plan_routes)
+                            level_field_routes, neighbourhood_routes, overlap_groups,
+                            owned_ranges, owners, plan_routes, prolongation_stencil, restriction_stencil)
 from .exchange import (CARRY_TAG, FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
                        StripExchange, Traffic, broadcast_arrays, finish_strips, gather_item_rows, gather_owned_blocks,
                        hand_over_rows, move_rows, share_owned_blocks)
@@ -131,30 +132,24 @@ class WholeMesh:
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
         """Complete the ghost fill :meth:`start_ghosts` began (nothing left for one process)."""
 
-    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
-                          wanted: np.ndarray | None = None, layers: int | None = None) -> None:
-        """Fill the ghosts of the components of a derived field (velocities, stresses) that the
-        ``runs`` (slices of its component axis) select, of every block along ``axis`` (on a
-        uniform mesh only of the blocks where ``wanted[b]`` is not 0, when given, and of those
-        only the ``layers`` ghost layers next to the interior), without sign flips
-        (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`, run by run)."""
-        for run in runs:
-            fill_field_ghosts(field[:, run], mesh, axis, wanted=wanted, layers=layers)
-
     def start_field_ghosts(self, field: np.ndarray, mesh, runs: tuple[slice, ...], wanted: np.ndarray,
                            layers: int | None = None) -> FieldFill:
-        """The ghosts of :meth:`fill_field_ghosts` along every used axis of a uniform mesh, as far
-        as this process can fill them without waiting for another's strips; the blocks ``early``
+        """Fill the ghosts of the components of a derived field (velocities, stresses) that the
+        ``runs`` (slices of its component axis) select, along every used axis, without sign flips
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_field_ghosts`, run by run): on a uniform mesh
+        only of the blocks where ``wanted[b]`` is not 0 and of those only the ``layers`` ghost
+        layers next to the interior; on an adaptive mesh every layer of every block, the
+        coarse/fine faces by restriction and copies of the coarse cells.  Across MPI ranks this
+        fills what the process can without waiting for another's strips; the blocks ``early``
         of :meth:`field_groups` may then be advanced before :meth:`finish_field_ghosts`
-        completes the rest.  The axes' fills read interior cells only and write disjoint ghost
-        slabs, so their order does not matter.  One process fills every ghost here.  An
-        adaptive mesh fills axis by axis (:meth:`fill_field_ghosts`): its prolongation reads
-        the ghosts that the fills of the axes before wrote."""
-        if mesh.adaptive:
-            raise ValueError("an adaptive mesh fills a field's ghosts axis by axis (fill_field_ghosts)")
+        completes the rest.  Every cell these fills read is an interior cell (a same-level
+        neighbour's, a restriction's fine cells, the coarse cell a fine ghost copies) and each
+        axis's fill writes its own ghost slabs, so their order does not matter.  One process
+        fills every ghost here."""
         axes = used_axes(mesh)
         for axis in axes:
-            self.fill_field_ghosts(field, mesh, axis, runs, wanted, layers)
+            for run in runs:
+                fill_field_ghosts(field[:, run], mesh, axis, wanted=wanted, layers=layers)
         return FieldFill(axes, runs, wanted, layers)
 
     def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
@@ -316,6 +311,11 @@ class BlockRanges(WholeMesh):
         self.neighbourhood_strips = StripExchange(comm, self.neighbourhood, NEIGHBOURHOOD_TAG)
         #: Per axis on an adaptive mesh: this rank's rows of the coarse/fine plans and their exchanges.
         self._plans: dict[int, dict] = {}
+        #: On an adaptive mesh, the exchange before a derived field's fills along every axis
+        #: (:func:`~.decomposition.level_field_routes`), built on first use.
+        self._level_field_strips: StripExchange | None = None
+        #: The ``wanted`` of a derived field's fill of every block (an adaptive mesh's).
+        self.every_block = np.ones(mesh.nblocks, dtype=np.uint8)
         #: The exchanges of the face fluxes per (axis, row length), built on first use.
         self._flux_strips: dict[tuple[int, int], StripExchange] = {}
 
@@ -395,70 +395,53 @@ class BlockRanges(WholeMesh):
         plans["prolong_strips"].exchange(fields, self.traffic)
         prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 
-    def fill_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...],
-                          wanted: np.ndarray | None = None, layers: int | None = None) -> None:
-        """Receive the neighbours' strips of the components of ``field`` that the ``runs`` (slices
-        of its component axis) select along ``axis``, every run in one message per peer, then
-        fill the owned blocks' ghosts of those components (on a uniform mesh only of the blocks
-        where ``wanted[b]`` is not 0, when given, and of those only the ``layers`` ghost layers
-        next to the interior).  On an adaptive mesh the fine cells the restriction reads travel
-        with the strips, and the coarse/fine ghosts follow (:meth:`_fill_level_field_ghosts`)."""
-        g = int(mesh.ghost[axis])
-        if g == 0:
-            return
-        self.strips[axis].exchange((field,), self.traffic, runs)
-        if mesh.adaptive:
-            self.plans(mesh, axis)["restrict_strips"].exchange((field,), self.traffic, runs)
-        for run in runs:
-            if wanted is not None and not mesh.adaptive:
-                fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
-                                  wanted, g if layers is None else layers)
-            else:
-                fill_ghosts(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
-        if mesh.adaptive:
-            self._fill_level_field_ghosts(field, mesh, axis, runs)
-
-    def _fill_level_field_ghosts(self, field: np.ndarray, mesh, axis: int, runs: tuple[slice, ...]) -> None:
-        """The coarse/fine ghosts along ``axis`` of the components of ``field`` that the ``runs``
-        select, after the same-level ones: restriction of this rank's rows, the coarse cells of
-        other ranks that the prolongation reads (every run in one message per peer), the
-        prolongation of this rank's rows."""
-        plans = self.plans(mesh, axis)
-        for run in runs:
-            restrict_ghosts(field[:, run], plans["restrict"], plans["restrict_weight"])
-        plans["prolong_strips"].exchange((field,), self.traffic, runs)
-        for run in runs:
-            prolong_field_ghosts(field[:, run], plans["prolong"])
-
     def start_field_ghosts(self, field: np.ndarray, mesh, runs: tuple[slice, ...], wanted: np.ndarray,
                            layers: int | None = None) -> FieldFill:
         """Post the strips of the components of ``field`` that the ``runs`` (slices of its
-        component axis) select along every used axis of a uniform mesh, every axis and run in one
-        message per peer (:attr:`field_routes`, :meth:`~.exchange.StripExchange.post`), and fill the
-        ghosts of those components of the owned blocks where ``wanted[b]`` is not 0 (their
-        ``layers`` layers next to the interior) from what this rank holds, axis by axis, then
-        return while the strips travel: the inner blocks of :meth:`field_groups` have their
-        ghosts complete.  The strips are interior cells and each axis's fill writes its own
-        ghost slabs only, so one axis's strips need nothing from another's fill.  The slabs of
-        the edge blocks that face another rank's block are filled again by
-        :meth:`finish_field_ghosts`.  An adaptive mesh fills axis by axis
-        (:meth:`fill_field_ghosts`)."""
-        if mesh.adaptive:
-            raise ValueError("an adaptive mesh fills a field's ghosts axis by axis (fill_field_ghosts)")
+        component axis) select along every used axis, every axis and run in one message per peer
+        (:meth:`~.exchange.StripExchange.post`), and fill the ghosts of those components of the
+        owned blocks from what this rank holds, axis by axis, then return while the strips
+        travel: the inner blocks of :meth:`field_groups` have their ghosts complete.  The strips
+        are interior cells and each axis's fill writes its own ghost slabs only, so one axis's
+        strips need nothing from another's fill.  The slabs of the edge blocks that face another
+        rank's block are filled again by :meth:`finish_field_ghosts`.
+
+        On a uniform mesh (:attr:`field_routes`) the blocks where ``wanted[b]`` is not 0 get their
+        ``layers`` layers next to the interior.  On an adaptive mesh every owned block gets every
+        layer, and the message also carries the fine cells of other ranks' blocks that a
+        restriction reads and the coarse cells that a fine ghost copies
+        (:func:`~.decomposition.level_field_routes`, interior cells too); the rows of the
+        coarse/fine plans whose source block this rank owns are applied here, the others by
+        :meth:`finish_field_ghosts`."""
         axes = used_axes(mesh)
-        pending = self.field_strips.post((field,), self.traffic, runs)
+        if not mesh.adaptive:
+            pending = self.field_strips.post((field,), self.traffic, runs)
+            for axis in axes:
+                g = int(mesh.ghost[axis])
+                for run in runs:
+                    fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
+                                      wanted, g if layers is None else layers)
+            return FieldFill(axes, runs, wanted, layers, pending)
+        if self._level_field_strips is None:
+            self._level_field_strips = StripExchange(
+                self.comm, level_field_routes(mesh, self.cuts, self.rank, self.routes), FIELD_TAG)
+        pending = self._level_field_strips.post((field,), self.traffic, runs)
         for axis in axes:
             g = int(mesh.ghost[axis])
+            plans = self.plans(mesh, axis)
             for run in runs:
-                fill_ghosts_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi,
-                                  wanted, g if layers is None else layers)
-        return FieldFill(axes, runs, wanted, layers, pending)
+                fill_ghosts(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g, -1, self.lo, self.hi)
+                restrict_ghosts(field[:, run], plans["restrict_here"], plans["restrict_here_weight"])
+                prolong_field_ghosts(field[:, run], plans["prolong_here"])
+        return FieldFill(axes, runs, self.every_block, None, pending)
 
     def finish_field_ghosts(self, fill: FieldFill, field: np.ndarray, mesh) -> None:
         """Wait for the strips of :meth:`start_field_ghosts` and fill the edge blocks' slabs that
         face another rank's block, axis by axis and run by run
         (:func:`~impactpipe.hydro.mesh.boundary.fill_ghosts_from_ranks_where`); their other slabs
-        keep what :meth:`start_field_ghosts` gave them."""
+        keep what :meth:`start_field_ghosts` gave them.  On an adaptive mesh the rows of the
+        coarse/fine plans whose source block another rank owns follow (``restrict_away`` and
+        ``prolong_away`` of :meth:`plans`)."""
         if fill.pending is None:
             return
         finish_strips(fill.pending)
@@ -468,17 +451,27 @@ class BlockRanges(WholeMesh):
                 fill_ghosts_from_ranks_where(field[:, run], mesh.neighbor, mesh.neighbor_level, axis, g,
                                              self.field_overlap[1], self.lo, self.hi, fill.wanted,
                                              g if fill.layers is None else fill.layers)
+            if mesh.adaptive:
+                plans = self.plans(mesh, axis)
+                for run in fill.runs:
+                    restrict_ghosts(field[:, run], plans["restrict_away"], plans["restrict_away_weight"])
+                    prolong_field_ghosts(field[:, run], plans["prolong_away"])
 
     def field_groups(self, mesh) -> tuple[np.ndarray, np.ndarray]:
-        """(early, late): the owned blocks none of whose faces has another rank's block beside
-        it, and the rest (:func:`~.decomposition.field_overlap_groups`)."""
+        """(early, late): the owned blocks whose ghosts a derived field's fill completes from this
+        rank's cells alone, and the rest (:func:`~.decomposition.field_overlap_groups`)."""
         return self.field_overlap
 
     def plans(self, mesh, axis: int) -> dict:
         """This rank's rows of the coarse/fine plans of ``axis`` (destination blocks it owns) and
-        the exchanges that bring the cells they read from other ranks' blocks: the 2^ndim fine
-        cells of a restriction (before the fill), the coarse cell and its neighbours along
-        every used axis of a prolongation (after the restriction, ghosts included)."""
+        the exchanges that bring the cells they read from other ranks' blocks.
+
+        ``restrict`` (with ``restrict_weight``), ``prolong``, ``reflux`` (with ``reflux_volume``):
+        the rows; ``restrict_here`` / ``restrict_away`` and ``prolong_here`` / ``prolong_away``
+        (with their weights): those whose source block this rank owns / another rank owns (a
+        derived field's fill applies the first before its strips arrive).  ``restrict_strips``
+        and ``prolong_strips`` (the coarse cell and its neighbours along every used axis, ghosts
+        included): before the state's fill and after its restriction."""
         if axis not in self._plans:
             whole = axis_plans(mesh, axis)
             owner = owners(self.cuts)
@@ -488,14 +481,18 @@ class BlockRanges(WholeMesh):
                 mine[name] = np.ascontiguousarray(whole[name][keep])
                 if weight is not None:
                     mine[weight] = np.ascontiguousarray(whole[weight][keep])
-            used = [d for d in range(3) if mesh.ghost[d] > 0]
-            corner = np.array([[a, j, k] for a in (0, 1) for j in (0, 1) for k in (0, 1)
-                               if (a == 0 or 0 in used) and (j == 0 or 1 in used) and (k == 0 or 2 in used)])
-            star = np.array([np.zeros(3, int)] + [sign * np.eye(3, dtype=int)[d] for d in used for sign in (-1, 1)])
+            for name, weight in (("restrict", "restrict_weight"), ("prolong", None)):
+                here = owner[mine[name][:, 4]] == self.rank
+                for part, rows in (("here", here), ("away", ~here)):
+                    mine[f"{name}_{part}"] = np.ascontiguousarray(mine[name][rows])
+                    if weight is not None:
+                        mine[f"{name}_{part}_weight"] = np.ascontiguousarray(mine[weight][rows])
             mine["restrict_strips"] = StripExchange(
-                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["restrict"], corner), RESTRICT_TAG + axis)
+                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["restrict"], restriction_stencil(mesh)),
+                RESTRICT_TAG + axis)
             mine["prolong_strips"] = StripExchange(
-                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["prolong"], star), PROLONG_TAG + axis)
+                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["prolong"], prolongation_stencil(mesh)),
+                PROLONG_TAG + axis)
             mine["reflux_pairs"] = (whole["reflux"][:, 0], whole["reflux"][:, 5])
             self._plans[axis] = mine
         return self._plans[axis]

@@ -562,15 +562,22 @@ class MaterialStrength:
         own, for the blocks of :meth:`_mark_quiet` alone: the kick reads no stress ghost of a
         quiet block (most of an impact's target right after contact); across MPI ranks they
         go with the others, one message per peer, and every block holding material gets them.
-        An adaptive mesh fills the axes one after another, completely
-        (:meth:`_fill_work_ghosts`), and returns no fill."""
+        An adaptive mesh fills every layer of every block, the coarse/fine faces by restriction
+        and copies of the coarse cells, which read interior cells only: its axes are one fill
+        too, and across MPI ranks the strips, the restriction's fine cells and the copied
+        coarse cells of every axis travel in one message per peer.  With a ``level`` (steps per
+        level) an adaptive mesh's level's blocks are filled axis after axis, completely
+        (:meth:`_fill_work_ghosts_of_level`), and no fill is returned."""
         layers, skipped = self._ghost_reads()
         runs = slot_runs(slots, skipped)
-        if self.mesh.adaptive:
+        if self.mesh.adaptive and level is not None:
             for axis in range(self.mesh.ndim):
-                self._fill_work_ghosts(partition, axis, runs, level)
+                self._fill_work_ghosts_of_level(axis, runs, level)
             return []
-        if partition.whole:
+        if self.mesh.adaptive:
+            fills = [partition.start_field_ghosts(self.work, self.mesh, runs, self.holds, GHOST)]
+            layers = GHOST
+        elif partition.whole:
             flow = slot_runs(slice(slots.start, max(slots.start, min(slots.stop, WK_S))), skipped)
             stress = slot_runs(slice(min(slots.stop, max(slots.start, WK_S)), slots.stop), skipped)
             fills = [partition.start_field_ghosts(self.work, self.mesh, part, wanted, layers)
@@ -591,7 +598,7 @@ class MaterialStrength:
         """Run ``kernel(blocks)`` (a stress-step kernel on the int64 ``blocks``) on every block the
         ``partition`` advances (or on the ``level``'s), the ghost ``fills`` completed first where
         the kernel reads them: the
-        blocks none of whose neighbours another MPI rank owns (``partition.field_groups``)
+        blocks whose ghosts need no other MPI rank's cells (``partition.field_groups``)
         run while the strips travel, the others after :meth:`_finish_work_ghosts`.  Every
         block runs the same arithmetic either way, and each writes only its own cells and
         counters, so the answer does not depend on the split."""
@@ -604,23 +611,13 @@ class MaterialStrength:
         self._finish_work_ghosts(partition, fills)
         kernel(late)
 
-    def _fill_work_ghosts(self, partition, axis: int, runs: tuple[slice, ...], level: LevelBlocks | None = None
-                          ) -> None:
-        """Ghosts along ``axis`` of the work arrays' ``runs`` of slots on an adaptive mesh, then
-        the wall sign flips (of the ``partition``'s blocks: a rank writes no other rank's
-        block): every layer of every block (the prolongation reads the coarse
-        blocks' ghosts, those of the axes filled before included;
-        ``partition.fill_field_ghosts``: same-level copies, across MPI ranks received strips,
-        restriction and copies at coarse/fine faces).  With a ``level`` (:class:`LevelBlocks`),
-        the level's blocks only: the same-level copies of the layers the kernels read into the
-        blocks holding material, as on a uniform mesh, then every layer at the level's
-        coarse/fine faces (restriction from the finer level, copies of the coarser level's
-        interior cells: :func:`_fill_level_work_ghosts`, which read no ghost), and the wall sign
-        flips of the level's blocks."""
-        if level is None:
-            partition.fill_field_ghosts(self.work, self.mesh, axis, runs, self.holds, GHOST)
-            self._flip_work_walls(axis, runs, GHOST, owned=self._range(partition))
-            return
+    def _fill_work_ghosts_of_level(self, axis: int, runs: tuple[slice, ...], level: LevelBlocks) -> None:
+        """Ghosts along ``axis`` of the work arrays' ``runs`` of slots of the ``level``'s blocks
+        (:class:`LevelBlocks`, steps per level on one process): the same-level copies of the
+        layers the kernels read into the blocks holding material, as on a uniform mesh, then
+        every layer at the level's coarse/fine faces (restriction from the finer level, copies of
+        the coarser level's interior cells: :func:`_fill_level_work_ghosts`, which read no
+        ghost), and the wall sign flips of the level's blocks."""
         layers = self._ghost_reads()[0]
         for run in runs:
             _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, level.mask & self.holds, layers)
