@@ -17,10 +17,12 @@ from impactpipe.hydro.parallel.decomposition import (
     exchange_routes,
     field_overlap_groups,
     level_field_routes,
+    level_state_routes,
     neighbourhood_routes,
     overlap_groups,
     owned_ranges,
     owners,
+    prolongation_stencil,
     restriction_stencil,
     touching_blocks,
 )
@@ -161,29 +163,31 @@ def corner_refined_mesh():
     return mesh
 
 
-def test_on_an_adaptive_mesh_the_blocks_of_the_coarse_fine_plans_are_swept_after_the_strips():
-    """2d-planar, two levels around one corner block, on 3 ranks: a rank's edge blocks along an
-    axis are those with a neighbour of another rank along it and those a row of the axis's
-    restriction or prolongation writes or reads (their ghosts are completed after the wait);
-    some blocks are inner."""
-    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 1.0], [32, 32], [("outflow", "outflow")] * 2, 4, 3)
-    for _ in range(2):
-        refine = np.zeros(mesh.nblocks, dtype=bool)
-        refine[np.argmin(mesh.block_lo[:, :2].sum(axis=1))] = True
-        mesh, _ = remesh(mesh, HydroState.empty(mesh, 1), plan_leaves(mesh, refine, np.zeros_like(refine)))
-    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
-    owner = owners(cuts)
-    for axis in range(2):
-        plans = axis_plans(mesh, axis)
-        touched = set(np.concatenate([plans[name][:, column] for name in ("restrict", "prolong")
-                                      for column in (0, 4)]).tolist())
-        for rank in range(3):
-            inner, edge = overlap_groups(mesh, cuts, rank)[axis]
-            for b in range(cuts[rank], cuts[rank + 1]):
-                foreign = any(n >= 0 and owner[n] != rank for n in mesh.neighbor[b, axis])
-                assert (b - cuts[rank] in edge) == (foreign or b in touched)
-            assert inner.size + edge.size == cuts[rank + 1] - cuts[rank]
-        assert touched and sum(overlap_groups(mesh, cuts, rank)[axis][0].size for rank in range(3)) > 0
+def test_on_an_adaptive_mesh_the_blocks_filled_from_other_ranks_are_swept_after_the_strips():
+    """2d-planar, two levels around one corner block, on 2 and 3 ranks: a rank's edge blocks
+    along an axis are those with a neighbour of another rank across a face between blocks of
+    one level and those that a row of the axis's restriction or prolongation fills from another
+    rank's block (their ghosts are completed after the wait); some blocks that such rows fill
+    from the rank's own blocks, or read, are inner."""
+    mesh = corner_refined_mesh()
+    inner_touched = 0
+    for nranks in (2, 3):
+        cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), nranks)
+        owner = owners(cuts)
+        for axis in range(2):
+            plans = axis_plans(mesh, axis)
+            rows = np.concatenate([plans[name][:, [0, 4]] for name in ("restrict", "prolong")])
+            from_ranks = set(rows[owner[rows[:, 0]] != owner[rows[:, 1]], 0].tolist())
+            assert from_ranks
+            for rank in range(nranks):
+                inner, edge = overlap_groups(mesh, cuts, rank)[axis]
+                for b in range(cuts[rank], cuts[rank + 1]):
+                    foreign = any(n >= 0 and owner[n] != rank and level == 0
+                                  for n, level in zip(mesh.neighbor[b, axis], mesh.neighbor_level[b, axis]))
+                    assert (b - cuts[rank] in edge) == (foreign or b in from_ranks)
+                assert inner.size + edge.size == cuts[rank + 1] - cuts[rank]
+                inner_touched += len(set(rows.ravel().tolist()) & set((inner + cuts[rank]).tolist()))
+    assert inner_touched > 0
 
 
 def received_keys(mesh, routes) -> dict[int, set[int]]:
@@ -239,6 +243,41 @@ def test_on_an_adaptive_mesh_the_stress_step_s_inner_blocks_need_no_other_rank_s
             assert (b in edge) == (foreign or b in remote_rows)
         inner_blocks += inner.size
     assert inner_blocks > 0
+
+
+def test_on_an_adaptive_mesh_the_state_s_prolongation_reads_no_ghost_it_waits_for():
+    """Two levels around one corner block, on 3 ranks: before the state's fill along an axis a
+    rank receives (level_state_routes, one message per peer) every cell of other ranks' blocks
+    that its prolongation reads but the coarse ghosts toward its finer blocks; those it
+    restricts itself (BlockRanges.plans' restrict_borrowed) from its own fine cells, the rows
+    of the whole restriction that set them."""
+    from types import SimpleNamespace
+
+    from impactpipe.hydro.parallel.distributed import BlockRanges
+
+    mesh = corner_refined_mesh()
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    owner = owners(cuts)
+    borrowed_rows = 0
+    for rank in range(3):
+        partition = BlockRanges(SimpleNamespace(rank=rank, size=3), mesh, cuts)
+        for axis in range(2):
+            received = received_keys(mesh, level_state_routes(mesh, cuts, rank, exchange_routes(mesh, cuts, rank),
+                                                               axis))
+            plans = partition.plans(mesh, axis)
+            borrowed = plans["restrict_borrowed"]
+            assert (owner[borrowed[:, 4]] == rank).all() and (owner[borrowed[:, 0]] != rank).all()
+            restricted = set(read_keys(mesh, borrowed[:, [4, 5, 6, 7, 0, 1, 2, 3]], np.zeros((1, 3), int)).ravel()
+                             .tolist())
+            rows = plans["prolong_away"]
+            for row, keys in zip(rows, read_keys(mesh, rows, prolongation_stencil(mesh))):
+                inside = interior(mesh, keys, [axis])
+                assert set(keys[inside].tolist()) <= received[owner[row[4]]]
+                assert inside.sum() == len(keys) - 1 and set(keys[~inside].tolist()) <= restricted
+            whole = axis_plans(mesh, axis)["restrict"]
+            assert len({tuple(r) for r in borrowed.tolist()} - {tuple(r) for r in whole.tolist()}) == 0
+            borrowed_rows += len(borrowed)
+    assert borrowed_rows > 0
 
 
 @pytest.mark.parametrize("geometry", ["2d-planar", "3d"])

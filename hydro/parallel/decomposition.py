@@ -171,10 +171,12 @@ def overlap_groups(mesh, cuts: np.ndarray, rank: int) -> list[tuple[np.ndarray, 
 
     While the strips of a ghost fill travel, the sweep can advance the inner blocks; the edge
     blocks wait for them (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.start_ghosts`).
-    On an adaptive mesh the blocks that a row of the axis's coarse/fine plans writes or reads
-    (:func:`impactpipe.hydro.amr.plans.axis_plans`: the restriction's coarse and fine blocks, the
-    prolongation's fine and coarse blocks) are edge blocks too: their ghosts are completed after
-    the strips arrive, from cells that must not have been swept yet.
+    On an adaptive mesh an edge block has another rank's block beside a face between blocks of
+    one level, or it is the destination of a row of the axis's coarse/fine plans
+    (:func:`impactpipe.hydro.amr.plans.axis_plans`: restriction, prolongation) whose source
+    block another rank owns: those rows are applied after the strips arrive, and they read
+    only the cells received and the edge blocks' own (the rows whose source this rank owns are
+    applied before the inner blocks are swept).
     """
     lo, hi = int(cuts[rank]), int(cuts[rank + 1])
     local = np.arange(hi - lo, dtype=np.int64)
@@ -183,23 +185,9 @@ def overlap_groups(mesh, cuts: np.ndarray, rank: int) -> list[tuple[np.ndarray, 
         if mesh.ghost[axis] == 0:
             groups.append((local[:0], local))
             continue
-        nbr = mesh.neighbor[lo:hi, axis, :]
-        remote = ((nbr >= 0) & ((nbr < lo) | (nbr >= hi))).any(axis=1)
-        if mesh.adaptive:
-            remote |= _in_level_plans(axis_plans(mesh, axis), lo, hi)
+        remote = _filled_from_ranks(mesh, cuts, rank, [axis])
         groups.append((local[~remote], local[remote]))
     return groups
-
-
-def _in_level_plans(plans: dict, lo: int, hi: int) -> np.ndarray:
-    """(hi - lo,) bool: whether block lo + i is the destination or the source block of a row of
-    the coarse/fine ``plans``' restriction or prolongation (columns 0 and 4)."""
-    touched = np.zeros(hi - lo, dtype=bool)
-    for name in ("restrict", "prolong"):
-        for block in (plans[name][:, 0], plans[name][:, 4]):
-            mine = block[(block >= lo) & (block < hi)]
-            touched[mine - lo] = True
-    return touched
 
 
 def _filled_from_ranks(mesh, cuts: np.ndarray, rank: int, axes: list[int]) -> np.ndarray:
@@ -318,11 +306,16 @@ def prolongation_stencil(mesh) -> np.ndarray:
 COPY_STENCIL = np.zeros((1, 3), dtype=np.int64)
 
 
-def plan_routes(mesh, cuts: np.ndarray, rank: int, plan: np.ndarray, stencil: np.ndarray) -> list[Route]:
+def plan_routes(mesh, cuts: np.ndarray, rank: int, plan: np.ndarray, stencil: np.ndarray,
+                interior_along: int | None = None) -> list[Route]:
     """The routes of ``rank`` that bring to the owner of each row's destination block
     (``plan[:, 0]``) the cells its kernel reads in the row's source block (``plan[:, 4]``):
     the source cell ``plan[:, 5:8]`` plus each offset of ``stencil`` (S, 3), where another rank
-    owns the source (the coarse/fine plans of :mod:`impactpipe.hydro.amr.plans`)."""
+    owns the source (the coarse/fine plans of :mod:`impactpipe.hydro.amr.plans`).  With
+    ``interior_along`` (an axis), only the cells in the interior along that axis: a state's
+    prolongation along it also reads the coarse block's ghost cell toward the finer block,
+    which the restriction sets from the finer block's cells, and the owner of the finer block
+    restricts it itself (:meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.plans`)."""
     owner = owners(cuts)
     padded = np.array(mesh.padded_shape)
     per_block = int(padded.prod())
@@ -331,6 +324,10 @@ def plan_routes(mesh, cuts: np.ndarray, rank: int, plan: np.ndarray, stencil: np
     keys = (plan[:, 4:5] * per_block + flat).ravel()
     senders = np.repeat(owner[plan[:, 4]], len(stencil))
     receivers = np.repeat(owner[plan[:, 0]], len(stencil))
+    if interior_along is not None:
+        along = cells[..., interior_along].ravel()
+        inside = (along >= mesh.ghost[interior_along]) & (along < padded[interior_along] - mesh.ghost[interior_along])
+        keys, senders, receivers = keys[inside], senders[inside], receivers[inside]
     return _routes(keys, senders, receivers, rank, per_block)
 
 
@@ -349,6 +346,17 @@ def level_field_routes(mesh, cuts: np.ndarray, rank: int, routes: list[list[Rout
         parts += [routes[axis], plan_routes(mesh, cuts, rank, plans["restrict"], restriction_stencil(mesh)),
                   plan_routes(mesh, cuts, rank, plans["prolong"], COPY_STENCIL)]
     return every_axis_routes(parts)
+
+
+def level_state_routes(mesh, cuts: np.ndarray, rank: int, routes: list[list[Route]], axis: int) -> list[Route]:
+    """The routes of ``rank``, one per peer rank, of the state's ghost fill along ``axis`` of an
+    adaptive mesh: the strips of ``routes`` (those of :func:`exchange_routes`), the fine cells of
+    the restrictions and the coarse cells that the prolongations read, but for the coarse
+    ghosts toward the finer block (``interior_along`` of :func:`plan_routes`).  None of them is
+    a ghost cell that this fill writes, so they all travel before it, in one message per peer."""
+    plans = axis_plans(mesh, axis)
+    return every_axis_routes([routes[axis], plan_routes(mesh, cuts, rank, plans["restrict"], restriction_stencil(mesh)),
+                              plan_routes(mesh, cuts, rank, plans["prolong"], prolongation_stencil(mesh), axis)])
 
 
 def block_routes(cuts: np.ndarray, rank: int, receiver_blocks: np.ndarray, sender_blocks: np.ndarray,

@@ -48,7 +48,7 @@ from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.storage import atomic_path, atomic_path_together
 
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
-                            level_field_routes, neighbourhood_routes, overlap_groups,
+                            level_field_routes, level_state_routes, neighbourhood_routes, overlap_groups,
                             owned_ranges, owners, plan_routes, prolongation_stencil, restriction_stencil)
 from .exchange import (CARRY_TAG, FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
                        StripExchange, Traffic, broadcast_arrays, finish_strips, gather_item_rows, gather_owned_blocks,
@@ -68,8 +68,6 @@ class GhostFill:
     early: np.ndarray
     late: np.ndarray
     pending: PendingStrips | None = None
-    #: On an adaptive mesh: the fine cells of other ranks' blocks that the restriction reads, still travelling.
-    restricting: PendingStrips | None = None
 
 
 @dataclass
@@ -329,13 +327,18 @@ class BlockRanges(WholeMesh):
         if q_layers is None or mesh.adaptive:
             q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        self.strips[axis].exchange(fields, self.traffic)
-        if mesh.adaptive:
-            self.plans(mesh, axis)["restrict_strips"].exchange(fields, self.traffic)
+        self._state_strips(mesh, axis).exchange(fields, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers,
                                NO_RECORD)
         if mesh.adaptive:
-            self._fill_level_ghosts(fields, mesh, axis)
+            self._fill_level_ghosts(fields, mesh, axis, "here")
+            self._fill_level_ghosts(fields, mesh, axis, "away")
+
+    def _state_strips(self, mesh, axis: int) -> StripExchange:
+        """The exchange before the state's ghost fill along ``axis``: the strips on a uniform mesh;
+        on an adaptive mesh, with them in one message per peer, the fine cells the restriction
+        reads and the coarse cells the prolongation reads (``level_strips`` of :meth:`plans`)."""
+        return self.plans(mesh, axis)["level_strips"] if mesh.adaptive else self.strips[axis]
 
     def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None,
                      scalars_clear: np.ndarray | None = None) -> GhostFill:
@@ -345,8 +348,11 @@ class BlockRanges(WholeMesh):
         whose ghosts along ``axis`` are now complete) can be swept meanwhile.  The slabs of the
         ``late`` blocks that face another rank's block are filled again by
         :meth:`finish_ghosts` (every layer).  On an adaptive mesh the fine cells that the
-        restriction reads from other ranks' blocks are posted too, every layer is filled, and
-        the coarse/fine ghosts are left to :meth:`finish_ghosts`.  ``q_layers`` as in
+        restriction reads and the coarse cells that the prolongation reads from other ranks'
+        blocks travel with the strips (:meth:`_state_strips`), every layer is filled, and the
+        coarse/fine ghosts whose source block this rank owns are filled here
+        (:meth:`_fill_level_ghosts`), the others by :meth:`finish_ghosts`; the blocks those
+        others write are late.  ``q_layers`` as in
         :meth:`fill_ghosts`.  ``scalars_clear`` must be None: the ranks keep no record of the
         blocks whose scalars are +0.0, and every slab is copied."""
         if scalars_clear is not None:
@@ -358,42 +364,48 @@ class BlockRanges(WholeMesh):
         if q_layers is None or mesh.adaptive:
             q_layers = every_layer(state.arhoq, g)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        pending = self.strips[axis].post(fields, self.traffic)
-        restricting = None
-        if mesh.adaptive:
-            restricting = self.plans(mesh, axis)["restrict_strips"].post(fields, self.traffic)
+        pending = self._state_strips(mesh, axis).post(fields, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers,
                                NO_RECORD)
-        return GhostFill(inner, edge, pending, restricting)
+        if mesh.adaptive:
+            self._fill_level_ghosts(fields, mesh, axis, "here")
+        return GhostFill(inner, edge, pending)
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
         """Wait for the strips of :meth:`start_ghosts` and fill the edge blocks' slabs that face
         another rank's block (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts_from_ranks`);
         their other slabs keep what :meth:`start_ghosts` gave them, from the blocks as they were
-        before the early sweep.  On an adaptive mesh the coarse/fine ghosts follow, as in
-        :meth:`fill_ghosts`: the restriction, the exchange of the coarse cells the prolongation
-        reads, the prolongation; every block they read or write is late."""
+        before the early sweep.  On an adaptive mesh the coarse/fine ghosts whose source block
+        another rank owns follow (:meth:`_fill_level_ghosts`): they read only the cells received
+        and those of late blocks."""
         if fill.pending is None:
             return
         finish_strips(fill.pending)
-        if fill.restricting is not None:
-            finish_strips(fill.restricting)
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         g = int(mesh.ghost[axis])
         fill_state_ghosts_from_ranks(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, fill.late + self.lo,
                                      self.lo, self.hi, every_layer(state.arhoq, g))
         if mesh.adaptive:
-            self._fill_level_ghosts(fields, mesh, axis)
+            self._fill_level_ghosts(fields, mesh, axis, "away")
 
-    def _fill_level_ghosts(self, fields: tuple, mesh, axis: int) -> None:
-        """The coarse/fine ghosts of the state's ``fields`` along ``axis`` after the same-level
-        ones: restriction of this rank's rows, the coarse cells of other ranks that the
-        prolongation reads (received), the prolongation of this rank's rows."""
+    def _fill_level_ghosts(self, fields: tuple, mesh, axis: int, part: str) -> None:
+        """The coarse/fine ghosts of the state's ``fields`` along ``axis`` of this rank's rows of
+        the plans (:meth:`plans`) whose source block this rank owns (``part`` "here": no cell of
+        another rank's block is read, so they are filled before the strips arrive) or another
+        rank owns ("away": after, from the cells received, :meth:`_state_strips`): restriction,
+        then prolongation.  A prolongation reads its coarse cell's ghost toward the finer block,
+        which the restriction sets from the finer block's cells: with the rows "here" those of
+        this rank's finer blocks; with the rows "away" this rank also restricts those ghosts of
+        the other ranks' coarse blocks itself (``restrict_borrowed``)."""
         plans = self.plans(mesh, axis)
+        restrictions = [(plans[f"restrict_{part}"], plans[f"restrict_{part}_weight"])]
+        if part == "away":
+            restrictions.append((plans["restrict_borrowed"], plans["restrict_borrowed_weight"]))
         for arr in fields:
-            restrict_ghosts(arr, plans["restrict"], plans["restrict_weight"])
-        plans["prolong_strips"].exchange(fields, self.traffic)
-        prolong_state_ghosts(fields, plans["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
+            for rows, weights in restrictions:
+                restrict_ghosts(arr, rows, weights)
+        prolong_state_ghosts(fields, plans[f"prolong_{part}"], mesh.block_lo, mesh.block_dx, mesh.geometry_code,
+                             mesh.ndim)
 
     def start_field_ghosts(self, field: np.ndarray, mesh, runs: tuple[slice, ...], wanted: np.ndarray,
                            layers: int | None = None) -> FieldFill:
@@ -469,9 +481,14 @@ class BlockRanges(WholeMesh):
         ``restrict`` (with ``restrict_weight``), ``prolong``, ``reflux`` (with ``reflux_volume``):
         the rows; ``restrict_here`` / ``restrict_away`` and ``prolong_here`` / ``prolong_away``
         (with their weights): those whose source block this rank owns / another rank owns (a
-        derived field's fill applies the first before its strips arrive).  ``restrict_strips``
-        and ``prolong_strips`` (the coarse cell and its neighbours along every used axis, ghosts
-        included): before the state's fill and after its restriction."""
+        fill applies the first before its strips arrive).  ``restrict_borrowed``
+        (with its weights): rows of other ranks, the coarse ghosts of their blocks toward this
+        rank's finer blocks that this rank's prolongation reads (:meth:`_borrowed_restriction`).
+        ``level_strips``: before the state's fill, the strips with the fine cells of the
+        restriction and the coarse cells of the prolongation, in one message per peer
+        (:func:`~.decomposition.level_state_routes`); ``restrict_strips`` and ``prolong_strips``
+        (the coarse cell and its neighbours along every used axis, ghosts included): before and
+        after the restriction of the first ghost layer (:meth:`fill_first_ghost_layer`)."""
         if axis not in self._plans:
             whole = axis_plans(mesh, axis)
             owner = owners(self.cuts)
@@ -487,15 +504,49 @@ class BlockRanges(WholeMesh):
                     mine[f"{name}_{part}"] = np.ascontiguousarray(mine[name][rows])
                     if weight is not None:
                         mine[f"{name}_{part}_weight"] = np.ascontiguousarray(mine[weight][rows])
+            mine["restrict_borrowed"], mine["restrict_borrowed_weight"] = self._borrowed_restriction(
+                mesh, axis, whole, mine["prolong_away"])
             mine["restrict_strips"] = StripExchange(
                 self.comm, plan_routes(mesh, self.cuts, self.rank, whole["restrict"], restriction_stencil(mesh)),
                 RESTRICT_TAG + axis)
             mine["prolong_strips"] = StripExchange(
                 self.comm, plan_routes(mesh, self.cuts, self.rank, whole["prolong"], prolongation_stencil(mesh)),
                 PROLONG_TAG + axis)
+            mine["level_strips"] = StripExchange(
+                self.comm, level_state_routes(mesh, self.cuts, self.rank, self.routes, axis), STRIP_TAG + axis)
             mine["reflux_pairs"] = (whole["reflux"][:, 0], whole["reflux"][:, 5])
             self._plans[axis] = mine
         return self._plans[axis]
+
+    def _borrowed_restriction(self, mesh, axis: int, whole: dict, prolong_away: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, weights) of the whole restriction plan of ``axis`` (``whole``) that set the coarse
+        ghost cells which the rows ``prolong_away`` of this rank's prolongation read in other
+        ranks' blocks: each coarse cell's neighbour along ``axis`` outside the interior, toward
+        the finer block.  The coarse cell of a fine ghost lies next to the coarse/fine face, so
+        that neighbour is restricted from the fine cells of the same finer block, this rank's:
+        this rank restricts it itself, as its owner does, instead of receiving it after the
+        owner's restriction, and the prolongation's cells can travel with the strips
+        (:func:`~.decomposition.level_state_routes`).  A RuntimeError says if a row reads another
+        rank's cells."""
+        padded = np.array(mesh.padded_shape)
+        per_block = int(padded.prod())
+        g = int(mesh.ghost[axis])
+        cells = prolong_away[:, 5:8].copy()
+        cells[:, axis] += np.where(cells[:, axis] == g, -1, 1)
+        outside = (cells[:, axis] < g) | (cells[:, axis] >= padded[axis] - g)
+
+        def keys(blocks: np.ndarray, cells: np.ndarray) -> np.ndarray:
+            """Flat indices of the padded ``cells`` (N, 3) of ``blocks`` (N,) in a field of one component."""
+            return blocks * per_block + (cells[:, 0] * padded[1] + cells[:, 1]) * padded[2] + cells[:, 2]
+
+        rows = np.isin(keys(whole["restrict"][:, 0], whole["restrict"][:, 1:4]),
+                       keys(prolong_away[outside, 4], cells[outside]))
+        borrowed = np.ascontiguousarray(whole["restrict"][rows])
+        if (owners(self.cuts)[borrowed[:, 4]] != self.rank).any():
+            raise RuntimeError("a coarse ghost that this rank's prolongation reads is restricted from another "
+                               "rank's fine cells")
+        return borrowed, np.ascontiguousarray(whole["restrict_weight"][rows])
 
     def share_face_flux(self, face_flux: np.ndarray, axis: int) -> None:
         """Receive, from their owners, the face-flux rows of the finer blocks beside this rank's
