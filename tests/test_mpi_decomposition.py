@@ -152,15 +152,23 @@ def test_the_stress_step_s_inner_blocks_have_no_face_towards_another_rank_on_any
     assert sum(field_overlap_groups(mesh, cuts, rank)[0].size for rank in range(3)) > 0
 
 
-def corner_refined_mesh():
-    """2d-planar, 32^2 cells at the finest of three levels in blocks of 4^2 cells (2 x 2 root
-    blocks), refined twice at the corner block at the origin: 10 blocks."""
-    mesh = adaptive_mesh("2d-planar", [0.0, 0.0], [1.0, 1.0], [32, 32], [("outflow", "outflow")] * 2, 4, 3)
+def corner_refined_mesh(geometry: str = "2d-planar", boundary: tuple[str, str] = ("outflow", "outflow"),
+                        cells: int = 32):
+    """A unit box of ``cells`` cells per axis at the finest of three levels in blocks of 4 cells
+    per axis, refined twice at the corner block at the origin (2d-planar, 32^2: 2 x 2 root
+    blocks, 10 blocks)."""
+    ndim = 3 if geometry == "3d" else 2
+    mesh = adaptive_mesh(geometry, [0.0] * ndim, [1.0] * ndim, [cells] * ndim, [boundary] * ndim, 4, 3)
     for _ in range(2):
         refine = np.zeros(mesh.nblocks, dtype=bool)
-        refine[np.argmin(mesh.block_lo[:, :2].sum(axis=1))] = True
+        refine[np.argmin(mesh.block_lo[:, :ndim].sum(axis=1))] = True
         mesh, _ = remesh(mesh, HydroState.empty(mesh, 1), plan_leaves(mesh, refine, np.zeros_like(refine)))
     return mesh
+
+
+#: Adaptive meshes of the tests of the coarse/fine exchanges: (geometry, boundary, cells per axis).
+ADAPTIVE_MESHES = [("2d-planar", ("outflow", "outflow"), 32), ("2d-cylindrical", ("reflecting", "outflow"), 32),
+                   ("2d-planar", ("periodic", "periodic"), 64), ("3d", ("outflow", "outflow"), 32)]
 
 
 def test_on_an_adaptive_mesh_the_blocks_filled_from_other_ranks_are_swept_after_the_strips():
@@ -211,22 +219,26 @@ def interior(mesh, keys: np.ndarray, axes) -> np.ndarray:
     return np.all([(index[d] >= mesh.ghost[d]) & (index[d] < padded[d] - mesh.ghost[d]) for d in axes], axis=0)
 
 
-def test_on_an_adaptive_mesh_the_stress_step_s_inner_blocks_need_no_other_rank_s_cells():
-    """Two levels around one corner block, on 3 ranks: a rank's edge blocks for the stress step
+@pytest.mark.parametrize(("geometry", "boundary", "cells"), ADAPTIVE_MESHES)
+@pytest.mark.parametrize("nranks", [2, 3, 4])
+def test_on_an_adaptive_mesh_the_stress_step_s_inner_blocks_need_no_other_rank_s_cells(geometry, boundary, cells,
+                                                                                       nranks):
+    """Two levels around one corner block, on 2-4 ranks: a rank's edge blocks for the stress step
     are those with a neighbour of another rank across a face between blocks of one level and
     those that a row of a restriction or prolongation fills from another rank's block; some are
     inner.  The one message per peer of a derived field's fills (level_field_routes) holds only
     interior cells, and every cell that such a row reads: the restriction's fine cells, the
     coarse cell a fine ghost copies."""
-    mesh = corner_refined_mesh()
-    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    mesh = corner_refined_mesh(geometry, boundary, cells)
+    used = range(mesh.ndim)
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), nranks)
     owner = owners(cuts)
-    inner_blocks = 0
-    for rank in range(3):
+    inner_blocks = filled_from_ranks = 0
+    for rank in range(nranks):
         routes = level_field_routes(mesh, cuts, rank, exchange_routes(mesh, cuts, rank))
         received = received_keys(mesh, routes)
         remote_rows = set()
-        for axis in range(2):
+        for axis in used:
             plans = axis_plans(mesh, axis)
             for name, stencil in (("restrict", restriction_stencil(mesh)), ("prolong", np.zeros((1, 3), int))):
                 rows = plans[name][(owner[plans[name][:, 0]] == rank) & (owner[plans[name][:, 4]] != rank)]
@@ -234,19 +246,22 @@ def test_on_an_adaptive_mesh_the_stress_step_s_inner_blocks_need_no_other_rank_s
                 for row, keys in zip(rows, read_keys(mesh, rows, stencil)):
                     assert set(keys.tolist()) <= received[owner[row[4]]]
         for keys in received.values():
-            assert interior(mesh, sorted(keys), range(2)).all()
+            assert interior(mesh, sorted(keys), used).all()
         inner, edge = field_overlap_groups(mesh, cuts, rank)
         assert np.array_equal(np.sort(np.concatenate([inner, edge])), np.arange(cuts[rank], cuts[rank + 1]))
         for b in range(cuts[rank], cuts[rank + 1]):
             foreign = any(n >= 0 and owner[n] != rank and level == 0
-                          for n, level in zip(mesh.neighbor[b, :2].ravel(), mesh.neighbor_level[b, :2].ravel()))
+                          for n, level in zip(mesh.neighbor[b, used].ravel(), mesh.neighbor_level[b, used].ravel()))
             assert (b in edge) == (foreign or b in remote_rows)
         inner_blocks += inner.size
-    assert inner_blocks > 0
+        filled_from_ranks += len(remote_rows)
+    assert inner_blocks > 0 and filled_from_ranks > 0
 
 
-def test_on_an_adaptive_mesh_the_state_s_prolongation_reads_no_ghost_it_waits_for():
-    """Two levels around one corner block, on 3 ranks: before the state's fill along an axis a
+@pytest.mark.parametrize(("geometry", "boundary", "cells"), ADAPTIVE_MESHES)
+@pytest.mark.parametrize("nranks", [2, 3, 4])
+def test_on_an_adaptive_mesh_the_state_s_prolongation_reads_no_ghost_it_waits_for(geometry, boundary, cells, nranks):
+    """Two levels around one corner block, on 2-4 ranks: before the state's fill along an axis a
     rank receives (level_state_routes, one message per peer) every cell of other ranks' blocks
     that its prolongation reads but the coarse ghosts toward its finer blocks; those it
     restricts itself (BlockRanges.plans' restrict_borrowed) from its own fine cells, the rows
@@ -255,13 +270,13 @@ def test_on_an_adaptive_mesh_the_state_s_prolongation_reads_no_ghost_it_waits_fo
 
     from impactpipe.hydro.parallel.distributed import BlockRanges
 
-    mesh = corner_refined_mesh()
-    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), 3)
+    mesh = corner_refined_mesh(geometry, boundary, cells)
+    cuts = owned_ranges(np.ones(mesh.nblocks, dtype=np.int64), nranks)
     owner = owners(cuts)
     borrowed_rows = 0
-    for rank in range(3):
-        partition = BlockRanges(SimpleNamespace(rank=rank, size=3), mesh, cuts)
-        for axis in range(2):
+    for rank in range(nranks):
+        partition = BlockRanges(SimpleNamespace(rank=rank, size=nranks), mesh, cuts)
+        for axis in range(mesh.ndim):
             received = received_keys(mesh, level_state_routes(mesh, cuts, rank, exchange_routes(mesh, cuts, rank),
                                                                axis))
             plans = partition.plans(mesh, axis)
