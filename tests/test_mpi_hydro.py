@@ -34,7 +34,8 @@ CONFIGS = Path(__file__).resolve().parent / "configs" / "mpi"
 SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml",
           "impact-strength": CONFIGS / "impact_strength.yaml", "impact_tracers": CONFIGS / "impact_tracers.yaml",
           "impact_adaptive": CONFIGS / "impact_adaptive.yaml", "impact_3d": CONFIGS / "impact_3d.yaml",
-          "column_collapse": CONFIGS / "column_collapse.yaml", "sedov_adaptive": CONFIGS / "sedov_adaptive.yaml"}
+          "column_collapse": CONFIGS / "column_collapse.yaml", "sedov_adaptive": CONFIGS / "sedov_adaptive.yaml",
+          "advection_adaptive": CONFIGS / "advection_adaptive.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
 ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 #: Seconds a run may take: the first one in a fresh environment compiles every kernel it calls
