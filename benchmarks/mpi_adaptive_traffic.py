@@ -1,5 +1,5 @@
-"""What the ranks of an adaptive run exchange and wait for, per step, in the sweeps' ghost fills
-and in the stress step's.
+"""What the ranks of an adaptive run exchange and wait for, per step, in the regrids, in the
+sweeps' ghost fills and in the stress step's.
 
 Run under mpiexec, one numba thread per rank, with the kernels in numba's cache:
 
@@ -10,11 +10,13 @@ impact_adaptive.yaml: basalt with GEO strength and Grady-Kipp fracture, self-gra
 levels, a regrid every 2 steps) at ``--cells-per-radius`` and ``--block-cells``, without
 tracers, rank 0 building it and sharing it out.  After ``--warmup`` steps, ``--steps`` steps
 between two barriers.  Each rank splits its traffic counters
-(:class:`~impactpipe.hydro.parallel.exchange.Traffic`) and its wall time between two parts of
-a step, through the Simulation's ``observer``: ``sweeps`` (from after the regrid to the last
-reflux: the state's ghost fills, the sweeps, the refluxes) and ``stress`` (from there to the
-end of the momentum sources: the stress step's fills of its work arrays and its kernels,
-self-gravity).  Per rank and step, for each part: ``messages_sent``, ``exchanges``,
+(:class:`~impactpipe.hydro.parallel.exchange.Traffic`) and its wall time between three parts
+of a step, through the Simulation's ``observer``: ``regrid`` (from the end of the step before
+to after the regrid: the regrids, whose first ghost layer's fills exchange, and the step's
+end), ``sweeps`` (from there to the last reflux: the state's ghost fills, the sweeps, the
+refluxes) and ``stress`` (from there to the end of the momentum sources: the stress step's
+fills of its work arrays and its kernels, self-gravity).  Per rank and step, for each part:
+``messages_sent``, ``exchanges``,
 ``bytes_sent`` (B), ``exchange_s`` (s in the exchanges: packing, waiting, unpacking),
 ``wait_s`` (s of it in ``Waitall``) and ``wall_s``; and the step's ``wall_s``.  Rank 0 prints
 one JSON document.
@@ -39,19 +41,21 @@ COUNTERS = ("messages_sent", "exchanges", "bytes_sent", "exchange_seconds", "wai
 
 class PartClock:
     """An observer of a Simulation's step (``sim.observer``) that adds the traffic counters and
-    wall time of each part (``sweeps``, ``stress``) to ``totals``."""
+    wall time of each part (``regrid``, ``sweeps``, ``stress``) to ``totals``, from a mark set
+    when it is made."""
 
     def __init__(self, traffic, ndim: int):
         self.traffic = traffic
         self.ndim = ndim
-        self.totals = {part: dict.fromkeys(COUNTERS + ("wall_seconds",), 0.0) for part in ("sweeps", "stress")}
+        self.totals = {part: dict.fromkeys(COUNTERS + ("wall_seconds",), 0.0)
+                       for part in ("regrid", "sweeps", "stress")}
         self.reflux_seen = 0
-        self.mark = None
+        self.mark = self._now()
 
     def __call__(self, event: str, axis: int) -> None:
         if event == "regrid":
             self.reflux_seen = 0
-            self.mark = self._now()
+            self._close("regrid")
         elif event == "reflux":
             self.reflux_seen += 1
             if self.reflux_seen == self.ndim:
@@ -78,9 +82,9 @@ def measure(comm, cells_per_radius: int, block_cells: int, warmup: int, steps: i
     sim = distribute_from_root(sim, comm)
     for _ in range(warmup):
         sim.step()
+    comm.Barrier()
     clock = PartClock(sim.partition.traffic, sim.mesh.ndim)
     sim.observer = clock
-    comm.Barrier()
     started = time.perf_counter()
     for _ in range(steps):
         sim.step()

@@ -51,12 +51,15 @@ ENV = {**os.environ, "NUMBA_NUM_THREADS": "1"}
 #: rank, to OUT.rankR.json (argument 2): the blocks refined and coarsened meanwhile and, for
 #: each array, the values outside the rank's own rows and its halo (the cells of its ghost
 #: fills' strips, of the coarse/fine plans' exchanges on an adaptive mesh and, for the state,
-#: of the tracers' neighbourhood) that are not +0.0 (bit patterns), the halo's values that
+#: the other ranks' coarse ghosts that the rank restricts itself and the tracers'
+#: neighbourhood) that are not +0.0 (bit patterns), the halo's values that
 #: are not (what the exchanges wrote), and the pages written that hold none of the own rows'
 #: and halo's values.
 UNWRITTEN = """
 import json, mmap, sys
+from types import SimpleNamespace
 import numpy as np
+from impactpipe.hydro.parallel.decomposition import Strips
 from impactpipe.hydro.parallel.distributed import distribute_from_root
 from impactpipe.pipeline import derived, load_config, ranks
 from impactpipe.pipeline.adapters.hydro import add_tracers, build_simulation
@@ -88,12 +91,18 @@ if sys.argv[4:] == ["resume"]:
     sim.snapshot()
 part = sim.partition
 strips = [route for routes in part.routes for route in routes]
+restricted = []
 if sim.mesh.adaptive:
+    padded = sim.mesh.padded_shape
     for axis in range(sim.mesh.ndim):
         plans = part.plans(sim.mesh, axis)
-        strips += plans["restrict_strips"].routes + plans["prolong_strips"].routes
+        strips += plans["level_strips"].routes
+        # the other ranks' coarse ghosts that this rank restricts itself for its prolongation
+        rows = plans["restrict_borrowed"]
+        cells = (rows[:, 1] * padded[1] + rows[:, 2]) * padded[2] + rows[:, 3]
+        restricted.append(SimpleNamespace(receive=Strips(rows[:, 0], cells)))
 arrays = {**sim.state.arrays(), "work": sim.strength.work}
-halos = {name: strips + part.neighbourhood for name in sim.state.arrays()}
+halos = {name: strips + restricted + part.neighbourhood for name in sim.state.arrays()}
 halos["work"] = strips
 def stray_pages(array, kept):
     # pages of ``array`` that this process wrote (present and exclusively mapped, /proc/self/pagemap:

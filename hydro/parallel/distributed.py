@@ -49,10 +49,10 @@ from impactpipe.storage import atomic_path, atomic_path_together
 
 from .decomposition import (block_costs, block_routes, every_axis_routes, exchange_routes, field_overlap_groups,
                             level_field_routes, level_state_routes, neighbourhood_routes, overlap_groups,
-                            owned_ranges, owners, plan_routes, prolongation_stencil, restriction_stencil)
-from .exchange import (CARRY_TAG, FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, PROLONG_TAG, RESTRICT_TAG, STRIP_TAG, PendingStrips,
-                       StripExchange, Traffic, broadcast_arrays, finish_strips, gather_item_rows, gather_owned_blocks,
-                       hand_over_rows, move_rows, share_owned_blocks)
+                            owned_ranges, owners)
+from .exchange import (CARRY_TAG, FIELD_TAG, FLUX_TAG, NEIGHBOURHOOD_TAG, STRIP_TAG, PendingStrips, StripExchange,
+                       Traffic, broadcast_arrays, finish_strips, gather_item_rows, gather_owned_blocks, hand_over_rows,
+                       move_rows, share_owned_blocks)
 from .owned_memory import from_outline, lazy_zeros, outline, placed_rows, receive_halos, receive_owned_blocks
 
 log = logging.getLogger(__name__)
@@ -484,11 +484,10 @@ class BlockRanges(WholeMesh):
         fill applies the first before its strips arrive).  ``restrict_borrowed``
         (with its weights): rows of other ranks, the coarse ghosts of their blocks toward this
         rank's finer blocks that this rank's prolongation reads (:meth:`_borrowed_restriction`).
-        ``level_strips``: before the state's fill, the strips with the fine cells of the
-        restriction and the coarse cells of the prolongation, in one message per peer
-        (:func:`~.decomposition.level_state_routes`); ``restrict_strips`` and ``prolong_strips``
-        (the coarse cell and its neighbours along every used axis, ghosts included): before and
-        after the restriction of the first ghost layer (:meth:`fill_first_ghost_layer`)."""
+        ``level_strips``: before the state's fill (and the fill of its first ghost layer,
+        :meth:`fill_first_ghost_layer`), the strips with the fine cells of the restriction and
+        the coarse cells of the prolongation, in one message per peer
+        (:func:`~.decomposition.level_state_routes`)."""
         if axis not in self._plans:
             whole = axis_plans(mesh, axis)
             owner = owners(self.cuts)
@@ -506,12 +505,6 @@ class BlockRanges(WholeMesh):
                         mine[f"{name}_{part}_weight"] = np.ascontiguousarray(mine[weight][rows])
             mine["restrict_borrowed"], mine["restrict_borrowed_weight"] = self._borrowed_restriction(
                 mesh, axis, whole, mine["prolong_away"])
-            mine["restrict_strips"] = StripExchange(
-                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["restrict"], restriction_stencil(mesh)),
-                RESTRICT_TAG + axis)
-            mine["prolong_strips"] = StripExchange(
-                self.comm, plan_routes(mesh, self.cuts, self.rank, whole["prolong"], prolongation_stencil(mesh)),
-                PROLONG_TAG + axis)
             mine["level_strips"] = StripExchange(
                 self.comm, level_state_routes(mesh, self.cuts, self.rank, self.routes, axis), STRIP_TAG + axis)
             mine["reflux_pairs"] = (whole["reflux"][:, 0], whole["reflux"][:, 5])
@@ -562,28 +555,31 @@ class BlockRanges(WholeMesh):
     def fill_first_ghost_layer(self, state, mesh, axis: int) -> None:
         """The first ghost layer along ``axis`` of the owned blocks, the values
         :func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer` gives it: the strips along
-        ``axis`` and (adaptive mesh) the fine cells of the restriction received from their
-        owners, the same-level layer, then this rank's rows of the first-layer restriction, the
-        coarse cells the prolongation reads received, this rank's rows of the first-layer
-        prolongation."""
+        ``axis`` received from their owners (on an adaptive mesh in one message per peer with
+        the fine cells of the restriction and the coarse cells of the prolongation,
+        :meth:`_state_strips`), the same-level layer, then this rank's rows of the first-layer
+        restriction and those of other ranks that its prolongation reads (``restrict_borrowed``
+        of :meth:`_first_layer_plans`), and its rows of the first-layer prolongation.  The
+        prolongation along ``axis`` reads no first-layer ghost that this fill writes but those
+        restrictions: the ghosts along the other axes come from their fills before."""
         g = int(mesh.ghost[axis])
         if g == 0:
             return
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        self.strips[axis].exchange(fields, self.traffic)
-        if mesh.adaptive:
-            self.plans(mesh, axis)["restrict_strips"].exchange(fields, self.traffic)
+        self._state_strips(mesh, axis).exchange(fields, self.traffic)
         fill_state_ghost_layer(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
         if not mesh.adaptive:
             return
         first = self._first_layer_plans(mesh, axis)
         restrict_state_ghosts(fields, first["restrict"], first["restrict_weight"])
-        self.plans(mesh, axis)["prolong_strips"].exchange(fields, self.traffic)
+        restrict_state_ghosts(fields, first["restrict_borrowed"], first["restrict_borrowed_weight"])
         prolong_state_ghosts(fields, first["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
 
     def _first_layer_plans(self, mesh, axis: int) -> dict:
         """This rank's rows (destination blocks it owns) of the first-layer plans of ``axis``
-        (:func:`~impactpipe.hydro.amr.plans.first_layer_plans`), kept."""
+        (:func:`~impactpipe.hydro.amr.plans.first_layer_plans`), and ``restrict_borrowed`` (with
+        its weights): the rows that set the other ranks' coarse ghosts which this rank's
+        first-layer prolongation reads (:meth:`_borrowed_restriction`), kept."""
         key = ("first_layer", axis)
         if key not in self._plans:
             whole = first_layer_plans(mesh, axis)
@@ -594,6 +590,9 @@ class BlockRanges(WholeMesh):
                 mine[name] = np.ascontiguousarray(whole[name][keep])
                 if weight is not None:
                     mine[weight] = np.ascontiguousarray(whole[weight][keep])
+            away = mine["prolong"][owner[mine["prolong"][:, 4]] != self.rank]
+            mine["restrict_borrowed"], mine["restrict_borrowed_weight"] = self._borrowed_restriction(
+                mesh, axis, whole, away)
             self._plans[key] = mine
         return self._plans[key]
 

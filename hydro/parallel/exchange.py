@@ -22,14 +22,12 @@ from numba import njit
 
 from .decomposition import Route, Strips, run_bounds
 
-#: Message tag of the strips before a ghost fill along axis d: STRIP_TAG + d.
+#: Message tag of the strips before a ghost fill along axis d: STRIP_TAG + d (on an adaptive
+#: mesh with the cells that the restriction and the prolongation of coarse/fine ghosts read).
 STRIP_TAG = 100
 #: Message tag of the cells around the blocks before the tracers sample the state.
 NEIGHBOURHOOD_TAG = 200
-#: Message tags before the restriction and the prolongation of coarse/fine ghosts along axis
-#: d (+ d), and of the face fluxes before a reflux along axis d (+ d).
-RESTRICT_TAG = 300
-PROLONG_TAG = 400
+#: Message tag of the face fluxes before a reflux along axis d: FLUX_TAG + d.
 FLUX_TAG = 500
 #: Message tag of the strips along every axis before a derived field's ghost fills along every
 #: axis (the stress step's work arrays), one message per peer.
