@@ -262,7 +262,8 @@ def fill_field_ghosts(field: np.ndarray, mesh, axis: int, flip_component: int = 
     ``wanted[NB]``: on a uniform mesh, fill only the same-level ghosts of the blocks where it
     is not 0 (without sign flips; :func:`fill_ghosts_where`), and there only the ``layers``
     ghost layers next to the interior (all by default); an adaptive mesh fills every block's
-    ghosts, every layer, since its prolongation reads the coarse blocks' ghosts.
+    ghosts, every layer (its restriction reads interior fine cells and its prolongation copies
+    the interior coarse cell).
     """
     g = int(mesh.ghost[axis])
     if g == 0:
