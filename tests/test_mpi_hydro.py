@@ -34,6 +34,7 @@ CONFIGS = Path(__file__).resolve().parent / "configs" / "mpi"
 SCENES = {"advection": CONFIGS / "advection_2d.yaml", "impact": CONFIGS / "impact_uniform.yaml",
           "impact-strength": CONFIGS / "impact_strength.yaml", "impact_tracers": CONFIGS / "impact_tracers.yaml",
           "impact_adaptive": CONFIGS / "impact_adaptive.yaml", "impact_3d": CONFIGS / "impact_3d.yaml",
+          "impact_3d_uniform": CONFIGS / "impact_3d_uniform.yaml",
           "column_collapse": CONFIGS / "column_collapse.yaml", "sedov_adaptive": CONFIGS / "sedov_adaptive.yaml",
           "advection_adaptive": CONFIGS / "advection_adaptive.yaml"}
 #: One numba thread per rank: the ranks already oversubscribe the test machine's cores.
