@@ -632,16 +632,25 @@ class Simulation:
         Fills the state's first ghost layer along every axis (what the indicators and the
         regrid read, :func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`, through the
         partition's exchanges on several ranks; the step fills every layer along an axis before
-        its sweep) and raises ``peak_pressure`` (Pa) to the largest |p| on the mesh
+        its sweep; the last axis's strips travel while the pressure of the blocks whose layer is
+        complete is evaluated) and raises ``peak_pressure`` (Pa) to the largest |p| on the mesh
         (:func:`impactpipe.hydro.amr.regrid.flag_blocks`; on several ranks each reads its own
         blocks, and every rank gets the same flags).  Collective on several ranks.
         """
-        for axis in range(self.mesh.ndim):
+        last = self.mesh.ndim - 1
+        for axis in range(last):
             self.partition.fill_first_ghost_layer(self.state, self.mesh, axis)
-        refine, coarsen, self.peak_pressure = flag_blocks(self.mesh, self.state, self.eos, self.shear_modulus,
-                                                          self.tensile_strength, self.refinement, self.peak_pressure,
-                                                          self.grady_kipp, self.porosity, self.regrid_reach(),
-                                                          None if self.partition.whole else self.partition)
+        fill = self.partition.start_first_ghost_layer(self.state, self.mesh, last)
+
+        def finish_fill() -> None:
+            self.partition.finish_first_ghost_layer(fill, self.state, self.mesh, last)
+
+        if not fill.late.size:
+            finish_fill()
+        refine, coarsen, self.peak_pressure = flag_blocks(
+            self.mesh, self.state, self.eos, self.shear_modulus, self.tensile_strength, self.refinement,
+            self.peak_pressure, self.grady_kipp, self.porosity, self.regrid_reach(),
+            None if self.partition.whole else self.partition, fill.late, finish_fill if fill.late.size else None)
         return refine, coarsen
 
     def _regrid(self) -> bool:

@@ -19,6 +19,7 @@ Every ``interval`` steps :func:`regrid` evaluates the refinement indicators
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,7 +132,8 @@ class BlockWants:
 def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
                 rule: RefinementRule, peak_pressure: float = 0.0,
                 grady_kipp: np.ndarray | None = None,
-                porosity: np.ndarray | None = None, reach: int | None = None, partition=None) -> BlockWants:
+                porosity: np.ndarray | None = None, reach: int | None = None, partition=None,
+                late: np.ndarray | None = None, finish_fill: Callable[[], None] | None = None) -> BlockWants:
     """The levels the refinement rule asks of each block (:class:`BlockWants`; arguments as :func:`flag_blocks`).
 
     With ``buffer: reach`` a jump refines the neighbours across the faces, edges and corners
@@ -146,15 +148,33 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     (one process): each process computes the pressure and the indicators of the blocks it
     advances (``partition.blocks``) only, the largest |p| is one reduction (MAX) and the
     indicator rows reach every process (``partition.share_rows``), so every process goes on
-    from the same (NB, ...) indicators, the single process's bit for bit."""
+    from the same (NB, ...) indicators, the single process's bit for bit.
+
+    ``finish_fill``: where the first ghost layer of the blocks ``late`` (int64 block numbers)
+    is still being filled (the strips of other processes travelling,
+    :meth:`~impactpipe.hydro.parallel.distributed.BlockRanges.start_first_ghost_layer`), the call
+    that completes it: the pressure of the other blocks is evaluated first, then, after it, that
+    of the ``late`` blocks (each cell's pressure is its own state's, so the order changes no bit)."""
     lo, hi = (0, mesh.nblocks) if partition is None else partition.blocks.indices(mesh.nblocks)[:2]
     zeros = np.zeros if partition is None else partition.zeros
+    fields = tuple(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
+                                                      state.energy))
     void = np.ones(mesh.nblocks, dtype=np.uint8)  # the blocks of other processes are skipped as void
-    void_blocks(*(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
-                                                     state.energy)), lo, hi, void)
+    void_blocks(*fields, lo, hi, void)
     pressure = zeros((mesh.nblocks,) + mesh.padded_shape)
+    evaluate = void
+    if finish_fill is not None:
+        evaluate = void.copy()
+        evaluate[late] = 1
     mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,
-                     shear_modulus, tensile_strength, pressure, grady_kipp, porosity, void)
+                     shear_modulus, tensile_strength, pressure, grady_kipp, porosity, evaluate)
+    if finish_fill is not None:
+        finish_fill()
+        void_blocks(*fields, lo, hi, void)  # a late block's ghosts may hold material now, or none
+        evaluate = np.ones_like(void)
+        evaluate[late] = void[late]
+        mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,
+                         shear_modulus, tensile_strength, pressure, grady_kipp, porosity, evaluate)
     peak_pressure = max(peak_pressure, float(np.abs(mesh.interior(pressure)[lo:hi]).max(initial=0.0)))
     if partition is not None:
         peak_pressure = partition.largest(peak_pressure)
@@ -204,7 +224,8 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
                 rule: RefinementRule, peak_pressure: float = 0.0,
                 grady_kipp: np.ndarray | None = None,
                 porosity: np.ndarray | None = None, reach: int | None = None,
-                partition=None) -> tuple[np.ndarray, np.ndarray, float]:
+                partition=None, late: np.ndarray | None = None,
+                finish_fill: Callable[[], None] | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """(refine, coarsen) flags per block and the largest |p| seen so far (Pa).
 
     The state's first ghost layer along every used axis must be filled (the indicators look one
@@ -217,11 +238,11 @@ def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     The pressure and indicators of the void blocks (ghosts included,
     :func:`~impactpipe.hydro.mesh.last_good.void_blocks`) are not computed: they are 0.
     ``reach``: the cells a wave crosses between two regrids plus one, for ``buffer: reach``
-    (:func:`block_wants`).  ``partition``: as there (each process reads its own blocks; every
-    process returns the same flags).
+    (:func:`block_wants`).  ``partition``, ``late``, ``finish_fill``: as there (each process
+    reads its own blocks; every process returns the same flags).
     """
     wants = block_wants(mesh, state, eos, shear_modulus, tensile_strength, rule, peak_pressure, grady_kipp,
-                        porosity, reach, partition)
+                        porosity, reach, partition, late, finish_fill)
     level = mesh.block_level
     refine = ((wants.want > level) | (wants.boxes > level)) & (level < mesh.max_level)
     coarsen = (wants.keep < level) & (wants.boxes < level) & (level > 0)

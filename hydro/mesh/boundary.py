@@ -110,6 +110,26 @@ def fill_state_ghost_layer(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
 
 
 @njit(cache=True, parallel=True)
+def fill_state_ghost_layer_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost,
+                                      blocks, lo, hi):
+    """For the blocks listed in ``blocks`` (int64), the first ghost layer of the slabs along
+    ``axis`` whose same-level neighbour lies outside ``lo .. hi - 1`` (another MPI rank's block,
+    its strips just received), every conserved field: what :func:`fill_state_ghost_layer`
+    writes there.  The other slabs and layers are left as they are."""
+    for e in prange(blocks.shape[0]):
+        b = blocks[e]
+        for side in range(2):
+            nbr = neighbor[b, axis, side]
+            if nbr >= 0 and neighbor_level[b, axis, side] == 0 and not (lo <= nbr < hi):
+                _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(arho, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(mom, b, side, nbr, axis, ghost, axis, 1)
+                _fill_block_side(energy, b, side, nbr, axis, ghost, -1, 1)
+                _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, 1)
+
+
+@njit(cache=True, parallel=True)
 def fill_state_ghosts_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost,
                                  blocks, lo, hi, q_layers):
     """For the blocks listed in ``blocks`` (int64), the ghost slabs along ``axis`` whose same-level

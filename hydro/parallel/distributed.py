@@ -42,7 +42,8 @@ from impactpipe.hydro.amr.transfer import (prolong_field_ghosts, prolong_state_g
                                            restrict_state_ghosts)
 from impactpipe.hydro.mesh.boundary import (
     NO_RECORD, every_layer, fill_field_ghosts, fill_first_ghost_layer, fill_ghosts, fill_ghosts_from_ranks_where,
-    fill_ghosts_where, fill_state_ghost_layer, fill_state_ghost_slabs, fill_state_ghosts, fill_state_ghosts_from_ranks,
+    fill_ghosts_where, fill_state_ghost_layer, fill_state_ghost_layer_from_ranks, fill_state_ghost_slabs,
+    fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.storage import atomic_path, atomic_path_together
@@ -82,6 +83,17 @@ class FieldFill:
     runs: tuple[slice, ...]
     wanted: np.ndarray
     layers: int | None
+    pending: PendingStrips | None = None
+
+
+@dataclass
+class FirstLayerFill:
+    """The fill of the state's first ghost layer along one axis, in two parts
+    (:meth:`WholeMesh.start_first_ghost_layer`): ``late`` (int64 block numbers), the blocks
+    whose layer waits for :meth:`WholeMesh.finish_first_ghost_layer`; ``pending``: the strips
+    still travelling, or None (the fill is complete)."""
+
+    late: np.ndarray
     pending: PendingStrips | None = None
 
 
@@ -191,6 +203,16 @@ class WholeMesh:
         """The first ghost layer along ``axis`` of every block
         (:func:`~impactpipe.hydro.mesh.boundary.fill_first_ghost_layer`: what the regrid reads)."""
         fill_first_ghost_layer(state, mesh, axis)
+
+    def start_first_ghost_layer(self, state, mesh, axis: int) -> FirstLayerFill:
+        """:meth:`fill_first_ghost_layer` as far as this process can go without another's strips;
+        the blocks ``late`` of the fill it returns wait for :meth:`finish_first_ghost_layer`.
+        One process fills the whole layer here."""
+        self.fill_first_ghost_layer(state, mesh, axis)
+        return FirstLayerFill(np.zeros(0, dtype=np.int64))
+
+    def finish_first_ghost_layer(self, fill: FirstLayerFill, state, mesh, axis: int) -> None:
+        """Complete the fill :meth:`start_first_ghost_layer` began (nothing left for one process)."""
 
     def regrid(self, sim, plan: dict, new_mesh=None) -> tuple:
         """(new mesh, new state, new partition) of ``sim`` after the regrid ``plan``
@@ -562,18 +584,55 @@ class BlockRanges(WholeMesh):
         of :meth:`_first_layer_plans`), and its rows of the first-layer prolongation.  The
         prolongation along ``axis`` reads no first-layer ghost that this fill writes but those
         restrictions: the ghosts along the other axes come from their fills before."""
+        self.finish_first_ghost_layer(self.start_first_ghost_layer(state, mesh, axis), state, mesh, axis)
+
+    def start_first_ghost_layer(self, state, mesh, axis: int) -> FirstLayerFill:
+        """Post the strips of :meth:`fill_first_ghost_layer` and fill the owned blocks' same-level
+        layer from what this rank holds, then return while the strips travel: the blocks of
+        the fill's ``late`` (:meth:`_first_layer_late`: beside another rank's block along
+        ``axis``, or written by a coarse/fine row) wait for :meth:`finish_first_ghost_layer`,
+        the others' layer along ``axis`` is complete."""
         g = int(mesh.ghost[axis])
         if g == 0:
-            return
+            return FirstLayerFill(np.zeros(0, dtype=np.int64))
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
-        self._state_strips(mesh, axis).exchange(fields, self.traffic)
+        pending = self._state_strips(mesh, axis).post(fields, self.traffic)
         fill_state_ghost_layer(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi)
+        return FirstLayerFill(self._first_layer_late(mesh, axis), pending)
+
+    def finish_first_ghost_layer(self, fill: FirstLayerFill, state, mesh, axis: int) -> None:
+        """Wait for the strips of :meth:`start_first_ghost_layer`, fill the late blocks' slabs of
+        the same-level layer beside other ranks' blocks from them
+        (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghost_layer_from_ranks`), then the
+        coarse/fine rows of :meth:`fill_first_ghost_layer`."""
+        if fill.pending is None:
+            return
+        finish_strips(fill.pending)
+        g = int(mesh.ghost[axis])
+        fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
+        fill_state_ghost_layer_from_ranks(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, fill.late, self.lo,
+                                          self.hi)
         if not mesh.adaptive:
             return
         first = self._first_layer_plans(mesh, axis)
         restrict_state_ghosts(fields, first["restrict"], first["restrict_weight"])
         restrict_state_ghosts(fields, first["restrict_borrowed"], first["restrict_borrowed_weight"])
         prolong_state_ghosts(fields, first["prolong"], mesh.block_lo, mesh.block_dx, mesh.geometry_code, mesh.ndim)
+
+    def _first_layer_late(self, mesh, axis: int) -> np.ndarray:
+        """The owned blocks (int64 block numbers) whose first ghost layer along ``axis`` a fill
+        completes only with other ranks' strips: beside another rank's block along ``axis``, or,
+        on an adaptive mesh, the destination of a row of this rank's first-layer plans (kept)."""
+        key = ("first_layer_late", axis)
+        if key not in self._plans:
+            neighbours = mesh.neighbor[self.lo:self.hi, axis, :]
+            late = ((neighbours >= 0) & ((neighbours < self.lo) | (neighbours >= self.hi))).any(axis=1)
+            if mesh.adaptive:
+                first = self._first_layer_plans(mesh, axis)
+                late[first["restrict"][:, 0] - self.lo] = True
+                late[first["prolong"][:, 0] - self.lo] = True
+            self._plans[key] = np.flatnonzero(late).astype(np.int64) + self.lo
+        return self._plans[key]
 
     def _first_layer_plans(self, mesh, axis: int) -> dict:
         """This rank's rows (destination blocks it owns) of the first-layer plans of ``axis``
