@@ -101,12 +101,7 @@ def fill_state_ghost_layer(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
-                _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(arho, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(mom, b, side, nbr, axis, ghost, axis, 1)
-                _fill_block_side(energy, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, 1)
+                _fill_state_layer_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
 
 
 @njit(cache=True, parallel=True)
@@ -121,12 +116,7 @@ def fill_state_ghost_layer_from_ranks(alpha, arho, arhoe, mom, energy, arhoq, ne
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr >= 0 and neighbor_level[b, axis, side] == 0 and not (lo <= nbr < hi):
-                _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(arho, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(mom, b, side, nbr, axis, ghost, axis, 1)
-                _fill_block_side(energy, b, side, nbr, axis, ghost, -1, 1)
-                _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, 1)
+                _fill_state_layer_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost)
 
 
 @njit(cache=True, parallel=True)
@@ -186,6 +176,18 @@ def _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis,
         for c in range(arhoq.shape[1]):
             if j < q_layers[c]:
                 _copy_slab(arhoq, b, blk, c, axis, dst, src, 1.0, ghost)
+
+
+@njit(cache=True, inline="always")
+def _fill_state_layer_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost):
+    """The first ghost layer of block b's slab on ``side`` along ``axis``, every conserved field
+    (the normal momentum's sign flipped at a reflecting face)."""
+    _fill_block_side(alpha, b, side, nbr, axis, ghost, -1, 1)
+    _fill_block_side(arho, b, side, nbr, axis, ghost, -1, 1)
+    _fill_block_side(arhoe, b, side, nbr, axis, ghost, -1, 1)
+    _fill_block_side(mom, b, side, nbr, axis, ghost, axis, 1)
+    _fill_block_side(energy, b, side, nbr, axis, ghost, -1, 1)
+    _fill_block_side(arhoq, b, side, nbr, axis, ghost, -1, 1)
 
 
 @njit(cache=True)
