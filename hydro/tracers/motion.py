@@ -407,7 +407,9 @@ class Tracers:
         self._log_position = np.ascontiguousarray(positions[order])
         counts = np.bincount(samples, minlength=self._log_start.shape[0] - 1)
         self._log_start[:] = np.concatenate([[0], np.cumsum(counts)])
+
     def _count_missing(self) -> None:
+        """Count the tracers on the mesh without a peak record (they record at the next step's start)."""
         self._missing = int(np.count_nonzero(np.isnan(self.peak_pressure_time) & ~self.exited))
 
     def _place(self, partition) -> None:
@@ -442,6 +444,7 @@ class Tracers:
         if held is not None:
             self._set_rows(held)
         return held is not None
+
     def held_by_every_process(self) -> None:
         """Say that every process now holds every tracer (after a broadcast of one process's
         tracers): at the next step each keeps those in its own blocks."""
