@@ -953,6 +953,8 @@ class Simulation:
         writes them and drops them; the other ranks' arrays are unchanged.  Where the ranks
         write together (:attr:`~impactpipe.hydro.parallel.distributed.WholeMesh.writes_together`)
         each writes its own blocks' rows into the one file instead, and the attributes are rank 0's.
+        The tracers, each held by the rank owning its block, are gathered in their order on the
+        ranks that write (:meth:`~impactpipe.hydro.tracers.motion.Tracers.assembled`).
         """
         part = self.partition
         attrs = self._checkpoint_attributes()
