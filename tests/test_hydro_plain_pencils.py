@@ -16,7 +16,7 @@ from impactpipe.hydro.mesh.boundary import fill_state_ghosts
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.scheme.plain_pencils import EMPTY_PENCIL, plain_material
-from impactpipe.pipeline.presets import resolve_strength
+from impactpipe.pipeline.presets import resolve_damage, resolve_strength
 
 GAS = {"model": "ideal_gas", "gamma": 1.4, "cv": 718.0}
 FIELDS = ("alpha", "arho", "arhoe", "arhoq", "momentum", "energy")
@@ -57,6 +57,19 @@ def strong_impact():
     """Basalt on basalt at 2 km/s in r-z with GEO strength: void, mixed cells, AMR, stress scalars."""
     materials = {"basalt": preset_material("basalt")}
     materials["basalt"]["strength"] = resolve_strength("geo", "strong", {})
+    return PROBLEMS["impact"].setup(
+        {"target": {"material": "basalt", "radius": 1000.0},
+         "projectile": {"material": "basalt", "radius": 100.0, "velocity": 2000.0},
+         "cells_per_projectile_radius": 4, "end_time": 1.0}, materials, block_cells=8)
+
+
+def fracture_impact():
+    """The same impact with Grady-Kipp fracture: flaws in every cell of the bodies, so the pencils
+    inside the target at rest carry scalars that do not move, and those the shock reaches carry
+    them with the mass."""
+    materials = {"basalt": preset_material("basalt")}
+    materials["basalt"]["strength"] = resolve_strength("geo", "strong", {})
+    materials["basalt"]["strength"]["damage"] = resolve_damage({"model": "grady_kipp", "preset": "basalt"})
     return PROBLEMS["impact"].setup(
         {"target": {"material": "basalt", "radius": 1000.0},
          "projectile": {"material": "basalt", "radius": 100.0, "velocity": 2000.0},
@@ -119,9 +132,10 @@ def test_pencils_are_classified_plain_empty_or_general():
 
 
 @pytest.mark.parametrize("build, steps", [(smooth_gas_box, 30), (sod_tube, 150), (iron_on_basalt, 150),
-                                          (copper_on_aluminium, 150), (heavy_sphere_3d, 10), (strong_impact, 40)],
+                                          (copper_on_aluminium, 150), (heavy_sphere_3d, 10), (strong_impact, 40),
+                                          (fracture_impact, 40)],
                          ids=["smooth-gas-box", "sod", "iron-on-basalt", "copper-on-aluminium", "heavy-sphere-3d",
-                              "impact-with-strength"])
+                              "impact-with-strength", "impact-with-fracture"])
 def test_plain_path_gives_the_general_paths_answer_bit_for_bit(build, steps):
     runs = []
     for plain in (True, False):

@@ -159,7 +159,9 @@ from impactpipe.hydro.scheme.pencil_layout import (
 from impactpipe.hydro.scheme.plain_pencils import (
     EMPTY_PENCIL,
     face_flux_plain,
+    moves_mass,
     plain_material,
+    plain_scalar_fluxes,
     scalars_carried,
     reconstruct_plain,
     update_plain,
@@ -230,7 +232,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     qp_row = q0 + Q_MAT + 3 * nmat
     f_row = qp_row + Q_MAT + 3 * nmat
     nq = arhoq.shape[1] // nmat
-    wq_row = f_row + F_MAT + 3 * nmat
+    donor_row = f_row + F_MAT + 3 * nmat
+    wq_row = donor_row + 1
     fq_row = wq_row + nmat * nq
     radial = geometry == CYLINDRICAL and axis == 0
     axial = geometry == CYLINDRICAL and axis == 1
@@ -310,9 +313,6 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         for r in range(f_row, fq_row + nmat * nq):
                             sc[f, r] = 0.0
                 elif m >= 0:
-                    # material m's scalars move only where some donor cell holds one
-                    carried = nq > 0 and not quiet and scalars_carried(arhoq_f, iq, stride, cs, nq, g - 1,
-                                                                       g + n + 1)
                     # a strengthless material's signal speed is its bulk sound speed: its gather skips
                     # the shear term (which the compiler would evaluate, division included, either way)
                     shear_m = shear_modulus[m]
@@ -321,20 +321,27 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
-                                          shear_m, True, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                                          porosity, bulk_predictor, carried)
+                                          shear_m, True, tensile_strength, nq, floors, b, grady_kipp,
+                                          porosity, bulk_predictor)
                     else:
                         for i in range(ncell):
                             _gather_plain(sc, i, m, rho0_m, i >= g and i < g + n, alpha_f, arho_f, arhoe_f, mom_f,
                                           arhoq_f, ia + i * stride, imn + i * stride, im1 + i * stride,
                                           im2 + i * stride, iq + i * stride, cs, eos_kind[m], eos_params[m], eos_table,
-                                          shear_m, False, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                                          porosity, False, carried)
+                                          shear_m, False, tensile_strength, nq, floors, b, grady_kipp,
+                                          porosity, False)
                     for i in range(1, ncell - 1):
                         reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, i >= g and i < g + n)
                     for f in range(g, g + n + 1):
                         face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row,
-                                        carried, f == g or f == g + n)
+                                        f == g or f == g + n, donor_row)
+                    # material m's scalars move only where a face moves mass and some donor cell holds one
+                    mass_row = f_row + F_MAT + 3 * m + 1
+                    carried = (nq > 0 and not quiet and moves_mass(sc, mass_row, g, g + n + 1)
+                               and scalars_carried(arhoq_f, iq, stride, cs, nq, g - 1, g + n + 1))
+                    if carried:
+                        plain_scalar_fluxes(sc, m, nmat, nq, g, g + n + 1, arho_f, arhoq_f, ia, iq, stride, cs,
+                                            wq_row, fq_row, mass_row, donor_row)
                 else:
                     stays_clear = False
                     # every material's scalars move only where some donor cell holds one
@@ -426,15 +433,13 @@ def _holds_sheared(sc, i, shear_modulus):
 
 @njit(cache=True, inline="always")
 def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, arhoq_f, ia, imn, im1, im2, iq, cs,
-                  kind, params, eos_table, shear, sheared, tensile_strength, nq, wq_row, floors, b, grady_kipp,
-                  porosity, bulk_predictor, carried):
+                  kind, params, eos_table, shear, sheared, tensile_strength, nq, floors, b, grady_kipp,
+                  porosity, bulk_predictor):
     """Step 1 for cell i of a plain pencil (material m alone, full, ``rho0_m`` its reference
     density, kg/m^3): the W rows of :func:`_gather_cell`, bit for bit, with material m's EOS
     (``kind``, ``params``) called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`)
     and the absent materials' rows written without an EOS call (alpha_k, zeros, Y_T,k: an
-    absent material holds no damage).  Only material m's transported scalars are gathered:
-    the plain fluxes carry no other material's, so reading those columns would be memory
-    traffic for nothing.
+    absent material holds no damage).
 
     The fields come flattened (:func:`impactpipe.hydro.scheme.pencil_layout.pencil_offset`), with
     the cell's flat indices: ``ia`` in material m's column of alpha, arho and arhoe (material
@@ -445,10 +450,10 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     material (``grady_kipp[m]``) bears (1 - D) of its EOS tension, as in
     :func:`impactpipe.hydro.scheme.mixture.material_state`; a porous material (``porosity[m]``
     alpha0 > 1, its distension the second-to-last transported scalar) has the porous pressure,
-    sound speed and tension limit Y_T (1 - D) / alpha of that function too.  Without ``carried``
-    (material m's scalars +0.0 in the pencil's donor cells,
-    :func:`impactpipe.hydro.scheme.plain_pencils.scalars_carried`) no face reads its specific
-    scalars, and they are not gathered (the damage and distension still set the pressure).
+    sound speed and tension limit Y_T (1 - D) / alpha of that function too.  The specific
+    transported scalars are not gathered here: only the faces read them, and only where the
+    pencil moves mass and carries some (:func:`impactpipe.hydro.scheme.plain_pencils.plain_scalar_fluxes`,
+    material m's alone); the damage and distension still set the pressure.
     An undamaged cell (damage amount +-0) keeps Y_T and its tension without the division of
     :func:`impactpipe.hydro.scheme.mixture.tension_left`, whose factor would be exactly 1.0.
     """
@@ -492,10 +497,6 @@ def _gather_plain(sc, i, m, rho0_m, interior, alpha_f, arho_f, arhoe_f, mom_f, a
     sc[i, r + 3] = pk
     sc[i, r + 4] = rk * c2b
     sc[i, r + 5] = ytk
-    if carried:
-        inv_ar = 1.0 / ar if ar > 0.0 else 0.0
-        for j in range(nq):
-            sc[i, wq_row + nq * m + j] = arhoq_f[iq + j * cs] * inv_ar
     for k in range(tensile_strength.shape[0]):
         if k != m:
             r = W_MAT + W_STRIDE * k

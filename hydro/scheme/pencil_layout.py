@@ -110,12 +110,13 @@ W_STRIDE = MATERIAL_ROWS    # the per-material rows of hydro.mixture.mixture_sta
 Q_UN, Q_UT1, Q_UT2, Q_P = range(4)
 Q_MAT = 4           # + 3 k: alpha_k, rho_k, e_k
 F_MN, F_MT1, F_MT2, F_E, F_S = range(5)
-F_MAT = 5           # + 3 k: volume, mass, internal energy
+F_MAT = 5           # + 3 k: volume, mass, internal energy; then one row: the face's donor cell (plain pencils)
 
 
 def scratch_rows(nmat: int, nq: int = 0) -> int:
-    """Number of scratch rows per thread for ``nmat`` materials with ``nq`` transported scalars each."""
-    return (W_MAT + W_STRIDE * nmat) + 2 * (Q_MAT + 3 * nmat) + (F_MAT + 3 * nmat) + 2 * nmat * nq
+    """Number of scratch rows per thread for ``nmat`` materials with ``nq`` transported scalars each:
+    the W, FM, FP and F rows, a face's donor cell, then the specific scalars and their fluxes."""
+    return (W_MAT + W_STRIDE * nmat) + 2 * (Q_MAT + 3 * nmat) + (F_MAT + 3 * nmat) + 1 + 2 * nmat * nq
 
 
 def allocate_scratch(nthreads: int, nmat: int, pencil_cells: int, nq: int = 0) -> np.ndarray:

@@ -144,18 +144,19 @@ def reconstruct_plain(sc, m, i, half, qm_row, qp_row, floors, b, interior):
 
 
 @njit(cache=True, inline="always")
-def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, carried, edge):
+def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row, fq_row, edge, donor_row):
     """Step 3 for face f (between cells f-1 and f) of a plain pencil: HLLC fluxes into column f.
 
     No void on either side; material m's volume flux is alpha_face s with the ultrabee face
     value and its mass flux alpha_face rho_m,K chi s, capped as in the general path
     (:func:`impactpipe.hydro.scheme.directional._face_flux`); absent materials carry zero fluxes.
-    Material m's scalar fluxes are its mass flux times the donor's specific values.  Without
-    ``carried`` (its scalars are +0.0 in every donor cell of the pencil, :func:`scalars_carried`)
-    they are the mass flux times +0.0, and the scalar fluxes are written at a block face
-    (``edge``) only, which the sweep stores for refluxing at a coarse/fine face: neither
-    :func:`update_plain` nor, for a cell it hands back, the general update
-    (:func:`impactpipe.hydro.scheme.directional._update_cell`) applies them then.
+    The donor cell's index goes to row ``donor_row`` of column f.  The scalar fluxes are left to
+    :func:`plain_scalar_fluxes`, which the sweep calls where the pencil moves mass and carries
+    scalars; here, at a block face (``edge``), which the sweep stores for refluxing at a
+    coarse/fine face, they are written as the pencil without scalars has them: material m's
+    mass flux times +0.0, the other materials' +0.0.  Neither :func:`update_plain` nor, for a
+    cell it hands back, the general update (:func:`impactpipe.hydro.scheme.directional._update_cell`)
+    applies scalar fluxes without ``carried``.
     """
     row = W_MAT + W_STRIDE * m
     qrow = Q_MAT + 3 * m
@@ -166,16 +167,17 @@ def face_flux_plain(sc, m, nmat, f, dt, dtdx, qm_row, qp_row, f_row, nq, wq_row,
     rho_r = sc[ir, qm_row + qrow] * sc[ir, qm_row + qrow + 1]
     side, s, p_star, chi, de, donor, up, down, krow, iv_donor = upwind_face(sc, f, rho_l, False, rho_r, False,
                                                                              qm_row, qp_row)
+    sc[f, donor_row] = donor
     mass, ek = material_face_flux(sc, f, row, qrow, frow, donor, up, down, krow, abs(s) * dtdx,
                                   abs(s) * dt * iv_donor, 1.0, s, chi, dt, iv_donor)
     for k in range(nmat):
         if k != m:
             for c in range(3):
                 sc[f, f_row + F_MAT + 3 * k + c] = 0.0
-            if carried or edge:
+            if edge:
                 for j in range(nq):
                     sc[f, fq_row + nq * k + j] = 0.0
-    scalar_face_fluxes(sc, f, fq_row, wq_row, nq, m, mass, donor, carried, edge)
+    scalar_face_fluxes(sc, f, fq_row, wq_row, nq, m, mass, donor, False, edge)
     flow_fluxes(sc, f, f_row, krow, donor, mass, mass * ek, s, p_star, de)
 
 
@@ -249,6 +251,52 @@ def update_plain(sc, m, i, dt, radial, qm_row, qp_row, f_row, b, alpha_f, arho_f
     mom_f[im2] = m2
     energy_f[ie] = e_tot
     return True
+
+
+@njit(cache=True, inline="always")
+def moves_mass(sc, mass_row, first, stop):
+    """Whether some face ``first .. stop - 1`` of a plain pencil carries a mass flux: a value other
+    than +-0.0 in its ``mass_row`` (material m's mass flux row of the F rows).
+
+    Where none does, every scalar flux of the pencil is that zero times the donor's specific
+    value, +-0.0, and the update U - dt (A_+ F_+ - A_- F_-) / V leaves each scalar at its value
+    (up to the sign of a zero): the sweep neither gathers, fluxes nor updates the scalars
+    (:func:`plain_scalar_fluxes`).  Material at rest makes such a pencil: the inside of a body
+    before the shock reaches it, whose flaws (Grady-Kipp) or distension (porosity) are not zero.
+    """
+    for f in range(first, stop):
+        if sc[f, mass_row] != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def plain_scalar_fluxes(sc, m, nmat, nq, first, stop, arho_f, arhoq_f, ia, iq, stride, cs, wq_row, fq_row, mass_row,
+                        donor_row):
+    """Material m's scalar fluxes through faces ``first .. stop - 1`` of a plain pencil, once
+    :func:`moves_mass` says they move mass.
+
+    The specific scalars q_j = (alpha_m rho_m q_j) / (alpha_m rho_m) of the donor cells
+    ``first - 1 .. stop - 1`` into the WQ rows (0 where alpha_m rho_m <= 0), then each face's
+    mass flux times its donor's q_j into the FQ rows, with the mass flux and donor that
+    :func:`face_flux_plain` stored (rows ``mass_row``, ``donor_row``): the values the gather
+    (:func:`impactpipe.hydro.scheme.directional._gather_plain`) and the face fluxes give with
+    ``carried``, bit for bit; the other materials' scalar fluxes are +0.0 (a cell the update
+    hands back to the general path applies every material's).  ``ia``, ``iq``: the flat indices
+    of cell 0 of the pencil in material m's columns (:func:`update_plain`), ``stride`` the
+    pencil's, ``cs`` a column's length.
+    """
+    for i in range(first - 1, stop):
+        ar = arho_f[ia + i * stride]
+        inv_ar = 1.0 / ar if ar > 0.0 else 0.0
+        for j in range(nq):
+            sc[i, wq_row + nq * m + j] = arhoq_f[iq + i * stride + j * cs] * inv_ar
+    for f in range(first, stop):
+        for k in range(nmat):
+            if k != m:
+                for j in range(nq):
+                    sc[f, fq_row + nq * k + j] = 0.0
+        scalar_face_fluxes(sc, f, fq_row, wq_row, nq, m, sc[f, mass_row], int(sc[f, donor_row]), True, False)
 
 
 @njit(cache=True, inline="always")
