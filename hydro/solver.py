@@ -32,7 +32,7 @@ from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, Lev
                                            finite_run, level_time_step)
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import NO_RECORD
-from impactpipe.hydro.mesh.last_good import block_runs, scalar_clear_blocks, void_blocks
+from impactpipe.hydro.mesh.last_good import RECORD_VOID, block_runs, scalar_clear_blocks, void_blocks
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
                                            distension_field, pack_porosity)
@@ -303,11 +303,12 @@ class Simulation:
         self._good_void = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, 1 where the block is void now (:func:`~impactpipe.hydro.mesh.last_good.void_blocks`)
         self._void_now = np.zeros(self.mesh.nblocks, dtype=np.uint8)
-        #: per block, 1 where the last-good copy's transported scalars are +0.0
+        #: per block, not 0 where the last-good copy's transported scalars are +0.0
         self._good_clear = np.zeros(self.mesh.nblocks, dtype=np.uint8)
-        #: per block, 1 where its transported scalars are +0.0
-        #: (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`): row 0 at the start of a
-        #: step, then the rows take turns as each sweep writes the record after it (:meth:`step`)
+        #: per block, RECORD_CLEAR where its transported scalars are +0.0
+        #: (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`), RECORD_VOID where it is
+        #: void (:mod:`impactpipe.hydro.mesh.last_good`), else 0: row 0 at the start of a step,
+        #: then the rows take turns as each sweep writes the record after it (:meth:`step`)
         self._scalars_clear = np.zeros((2, self.mesh.nblocks), dtype=np.uint8)
         self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
@@ -405,7 +406,7 @@ class Simulation:
             axes.reverse()
         st = self.state
         own = self.partition.blocks
-        recorded = self._records_clear_scalars()
+        recorded = self._keeps_block_record()
         clear_now, clear_next = self._scalars_clear if recorded else (NO_RECORD, NO_RECORD)
         for axis in axes:
             fill = self.partition.start_ghosts(st, self.mesh, axis, self._q_layers, clear_now if recorded else None)
@@ -445,13 +446,13 @@ class Simulation:
             self.tracers.after_step(self, dt)
         return dt
 
-    def _records_clear_scalars(self) -> bool:
-        """Whether a step keeps the record of the blocks whose transported scalars are +0.0
-        (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`), for the ghost fills,
-        the sweeps and the last-good copy to skip them: with scalars, on a uniform mesh in one
-        process (an adaptive mesh's coarse/fine ghosts and other ranks' strips are filled
-        otherwise)."""
-        return self.state.arhoq.shape[1] > 0 and not self.mesh.adaptive and self.partition.keeps_scalar_record
+    def _keeps_block_record(self) -> bool:
+        """Whether a step keeps the record of the void blocks and of the blocks whose transported
+        scalars are +0.0 (:data:`~impactpipe.hydro.mesh.last_good.RECORD_VOID`,
+        :func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`), for the ghost fills, the
+        sweeps and the last-good copy to skip them: on a uniform mesh in one process (an adaptive
+        mesh's coarse/fine ghosts and other ranks' strips are filled otherwise)."""
+        return not self.mesh.adaptive and self.partition.keeps_scalar_record
 
     def _sweep(self, axis: int, dt: float, blocks: np.ndarray, scalars_clear: np.ndarray,
                clear_after: np.ndarray) -> None:
@@ -710,8 +711,9 @@ class Simulation:
         fields = [arr.view(np.int64) for arr in (st.alpha, st.arho, st.arhoe, st.momentum, st.energy)]
         void_blocks(*fields, lo, hi, void)
         clear = self._scalars_clear[0]
-        if self._records_clear_scalars():
+        if self._keeps_block_record():
             scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear)
+            clear[lo:hi][void[lo:hi] != 0] = RECORD_VOID
         else:
             clear[lo:hi] = 0
         copy = np.zeros(self.mesh.nblocks, dtype=bool)

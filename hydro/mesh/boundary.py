@@ -25,6 +25,7 @@ from impactpipe.hydro.amr.plans import axis_plans, first_layer_plans
 from impactpipe.hydro.amr.transfer import (prolong_field_ghosts, prolong_state_ghosts, restrict_ghosts,
                                            restrict_state_ghosts)
 from impactpipe.hydro.mesh.blocks import REFLECTING
+from impactpipe.hydro.mesh.last_good import RECORD_VOID
 
 
 @njit(cache=True, parallel=True)
@@ -64,15 +65,20 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
 
     ``scalars_clear`` (uint8, (NB,), or empty: no record): the blocks whose scalars are +0.0
     in their interior and in those ghost layers
-    (:func:`impactpipe.hydro.mesh.last_good.scalar_clear_blocks`).  A slab of a clear block
+    (:func:`impactpipe.hydro.mesh.last_good.scalar_clear_blocks`), and among them the void
+    ones (:data:`impactpipe.hydro.mesh.last_good.RECORD_VOID`).  A slab of a clear block
     whose source block is clear too already holds the +0.0 the copy would write, and its
-    scalars are not copied."""
+    scalars are not copied; a slab of a void block from a void neighbour (not a domain face,
+    where a reflecting face would write -0.0) is not copied at all: it holds +0.0 since the
+    step began, and the neighbour's interior still does."""
     tracked = scalars_clear.shape[0] > 0
     for b in prange(lo, hi):
         for side in range(2):
             nbr = neighbor[b, axis, side]
             if nbr < 0 or neighbor_level[b, axis, side] == 0:
                 src = nbr if nbr >= 0 else b
+                if tracked and nbr >= 0 and scalars_clear[b] == RECORD_VOID and scalars_clear[src] == RECORD_VOID:
+                    continue
                 copy_scalars = not (tracked and scalars_clear[b] != 0 and scalars_clear[src] != 0)
                 _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers,
                                  copy_scalars)

@@ -19,6 +19,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+#: Codes of the per-block record a step keeps on a uniform mesh in one process
+#: (:meth:`impactpipe.hydro.solver.Simulation.step`): a block's transported scalars are +0.0
+#: (:func:`scalar_clear_blocks`) ...
+RECORD_CLEAR = 1
+#: ... or the block is void (:func:`void_blocks`; its scalars are then +0.0 too), every conserved
+#: field +0.0 in every cell, ghosts included, at the start of the step and, along the later axes,
+#: its interior unchanged by the sweeps before (:func:`impactpipe.hydro.scheme.directional.sweep`).
+RECORD_VOID = 2
+
 
 @njit(cache=True, parallel=True)
 def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void):

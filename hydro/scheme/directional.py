@@ -156,6 +156,7 @@ from impactpipe.hydro.scheme.pencil_layout import (
     pencil_cell_index,
     pencil_offset,
 )
+from impactpipe.hydro.mesh.last_good import RECORD_CLEAR, RECORD_VOID
 from impactpipe.hydro.scheme.plain_pencils import (
     EMPTY_PENCIL,
     face_flux_plain,
@@ -203,8 +204,10 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     carries scalars, which is then not scanned for
     (:func:`impactpipe.hydro.scheme.plain_pencils.scalars_carried`).  When every pencil of such
     a block is plain or empty and every cell takes the plain update, its scalars are still
-    +0.0 after the sweep: ``clear_after[b]`` (written with a record) is 1 for such a block,
-    else 0, the record for the sweep along the next axis.
+    +0.0 after the sweep: ``clear_after[b]`` (written with a record) is RECORD_CLEAR for such a
+    block, else 0, the record for the sweep along the next axis; RECORD_VOID for a block that
+    was void (``scalars_clear[b]`` RECORD_VOID) and whose pencils were all empty, so that the
+    sweep left its interior as it was (:data:`impactpipe.hydro.mesh.last_good.RECORD_VOID`).
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
     (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), or None.
     ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`;
@@ -256,6 +259,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
             src = neighbor[b, axis, side]
             quiet = quiet and (src < 0 or (neighbor_level[b, axis, side] == 0 and scalars_clear[src] != 0))
         stays_clear = quiet
+        stays_void = tracked and scalars_clear[b] == RECORD_VOID
         dx = block_dx[b, axis]
         dtdx = dt / dx
         half = 0.5 * dtdx
@@ -308,6 +312,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                 ie = b * cs + offset
                 iq = (b * nmat + max(m, 0)) * nq * cs + offset
                 carried = False
+                if m != EMPTY_PENCIL:
+                    stays_void = False
                 if m == EMPTY_PENCIL:
                     for f in (g, g + n):
                         for r in range(f_row, fq_row + nmat * nq):
@@ -404,7 +410,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                                  alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
                                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row, carried)
         if tracked:
-            clear_after[b] = 1 if stays_clear else 0
+            clear_after[b] = RECORD_VOID if stays_void else (RECORD_CLEAR if stays_clear else 0)
 
 
 @njit(cache=True, inline="always")
