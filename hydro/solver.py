@@ -317,13 +317,20 @@ class Simulation:
     # ------------------------------------------------------------------ stepping
 
     def stable_dt(self) -> float:
-        """CFL time step of the current state (s)."""
+        """CFL time step of the current state (s).  It first records the void blocks of the state
+        (:func:`~impactpipe.hydro.mesh.last_good.void_blocks`, into ``_void_now``), whose signal
+        rate is 0 without a look at their cells; :meth:`step` takes its last-good copy of the same
+        state right after, with this record."""
         st = self.state
         own = self.partition.blocks
+        lo, hi, _ = own.indices(self.mesh.nblocks)
+        fields = [arr.view(np.int64) for arr in (st.alpha, st.arho, st.arhoe, st.momentum, st.energy)]
+        void_blocks(*fields, lo, hi, self._void_now)
         rates = self._rate[own]
         max_signal_rate(st.alpha[own], st.arho[own], st.arhoe[own], st.momentum[own], self.mesh.block_dx[own],
                         self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim,
-                        self._rate_work, rates, None if self.porosity is None else st.arhoq[own], self.porosity)
+                        self._rate_work, rates, None if self.porosity is None else st.arhoq[own], self.porosity,
+                        self._void_now[own])
         bad = np.flatnonzero(~np.isfinite(rates))
         first_bad = (own.start or 0) + int(bad[0]) if bad.size else -1
         rate, first_bad = self.partition.combine_rate(float(rates.max()), first_bad)
@@ -700,7 +707,8 @@ class Simulation:
         """Copy the interior cells of the state (the ghosts are refilled before every use, so a
         restore refills them instead of keeping a copy: 35 % less memory in 3D with 8^3 blocks),
         the counters and the clock into the last-good copies.  A void block whose copy is void
-        already is not copied again (:mod:`impactpipe.hydro.mesh.last_good`); the others are
+        already is not copied again (:mod:`impactpipe.hydro.mesh.last_good`; the void blocks as
+        :meth:`stable_dt` recorded them, on this state, just before); the others are
         copied by numpy's strided copy, one run of consecutive blocks at a time (on the
         machines measured it copies at 4-5 ns per 2D gas-box cell on one thread, where a
         parallel numba kernel took 7 ns on two, docs/performance.md)."""
@@ -708,8 +716,6 @@ class Simulation:
         st = self.state
         lo, hi, _ = own.indices(self.mesh.nblocks)
         void = self._void_now
-        fields = [arr.view(np.int64) for arr in (st.alpha, st.arho, st.arhoe, st.momentum, st.energy)]
-        void_blocks(*fields, lo, hi, void)
         clear = self._scalars_clear[0]
         if self._keeps_block_record():
             scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear)

@@ -32,7 +32,7 @@ PHI_VOID = 1.0e-6
 
 @njit(cache=True, parallel=True)
 def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus, ndim, work,
-                    out, arhoq=None, porosity=None):
+                    out, arhoq=None, porosity=None, void=None):
     """Per block, the largest max_d (|u_d| + c) / dx_d (1/s) over non-void interior cells, into ``out[NB]``.
 
     c = sqrt(K / rho) with the sums of :func:`impactpipe.hydro.scheme.mixture.mixture_state`,
@@ -52,7 +52,9 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     With ``porosity`` (the (M, NPOROSITY) rows of :func:`impactpipe.hydro.eos.porosity.pack_porosity`)
     a porous material's sound speed is its solid's at the matrix density, alpha rho_k, the
     distension alpha from the transported scalars ``arhoq`` (as in the gather); None, and
-    ``arhoq`` is not read.
+    ``arhoq`` is not read.  ``void`` (uint8, (NB,), or None): the blocks known to be void
+    (:func:`impactpipe.hydro.mesh.last_good.void_blocks`), whose rate is 0 (none of their cells
+    has rho > 0) without a look at their cells.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = 0
@@ -71,6 +73,10 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
     for b in prange(nb):
+        if void is not None:
+            if void[b] != 0:
+                out[b] = 0.0
+                continue
         w = work[get_thread_id()]
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
