@@ -43,7 +43,7 @@ from impactpipe.hydro.parallel.distributed import WholeMesh, checkpoint_partitio
 from impactpipe.hydro.parallel.owned_memory import read_owned_rows, receive_halos
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.hydro.strength import MaterialStrength, StrengthArrays, pack_strength
-from impactpipe.hydro.strength.parameters import GRADY_KIPP, NONE, pack_damage
+from impactpipe.hydro.strength.parameters import GRADY_KIPP, pack_damage
 from impactpipe.hydro.scheme.directional import sweep
 from impactpipe.hydro.scheme.pencil_layout import (
     AMOUNT_NAMES,
