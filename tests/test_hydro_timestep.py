@@ -2,9 +2,11 @@
 
 import numba
 import numpy as np
+import pytest
 from numba import njit
 
 from impactpipe.hydro.eos import pack_eos
+from impactpipe.hydro.eos.porosity import ALPHA0, NPOROSITY
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.scheme.mixture import mixture_state
@@ -70,3 +72,39 @@ def test_rate_kernel_equals_the_per_cell_mixture_gather_bit_for_bit():
                         allocate_rate_work(numba.config.NUMBA_NUM_THREADS, shape), got)
         assert np.all(expected > 0.0)
         assert np.array_equal(got, expected)
+
+
+@pytest.mark.parametrize("material", ["ideal gas", "tillotson", "tillotson with shear", "porous tillotson"])
+def test_single_material_pass_equals_the_summing_passes_bit_for_bit(material):
+    """A mesh of one material takes its own one-pass loop (cubic cells); the same cells with a
+    second material absent everywhere (alpha = alpha rho = 0) take the summing passes."""
+    rng = np.random.default_rng(11)
+    spec = GAS if material == "ideal gas" else preset_material("basalt")["eos"]
+    rho0 = 1.2 if material == "ideal gas" else 2700.0
+    eos, padded = pack_eos([spec]), pack_eos([spec, GAS])
+    shear = np.array([[2.6e10, 0.6]]) if material == "tillotson with shear" else np.zeros((1, 2))
+    for shape, ndim in (((20, 20, 1), 2), ((12, 12, 12), 3)):
+        nb = 6
+        alpha, arho, arhoe, mom = random_mixture(rng, nb, shape, [rho0])
+        alpha[:, :, 4, 5] = np.nan  # a broken cell is passed over as the summing passes pass it
+        dx = np.repeat(rng.uniform(0.5, 2.0, size=(nb, 1)), 3, axis=1)
+        porosity = arhoq = None
+        if material == "porous tillotson":
+            porosity = np.zeros((1, NPOROSITY))
+            porosity[0, ALPHA0] = 1.5
+            arhoq = np.stack([(arho * rng.uniform(1.0, 1.5, size=arho.shape))[:, 0], np.zeros_like(arho[:, 0])], axis=1)
+        got, expected = np.zeros(nb), np.zeros(nb)
+        max_signal_rate(alpha, arho, arhoe, mom, dx, eos.kind, eos.params, eos.table, shear, ndim,
+                        allocate_rate_work(numba.config.NUMBA_NUM_THREADS, shape), got, arhoq, porosity)
+        zero = np.zeros_like(alpha)
+        two = [np.concatenate([f, zero], axis=1) for f in (alpha, arho, arhoe)]
+        if porosity is not None:
+            arhoq2 = np.concatenate([arhoq, np.zeros_like(arhoq)], axis=1)
+            porosity2 = np.concatenate([porosity, np.zeros((1, NPOROSITY))])
+            porosity2[1, ALPHA0] = 1.0
+        else:
+            arhoq2 = porosity2 = None
+        max_signal_rate(*two, mom, dx, padded.kind, padded.params, padded.table, np.concatenate([shear, [[0.0, 0.0]]]),
+                        ndim, allocate_rate_work(numba.config.NUMBA_NUM_THREADS, shape), expected, arhoq2, porosity2)
+        assert np.all(expected > 0.0)
+        assert np.array_equal(got.view(np.int64), expected.view(np.int64))

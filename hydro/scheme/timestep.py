@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import get_thread_id, njit, prange
 
-from impactpipe.hydro.eos import pressure_sound_speed_in_line, reference_density
+from impactpipe.hydro.eos import IDEAL_GAS, pressure_sound_speed_in_line, reference_density
+from impactpipe.hydro.eos.ideal_gas import ideal_gas_pressure_sound_speed
 from impactpipe.hydro.eos.porosity import ALPHA0
 from impactpipe.hydro.mesh.blocks import GHOST
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_speed_squared
@@ -54,7 +55,8 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     distension alpha from the transported scalars ``arhoq`` (as in the gather); None, and
     ``arhoq`` is not read.  ``void`` (uint8, (NB,), or None): the blocks known to be void
     (:func:`impactpipe.hydro.mesh.last_good.void_blocks`), whose rate is 0 (none of their cells
-    has rho > 0) without a look at their cells.
+    has rho > 0) without a look at their cells.  A mesh of one material takes one pass per
+    block with cubic cells (:func:`_single_material_rate`, the same rate bit for bit).
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = 0
@@ -78,6 +80,15 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
                 out[b] = 0.0
                 continue
         w = work[get_thread_id()]
+        cubic = True
+        for d in range(1, ndim):
+            if block_dx[b, d] != block_dx[b, 0]:
+                cubic = False
+        if nmat == 1 and cubic:
+            out[b] = _single_material_rate(alpha, arho, arhoe, arhoq, mom, b, eos_kind[0], eos_params[0], eos_table,
+                                           shear_modulus[0], porosity, nq, ndim, (gx, gy, gz), (nx, ny, nz),
+                                           block_dx[b, 0])
+            continue
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -114,10 +125,6 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
         # (dx_d > 0) and x -> x / rho + c are monotone in IEEE arithmetic, so the largest
         # quotient is the quotient of the largest, bit for bit; with cubic cells the largest
         # |m_d| of a cell is the one that counts (3 of a cell's 5 divisions in 2D, 5 of 7 in 3D)
-        cubic = True
-        for d in range(1, ndim):
-            if block_dx[b, d] != block_dx[b, 0]:
-                cubic = False
         s0 = 0.0
         s1 = 0.0
         s2 = 0.0
@@ -156,6 +163,90 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
             if ndim > 2 and s2 / block_dx[b, 2] > rate:
                 rate = s2 / block_dx[b, 2]
         out[b] = rate
+
+
+@njit(cache=True, inline="always")
+def _single_material_rate(alpha, arho, arhoe, arhoq, mom, b, kind, row, eos_table, shear, porosity, nq, ndim, lo, n,
+                          dx):
+    """:func:`max_signal_rate` of block b of a mesh with one material and cubic cells of size
+    ``dx`` (m), bit for bit, in one pass: rho = alpha rho and phi = alpha (the sums over one
+    material), and per cell x = max_d |m_d| / rho + c, or 0 where the cell is skipped (rho <= 0,
+    phi < PHI_VOID) or x is NaN (which the comparison of :func:`max_signal_rate` passes over);
+    the largest x is found by the bits of its int64 view (x >= +0.0, where the order of the
+    bits is the order of the numbers: a reduction that vectorises, where one over floats does
+    not without the compiler's fast-math), then divided by dx.  An ideal gas
+    without shear modulus or pores evaluates its sound speed in every cell and keeps it where
+    the material is present (arithmetic without branches: the loop vectorises); other
+    materials evaluate their EOS where present only.  ``lo``, ``n``: the first interior index
+    and the padded length per axis, as :func:`max_signal_rate` reads the block.
+    """
+    gx, gy, gz = lo
+    nx, ny, nz = n
+    sheared = shear[0] != 0.0 or shear[1] != 0.0
+    rho0 = reference_density(kind, row, eos_table)
+    porous = False
+    if porosity is not None:
+        porous = porosity[0, ALPHA0] > 1.0
+    largest = np.int64(0)
+    if kind == IDEAL_GAS and not sheared and not porous:
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    a = alpha[b, 0, ix, iy, iz]
+                    ar = arho[b, 0, ix, iy, iz]
+                    pk, c2 = ideal_gas_pressure_sound_speed(row, ar / a, arhoe[b, 0, ix, iy, iz] / ar)
+                    w2 = 0.0
+                    w2 += ar * c2
+                    if not (a > ALPHA_MIN and ar > 0.0):
+                        w2 = 0.0
+                    x = _largest_speed(mom, b, ix, iy, iz, ndim) / ar + np.sqrt(w2 / ar)
+                    if ar <= 0.0 or a < PHI_VOID or x != x:
+                        x = 0.0
+                    bits = np.float64(x).view(np.int64)
+                    if bits > largest:
+                        largest = bits
+    else:
+        for ix in range(gx, nx - gx):
+            for iy in range(gy, ny - gy):
+                for iz in range(gz, nz - gz):
+                    a = alpha[b, 0, ix, iy, iz]
+                    ar = arho[b, 0, ix, iy, iz]
+                    x = 0.0
+                    if not (ar <= 0.0 or a < PHI_VOID):
+                        w2 = 0.0
+                        if a > ALPHA_MIN:
+                            rk = ar / a
+                            ek = arhoe[b, 0, ix, iy, iz] / ar
+                            if porous:
+                                dist = 1.0
+                                if porosity is not None:  # always, where porous: the branch types arhoq
+                                    dist = arhoq[b, nq - 2, ix, iy, iz] / ar
+                                pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, dist * rk, ek)
+                                w2 += ar * (signal_speed_squared(c2, rk, shear, rho0 / dist) if sheared else c2)
+                            else:
+                                pk, c2, flag = pressure_sound_speed_in_line(kind, row, eos_table, rk, ek)
+                                w2 += ar * (signal_speed_squared(c2, rk, shear, rho0) if sheared else c2)
+                        x = _largest_speed(mom, b, ix, iy, iz, ndim) / ar + np.sqrt(w2 / ar)
+                        if x != x:
+                            x = 0.0
+                    bits = np.float64(x).view(np.int64)
+                    if bits > largest:
+                        largest = bits
+    return np.int64(largest).view(np.float64) / dx
+
+
+@njit(cache=True, inline="always")
+def _largest_speed(mom, b, ix, iy, iz, ndim):
+    """max_d |m_d| (kg/m^2/s) of a cell over the mesh's ``ndim`` axes, without a loop over them
+    (a loop inside the loop over the cells keeps the compiler from vectorising that one)."""
+    m = abs(mom[b, 0, ix, iy, iz])
+    m1 = abs(mom[b, 1, ix, iy, iz]) if ndim > 1 else 0.0
+    m2 = abs(mom[b, 2, ix, iy, iz]) if ndim > 2 else 0.0
+    if m1 > m:
+        m = m1
+    if m2 > m:
+        m = m2
+    return m
 
 
 def allocate_rate_work(threads: int, padded_shape) -> np.ndarray:
