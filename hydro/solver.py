@@ -8,8 +8,10 @@ which replaces what follows); then one sweep per used
 axis (:mod:`impactpipe.hydro.scheme.directional`), each after filling the ghosts along its axis and, on an
 adaptive mesh, followed by refluxing the coarse cells beside finer blocks
 (:func:`impactpipe.hydro.amr.transfer.reflux`); the sweep order alternates every step
-(x y z, then z y x), which makes the splitting second order over a pair of steps (Strang).  The state at the start of the step is kept, so a
-failing step leaves the last good state available (:meth:`Simulation.restore_last_good`).
+(x y z, then z y x), which makes the splitting second order over a pair of steps (Strang).  The state is
+copied every LAST_GOOD_INTERVAL steps and the steps since are listed, so a failing step leaves the
+last good state available (:meth:`Simulation.restore_last_good` copies the state back and takes
+those steps again, bit for bit).
 On several MPI ranks each process advances its share of the blocks (``Simulation.partition``,
 :mod:`impactpipe.hydro.parallel`).
 """
@@ -74,6 +76,11 @@ LOG_INTERVAL = 100
 LEVEL_STEP_GROWTH = 1.25
 #: At most this many retakes of one root step; the last one stands, or its failure is raised.
 LEVEL_STEP_RETAKES = 3
+#: Steps between two last-good copies of the state (:meth:`Simulation.restore_last_good` takes
+#: the steps since the copy again).  A copy reads and writes every interior cell of the state,
+#: which costs as much as the time step on a one-gas box (docs/performance.md); one copy per 8
+#: steps costs an eighth of that, and a failure at most 7 steps taken again.
+LAST_GOOD_INTERVAL = 8
 
 
 class HydroFailure(RuntimeError):
@@ -313,6 +320,15 @@ class Simulation:
         self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
         self._good_gravity_work = None if self.gravity is None else self.gravity.work
+        self._good_settled_cells = self.settled_cells
+        self._good_last_dt = self.last_dt
+        #: (dt, time after) of each step since the last-good copy (s), for :meth:`restore_last_good`
+        #: to take them again; None: the next step takes a copy first (of the tracers' records too)
+        self._replay: list[tuple[float, float]] | None = None
+        #: how many of them precede the step begun last (the one a restore goes back to the start of)
+        self._replay_upto = 0
+        #: the time (s) at the start of the step being taken, where a failure is reported
+        self._step_start_time = self.time
 
     # ------------------------------------------------------------------ stepping
 
@@ -407,6 +423,7 @@ class Simulation:
             self.last_dt = dt
             if self.tracers is not None:
                 self.tracers.after_step(self, dt)
+            self._replay.append((dt, self.time))
             return dt
         axes = list(range(self.mesh.ndim))
         if self.step_count % 2:
@@ -451,6 +468,7 @@ class Simulation:
         if self.tracers is not None:
             self.partition.share_neighbourhood(st)
             self.tracers.after_step(self, dt)
+        self._replay.append((dt, self.time))
         return dt
 
     def _keeps_block_record(self) -> bool:
@@ -590,7 +608,7 @@ class Simulation:
         finite = (finite_blocks(momentum, blocks) if isinstance(blocks, np.ndarray)
                   else finite_run(momentum[blocks].view(np.int64)))
         if self.partition.any(not finite):
-            raise HydroFailure("NaN in the momentum after the strength and gravity step", self._good_clock[0], -1,
+            raise HydroFailure("NaN in the momentum after the strength and gravity step", self._step_start_time, -1,
                                None, {})
 
     def run(self, end_time: float, output_times: Iterable[float] = (), on_output: Callable | None = None,
@@ -609,6 +627,7 @@ class Simulation:
             steps += 1
             if outputs and self.time >= outputs[0] * (1.0 - 1e-14):
                 self.time = outputs.pop(0)
+                self._replay[-1] = (self._replay[-1][0], self.time)
                 if on_output is not None:
                     on_output(self.snapshot())
             if progress is not None:
@@ -703,10 +722,24 @@ class Simulation:
 
     # ------------------------------------------------------------------ failure handling
 
+    def _last_good_interval(self) -> int:
+        """Steps between two last-good copies: LAST_GOOD_INTERVAL, or 1 where the solver takes a
+        step again from the copy itself (an adaptive mesh's regrids, the root steps per level) or a
+        step changes more than the state, the counters, the tracers and the clock (the face shear
+        stresses of the strength model)."""
+        if self.mesh.adaptive or self.time_stepping == PER_LEVEL or (
+                self.strength is not None and self.strength.face is not None):
+            return 1
+        return LAST_GOOD_INTERVAL
+
     def _save_good(self) -> None:
-        """Copy the interior cells of the state (the ghosts are refilled before every use, so a
-        restore refills them instead of keeping a copy: 35 % less memory in 3D with 8^3 blocks),
-        the counters and the clock into the last-good copies.  A void block whose copy is void
+        """At the start of a step: the records of the void blocks and of the blocks whose scalars
+        are +0.0 (for the ghost fills and the sweeps); then, on the first step after the copies were
+        taken anew (:meth:`_keep_good`) or once :meth:`_last_good_interval` steps were taken since
+        the last copy, the last-good copies: the interior cells of the state (the ghosts are
+        refilled before every use, so a restore refills them instead of keeping a copy: 35 % less
+        memory in 3D with 8^3 blocks), the counters, the clock and the tracers' records
+        (:meth:`restore_last_good` takes the steps since again).  A void block whose copy is void
         already is not copied again (:mod:`impactpipe.hydro.mesh.last_good`; the void blocks as
         :meth:`stable_dt` recorded them, on this state, just before); the others are
         copied by numpy's strided copy, one run of consecutive blocks at a time (on the
@@ -715,6 +748,7 @@ class Simulation:
         own = self.partition.blocks
         st = self.state
         lo, hi, _ = own.indices(self.mesh.nblocks)
+        self._step_start_time = self.time
         void = self._void_now
         clear = self._scalars_clear[0]
         if self._keeps_block_record():
@@ -722,6 +756,9 @@ class Simulation:
             clear[lo:hi][void[lo:hi] != 0] = RECORD_VOID
         else:
             clear[lo:hi] = 0
+        if self._replay is not None and len(self._replay) < self._last_good_interval():
+            self._replay_upto = len(self._replay)
+            return
         copy = np.zeros(self.mesh.nblocks, dtype=bool)
         copy[lo:hi] = (void[lo:hi] == 0) | (self._good_void[lo:hi] == 0)
         # a block whose scalars are +0.0 now and were at the copy keeps its copy of them
@@ -742,12 +779,27 @@ class Simulation:
             np.copyto(dst, src)
         self._good_clock = (self.time, self.step_count, self.cell_updates)
         self._good_gravity_work = None if self.gravity is None else self.gravity.work
+        self._good_settled_cells = self.settled_cells
+        self._good_last_dt = self.last_dt
+        self._replay = []
+        self._replay_upto = 0
+        if self.tracers is not None:
+            self.tracers.keep_good(self)
+
+    def state_changed(self) -> None:
+        """Say that the state was changed from outside between two steps: the next step takes its
+        last-good copy first, so that :meth:`restore_last_good` after a failure gives the state
+        with the change (the steps it takes again start from the copy, and would not make it)."""
+        self._replay = None
 
     def restore_last_good(self) -> None:
-        """Put back the state and counters from the start of the last (failed) step: the
-        interior cells as they were, the ghosts filled from them (collective on several ranks:
-        each restores its own blocks, and with tracers the cells around them that the tracers
-        read)."""
+        """Put back the state and counters from the start of the last (failed) step: the last-good
+        copies (:meth:`_save_good`; the interior cells, the ghosts filled from them), then the steps
+        taken since the copy, again, each to its dt and landing time, which gives the same state
+        bit for bit (collective on several ranks: each restores its own blocks, and with tracers the
+        cells around them that the tracers read; every rank takes the same steps again).  A change
+        made to the state from outside between two steps is kept only where :meth:`state_changed`
+        said so."""
         own = self.partition.blocks
         for name, arr in self.state.arrays().items():
             np.copyto(self.mesh.interior(arr)[own], self._good[name][own])
@@ -758,10 +810,19 @@ class Simulation:
         self.time, self.step_count, self.cell_updates = self._good_clock
         if self.gravity is not None:
             self.gravity.work = self._good_gravity_work
+        self.settled_cells = self._good_settled_cells
+        self.last_dt = self._good_last_dt
         self._failure[:] = 0
         if self.tracers is not None:
             self.partition.share_neighbourhood(self.state)
             self.tracers.restore_good(self.partition)
+        steps = [] if self._replay is None else self._replay[:self._replay_upto]
+        self._replay = None if self._replay is None else []
+        for dt, landed in steps:
+            self.step(dt_max=dt)
+            self.time = landed
+        if self._replay is not None:
+            self._replay_upto = len(self._replay)
 
     def _strength_counters(self) -> tuple:
         if self.strength is None:
@@ -788,14 +849,16 @@ class Simulation:
         with the values of the process that owns it)."""
         code, cell, values = self.partition.from_owner(b, lambda: self._failure_record(b))
         what = {1: "NaN in the updated state", 2: "negative density"}.get(code, "sweep failure")
-        raise HydroFailure(what, self._good_clock[0], b, cell, values)
+        raise HydroFailure(what, self._step_start_time, b, cell, values)
 
     def _failure_record(self, b: int) -> tuple[int, tuple[int, int, int], dict]:
-        """(failure code, padded cell, the cell's values after and before the step) of block ``b``."""
+        """(failure code, padded cell, the cell's values) of block ``b``: after the failed sweep, and
+        under "before" in the last-good copy, taken at the start of step "before_step"."""
         code, ix, iy, iz = (int(v) for v in self._failure[b])
         values = {name: getattr(self.state, name)[b, :, ix, iy, iz].tolist() for name in FIELDS}
         g = self.mesh.ghost
         values["before"] = {name: self._good[name][b, :, ix - g[0], iy - g[1], iz - g[2]].tolist() for name in FIELDS}
+        values["before_step"] = self._good_clock[1]
         return code, (ix, iy, iz), values
 
     # ------------------------------------------------------------------ diagnostics

@@ -228,7 +228,7 @@ class Tracers:
     """Massless Lagrangian tracers driven by a :class:`~impactpipe.hydro.solver.Simulation`.
 
     Pass to the Simulation (``Simulation(..., tracers=tracers)`` or ``sim.tracers = tracers``
-    before the first step); it calls :meth:`before_step`, :meth:`after_step`,
+    before the first step); it calls :meth:`keep_good`, :meth:`before_step`, :meth:`after_step`,
     :meth:`restore_good` and :meth:`save`.  Method and equations: module docstring.
 
     Args:
@@ -293,7 +293,7 @@ class Tracers:
         #: Whether each tracer is held by the process owning its block on the bound mesh.
         self._placed = False
 
-    #: Arrays that a step changes (kept at the start of each step for :meth:`restore_good`).
+    #: Arrays that a step changes (kept by :meth:`keep_good` for :meth:`restore_good`).
     _MUTABLE = ("position", "velocity", "peak_pressure", "peak_pressure_time", "peak_temperature", "exited",
                 "exit_time")
     #: The per-tracer arrays a tracer takes with it to another process, with its last-good
@@ -514,15 +514,23 @@ class Tracers:
 
     # ------------------------------------------------------------------ Simulation hooks
 
-    def before_step(self, sim) -> None:
-        """Keep the records for :meth:`restore_good` and sample v_n(x_n) from ``sim.state`` at t_n
-        (on several processes each holds the tracers in its blocks, placed first on a new mesh)."""
+    def keep_good(self, sim) -> None:
+        """Keep the records for :meth:`restore_good`: the Simulation calls it where it takes its
+        last-good copy of the state, at the start of a step (on several processes each holds the
+        tracers in its blocks, placed first on a new mesh)."""
         self._bind(sim.mesh, sim.state.nmat)
         if not self._placed:
             self._place(sim.partition)
         for name in self._MUTABLE:
             np.copyto(self._good[name], getattr(self, name))
         self._good_counts = (self.history_count, self.history_next)
+
+    def before_step(self, sim) -> None:
+        """Sample v_n(x_n) from ``sim.state`` at t_n (on several processes each holds the tracers
+        in its blocks, placed first on a new mesh)."""
+        self._bind(sim.mesh, sim.state.nmat)
+        if not self._placed:
+            self._place(sim.partition)
         self._t_start = sim.time
         self._fold_and_locate(sim, 0.0)
         self._sample(sim, self._v_start)
@@ -586,7 +594,7 @@ class Tracers:
                      self.peak_temperature, None if sim.porosity is None else st.arhoq, sim.porosity)
 
     def restore_good(self, partition=None) -> None:
-        """Put back the records from the start of the last step (after a failed step); on the
+        """Put back the records kept last (:meth:`keep_good`, after a failed step); on the
         processes of ``partition`` (collective) each tracer goes back to the owner of its block."""
         for name in self._MUTABLE:
             np.copyto(getattr(self, name), self._good[name])
