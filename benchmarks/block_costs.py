@@ -80,7 +80,7 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
                                      has_mass, stressed)
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
                                     counters[0], face, 3 * strength.nmat, copies, stressed)
-            cell_velocities(arho, mom, work, copies)
+            cell_velocities(arho, mom, work, copies, np.zeros(0, dtype=np.uint8))
             update_stress(dt, mesh.geometry_code, mesh.ndim, alpha, arho, arhoe, arhoq, lo, dx, eos.kind, eos.params,
                           eos.table, rho0, a.model, a.params, a.shear, a.tensile_strength, work,
                           strength.counts[blocks].copy(), strength.amounts[blocks].copy(), copies,

@@ -107,6 +107,8 @@ _ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
 _GRADIENT_FLIP = {a: tuple(WK_L + gradient_slot(a, i) for i in range(3) if i != a) for a in range(3)}
 #: The surface gravity :func:`update_stress` gets without a surface-layer pressure: none (empty).
 _NO_GRAVITY = np.zeros(0)
+#: ``unchanged`` of :func:`cell_velocities` where every block's velocities are found again.
+_NO_BLOCKS = np.zeros(0, dtype=np.uint8)
 
 
 def work_ghost_reads(ndim: int, geometry_code: int, wide: bool) -> tuple[int, frozenset]:
@@ -396,15 +398,19 @@ class MaterialStrength:
                                      self.arrays.model, self.ns, self.work, blocks, self.holds, self.has_mass,
                                      self.stressed)
 
-    def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None) -> None:
+    def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None,
+               kicked_only: bool = False) -> None:
         """Advance the stress of the ``partition``'s blocks (or of the ``level``'s) over ``dt`` (s)
         with the current velocities (the half-step ones after the first kick, into the work
         arrays with their ghosts first): Jaumann update, failure, yield, damage and stress
         power; the new mixture stress S^(n+1) goes to the work arrays, ghosts included (their
         fill only started, :meth:`_start_work_ghosts`: the second kick completes it).  While the
         velocities' strips travel, the update runs on the blocks that need none of them
-        (:meth:`_around_ghosts`)."""
-        cell_velocities(state.arho, state.momentum, self.work, self._blocks(partition, level))
+        (:meth:`_around_ghosts`).  ``kicked_only``: nothing but the first :meth:`kick` changed
+        the momentum since :meth:`load_stress` (no gravity between them), so the blocks that kick
+        passed over (:meth:`_mark_quiet`) keep the velocities load_stress found."""
+        unchanged = self._quiet if kicked_only else _NO_BLOCKS
+        cell_velocities(state.arho, state.momentum, self.work, self._blocks(partition, level), unchanged)
         fills = self._start_work_ghosts(partition, slice(WK_V, WK_V + 3), level)
         self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks), level)
         self._mark_quiet(partition, level)

@@ -302,17 +302,22 @@ def _clear_strength_scalars(arhoq, b, first, nq, porous, ix, iy, iz):
 
 
 @njit(cache=True, parallel=True)
-def cell_velocities(arho, mom, work, blocks):
+def cell_velocities(arho, mom, work, blocks, unchanged):
     """New velocities v = (rho v) / rho (m/s), rho = sum_k alpha_k rho_k, of the interior cells
     of the ``blocks`` listed (int64) that hold material
     (``work`` fill > 0, set by :func:`cell_velocity_and_stress`; the momentum kicks move no
-    mass, so the fills stay)."""
+    mass, so the fills stay).  A block with ``unchanged[b]`` not 0 (uint8, (NB,), or empty:
+    none) is passed over: its momentum is the one :func:`cell_velocity_and_stress` divided, and
+    its velocities are these quotients already, bit for bit (the same sums and division)."""
     nb, nmat, nx, ny, nz = arho.shape
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
+    skips = unchanged.shape[0] > 0
     for i in prange(blocks.shape[0]):
         b = blocks[i]
+        if skips and unchanged[b] != 0:
+            continue
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
