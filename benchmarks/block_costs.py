@@ -77,7 +77,7 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
             copies = np.arange(len(blocks), dtype=np.int64)
             holds, has_mass, stressed = (np.zeros(len(blocks), dtype=np.uint8) for _ in range(3))
             cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, a.model, strength.ns, work, copies, holds,
-                                     has_mass, stressed)
+                                     has_mass, stressed, np.zeros(0, dtype=np.uint8))
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
                                     counters[0], face, 3 * strength.nmat, copies, stressed)
             cell_velocities(arho, mom, work, copies, np.zeros(0, dtype=np.uint8))

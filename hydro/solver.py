@@ -459,7 +459,8 @@ class Simulation:
             lo, hi, _ = own.indices(self.mesh.nblocks)
             compact(st.alpha, st.arho, st.arhoq, self.porosity, self.porosity_counts, lo, hi)
         if self.strength is not None or self.gravity is not None:
-            self._momentum_sources(dt)
+            # the blocks still void after the sweeps (void settling moves material between them)
+            self._momentum_sources(dt, clear_now if recorded and not self.void_settling else NO_RECORD)
             self._observe("sources", -1)
         self.time += dt
         self.step_count += 1
@@ -576,13 +577,14 @@ class Simulation:
         self.cell_updates += updates
         return dt
 
-    def _momentum_sources(self, dt: float) -> None:
+    def _momentum_sources(self, dt: float, record: np.ndarray = NO_RECORD) -> None:
         """Stress divergence and gravity over ``dt`` (s), kick - stress update - kick.
 
         Half of each impulse before the stress update and half after it
         (:mod:`impactpipe.hydro.strength.model`), so the stress sees the half-step velocity: a
         body at rest in equilibrium between its stress and gravity feels no net kick before
-        the update and is not strained by it.
+        the update and is not strained by it.  ``record``: the last sweep's record of the
+        blocks (RECORD_VOID: void, untouched by the step), or NO_RECORD.
         """
         st = self.state
         half = 0.5 * dt
@@ -590,7 +592,7 @@ class Simulation:
         if self.gravity is not None:
             self.gravity.prepare(st, self.mesh, part)
         if self.strength is not None:
-            self.strength.load_stress(st, self.eos, part)
+            self.strength.load_stress(st, self.eos, part, record=record)
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
         if self.gravity is not None:
             self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
@@ -811,6 +813,10 @@ class Simulation:
         if self.gravity is not None:
             self.gravity.work = self._good_gravity_work
         self.settled_cells = self._good_settled_cells
+        if self.strength is not None and self._keeps_block_record():
+            # the work arrays of the steps undone: a block void in the copy is passed over by the
+            # first step taken again (cell_velocity_and_stress), whose fills must be 0 as it left them
+            self.strength.work.fill(0.0)
         self.last_dt = self._good_last_dt
         self._failure[:] = 0
         if self.tracers is not None:

@@ -377,15 +377,17 @@ class MaterialStrength:
             amount[cells] = law[:, j] * mass.ravel()[cells]
             mesh.interior(state.arhoq[own])[:, first + j] = amount.reshape(fill.shape)
 
-    def load_stress(self, state: HydroState, eos, partition, level: LevelBlocks | None = None) -> None:
+    def load_stress(self, state: HydroState, eos, partition, level: LevelBlocks | None = None,
+                    record: np.ndarray = _NO_BLOCKS) -> None:
         """Cell velocities, fills and the transported mixture stress S^n (from ``arhoq``) of the
         blocks this process advances (``partition``, :mod:`impactpipe.hydro.parallel`; or one
         refinement ``level``'s blocks, :class:`LevelBlocks`) into the work arrays, then their
         ghosts: what the first half kick (:meth:`kick`) uses.  The ghost fills are only started
-        here (:meth:`_start_work_ghosts`); the kick completes them."""
+        here (:meth:`_start_work_ghosts`); the kick completes them.  ``record``: the last sweep's
+        record of the blocks still void (:func:`cell_velocity_and_stress`), or empty."""
         cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
                                  self.arrays.model, self.ns, self.work, self._blocks(partition, level), self.holds,
-                                 self.has_mass, self.stressed)
+                                 self.has_mass, self.stressed, record)
         self._mark_quiet(partition, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_V, WK_S + self.ns), level)
 
@@ -396,7 +398,7 @@ class MaterialStrength:
         if blocks.size:
             cell_velocity_and_stress(state.alpha, state.arho, state.arhoq, state.momentum, self._fill_densities(eos),
                                      self.arrays.model, self.ns, self.work, blocks, self.holds, self.has_mass,
-                                     self.stressed)
+                                     self.stressed, _NO_BLOCKS)
 
     def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None,
                kicked_only: bool = False) -> None:

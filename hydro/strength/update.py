@@ -88,6 +88,7 @@ from numba import njit, prange
 from impactpipe.hydro.eos import pressure_not_negative, pressure_sound_speed_in_line, temperature_in_line
 from impactpipe.hydro.eos.porosity import ALPHA0, wave_speed_ratio
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.mesh.last_good import RECORD_VOID
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
@@ -158,7 +159,7 @@ def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
 
 @njit(cache=True, parallel=True)
 def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blocks, holds, has_mass,
-                             stressed_blocks):
+                             stressed_blocks, record):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
     ``blocks`` listed (int64) into ``work`` (ghosts are filled from them afterwards), into
     ``holds[b]`` whether block b has a cell that holds material (1) or not (0): the kernels of
@@ -189,15 +190,25 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blo
     does not carry) stay zero.  A cell whose fill in ``work`` is already 0 has zero velocity
     and stress there (every kernel that writes ``work`` keeps that so), and stays untouched
     when it is still void: most of the mesh is void in an impact, and skipping the stores
-    saves their memory traffic.
+    saves their memory traffic.  ``record`` (uint8, (NB,), or empty: none): the record of the
+    last sweep (:data:`impactpipe.hydro.mesh.last_good.RECORD_VOID`), a block whose entry is
+    RECORD_VOID was void at the start of the step and no sweep wrote to it: it is passed over
+    without a look at its cells (no cell holds material; the fills in ``work`` are 0 already,
+    left so when the block was last looked at, void as now), half of an impact's blocks.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
     gx = GHOST if nx > 1 else 0
     gy = GHOST if ny > 1 else 0
     gz = GHOST if nz > 1 else 0
+    recorded = record.shape[0] > 0
     for i in prange(blocks.shape[0]):
         b = blocks[i]
+        if recorded and record[b] == RECORD_VOID:
+            holds[b] = 0
+            has_mass[b] = 0
+            stressed_blocks[b] = 0
+            continue
         held = 0
         massive = 0
         carries = False
