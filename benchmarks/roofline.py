@@ -13,10 +13,11 @@ Two measurements in one job:
    (alpha, arho, arhoe, arhoq, momentum, energy) per interior cell, padded cells included,
    and S_i the same without the ghost cells,
 
-       B = S (2 ndim + 1) + 2 S_i
+       B = S (2 ndim + 1) + 2 S_i / K
 
    -- each of the ndim sweeps reads and writes the state once, the time-step kernel reads it
-   once, the last-good copy reads and writes its interior cells once (ghost fills and the
+   once, the last-good copy reads and writes its interior cells once every K steps
+   (``Simulation._last_good_interval()``: 8 on a uniform mesh, 1 on an adaptive one; ghost fills and the
    sweeps' scratch are left out: they are cache-resident or small).  The bandwidth ceiling is then
    R_max = bandwidth / B cell-updates/s, and ``roofline_fraction`` = measured rate / R_max:
    near 1 a step is limited by memory traffic, far below 1 by arithmetic and latency.
@@ -140,7 +141,7 @@ def main() -> None:
             run = phase_times(case, not args.full, args.steps, t)
             sim = run["sim"]
             s = state_bytes_per_cell(sim)
-            b = s * (2 * sim.mesh.ndim + 1) + 2 * interior_bytes_per_cell(sim)
+            b = s * (2 * sim.mesh.ndim + 1) + 2 * interior_bytes_per_cell(sim) / sim._last_good_interval()
             rate = run["updates"] / run["wall"]
             ceiling = bandwidth[t] / b
             rows.append({

@@ -49,7 +49,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     and Tillotson are called in place (:func:`impactpipe.hydro.eos.pressure_sound_speed_in_line`).  Cells with rho <= 0 or phi < PHI_VOID carry no
     signal.  ``mom`` is the momentum density (kg/m^2/s), ``block_dx`` the cell sizes (m).
     A 2D mesh's arrays (nz = 1) are read as (NB, M, 1, nx, ny), so that the innermost loop runs
-    along the block's rows (the same cells and sums: 15 -> 12 ns per gas-box cell).
+    along the block's rows (the same cells and sums).
     With ``porosity`` (the (M, NPOROSITY) rows of :func:`impactpipe.hydro.eos.porosity.pack_porosity`)
     a porous material's sound speed is its solid's at the matrix density, alpha rho_k, the
     distension alpha from the transported scalars ``arhoq`` (as in the gather); None, and
