@@ -85,7 +85,7 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
                           eos.table, rho0, a.model, a.params, a.shear, a.tensile_strength, work,
                           strength.counts[blocks].copy(), strength.amounts[blocks].copy(), copies,
                           strength.damage.model, strength.damage.params, gravity, strength._porosity_rows, has_mass,
-                          stressed, strength.face is not None)
+                          stressed, strength.face is not None, np.zeros(0, dtype=np.uint8))
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
                                     counters[0], face, 3 * strength.nmat, copies, stressed)
         best = min(best, time.perf_counter() - started)

@@ -597,7 +597,7 @@ class Simulation:
         if self.gravity is not None:
             self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
         if self.strength is not None:
-            self.strength.update(st, dt, self.eos, part, kicked_only=self.gravity is None)
+            self.strength.update(st, dt, self.eos, part, kicked_only=self.gravity is None, record=record)
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
         if self.gravity is not None:
             self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)

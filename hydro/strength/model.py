@@ -401,7 +401,7 @@ class MaterialStrength:
                                      self.stressed, _NO_BLOCKS)
 
     def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None,
-               kicked_only: bool = False) -> None:
+               kicked_only: bool = False, record: np.ndarray = _NO_BLOCKS) -> None:
         """Advance the stress of the ``partition``'s blocks (or of the ``level``'s) over ``dt`` (s)
         with the current velocities (the half-step ones after the first kick, into the work
         arrays with their ghosts first): Jaumann update, failure, yield, damage and stress
@@ -410,18 +410,20 @@ class MaterialStrength:
         velocities' strips travel, the update runs on the blocks that need none of them
         (:meth:`_around_ghosts`).  ``kicked_only``: nothing but the first :meth:`kick` changed
         the momentum since :meth:`load_stress` (no gravity between them), so the blocks that kick
-        passed over (:meth:`_mark_quiet`) keep the velocities load_stress found."""
+        passed over (:meth:`_mark_quiet`) keep the velocities load_stress found.  ``record``: the
+        last sweep's record of the blocks whose scalars are +0.0 (:func:`update_stress`), or empty."""
         unchanged = self._quiet if kicked_only else _NO_BLOCKS
         cell_velocities(state.arho, state.momentum, self.work, self._blocks(partition, level), unchanged)
         fills = self._start_work_ghosts(partition, slice(WK_V, WK_V + 3), level)
-        self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks), level)
+        self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks, record), level)
         self._mark_quiet(partition, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
         if self.face is not None:
             self._incoming += self._start_work_ghosts(partition, slice(WK_Y, NWORK_FACE), level)
             self._face_dt = dt
 
-    def stress_step(self, state: HydroState, dt: float, eos, blocks: np.ndarray) -> None:
+    def stress_step(self, state: HydroState, dt: float, eos, blocks: np.ndarray,
+                    record: np.ndarray = _NO_BLOCKS) -> None:
         """The stress update of :meth:`update` over ``dt`` (s) on the ``blocks`` listed (int64)
         alone (:func:`update_stress`), from the velocities and fills in the work arrays (their
         ghosts filled) and the blocks with mass in :attr:`has_mass`: no velocities computed, no
@@ -433,7 +435,7 @@ class MaterialStrength:
                       a.model, a.params, a.shear, a.tensile_strength, self.work, self.counts, self.amounts, blocks,
                       self.damage.model, self.damage.params,
                       _NO_GRAVITY if self.surface_gravity is None else self.surface_gravity, self._porosity_rows,
-                      self.has_mass, self.stressed, self.face is not None)
+                      self.has_mass, self.stressed, self.face is not None, record)
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
              amounts: np.ndarray, partition, level: LevelBlocks | None = None) -> None:

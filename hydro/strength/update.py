@@ -83,12 +83,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_not_negative, pressure_sound_speed_in_line, temperature_in_line
 from impactpipe.hydro.eos.porosity import ALPHA0, wave_speed_ratio
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
-from impactpipe.hydro.mesh.last_good import RECORD_VOID
+from impactpipe.hydro.mesh.last_good import RECORD_CLEAR, RECORD_VOID
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
 from impactpipe.hydro.strength.elastic import jaumann_update, radial_return
@@ -478,10 +480,79 @@ def _grady_kipp_damage(damage, pressure, sxx, syy, szz, sxy, sxz, syz, rho, c2_b
     return damage_step(damage, rate, dt), False
 
 
+@njit(cache=True, inline="always")
+def _rests_unstressed(work, alpha, arho, arhoe, amounts, b, ndim, model, eos_kind, eos_params, rho0, tensile_strength):
+    """Whether the stress step of block b, whose transported scalars are +0.0 (no stress, plastic
+    strain or damage), would leave everything as it is: every velocity of its interior cells and
+    of the ghost layers beside its faces (what the velocity gradients read) is +0.0, so every
+    L_ij is +0.0; each material with a yield model present in a cell holding material has
+    Y_T >= 0 and a pressure certain to be >= 0 (:func:`impactpipe.hydro.eos.pressure_not_negative`)
+    at rho_k >= STRENGTH_MIN_DENSITY_FRACTION rho0_k, the cell being at rest and unstressed in
+    :func:`update_stress`'s sense (it skips the EOS; nothing fails, yields or is counted); and
+    the energies it adds the stress power to are not -0.0: the power is +0.0, and +0.0 added
+    to anything but -0.0 leaves its bits (the stress work ``amounts[b, AMT_PLASTIC_WORK]``, each
+    alpha_k rho_k e_k).  A non-porous scene without surface-layer pressure or stored strength."""
+    nb, nmat, nx, ny, nz = alpha.shape
+    w0 = amounts[b, AMT_PLASTIC_WORK]
+    if w0 == 0.0 and math.copysign(1.0, w0) < 0.0:
+        return False
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    ex = 1 if nx > 1 else 0
+    ey = 1 if ny > 1 else 0
+    ez = 1 if nz > 1 else 0
+    # the interior cells and the first ghost layer beside each face (not the corners)
+    if not _velocities_zero(work, b, gx, nx - gx, gy, ny - gy, gz, nz - gz):
+        return False
+    if ex and not (_velocities_zero(work, b, gx - 1, gx, gy, ny - gy, gz, nz - gz)
+                   and _velocities_zero(work, b, nx - gx, nx - gx + 1, gy, ny - gy, gz, nz - gz)):
+        return False
+    if ey and not (_velocities_zero(work, b, gx, nx - gx, gy - 1, gy, gz, nz - gz)
+                   and _velocities_zero(work, b, gx, nx - gx, ny - gy, ny - gy + 1, gz, nz - gz)):
+        return False
+    if ez and not (_velocities_zero(work, b, gx, nx - gx, gy, ny - gy, gz - 1, gz)
+                   and _velocities_zero(work, b, gx, nx - gx, gy, ny - gy, nz - gz, nz - gz + 1)):
+        return False
+    for ix in range(gx, nx - gx):
+        for iy in range(gy, ny - gy):
+            for iz in range(gz, nz - gz):
+                if work[b, WK_PHI, ix, iy, iz] <= 0.0:
+                    continue
+                for k in range(nmat):
+                    if model[k] == NONE:
+                        continue
+                    a = alpha[b, k, ix, iy, iz]
+                    ar = arho[b, k, ix, iy, iz]
+                    if not (a > ALPHA_MIN and ar > 0.0):
+                        continue
+                    e_density = arhoe[b, k, ix, iy, iz]
+                    rk = ar / a
+                    if (tensile_strength[k] < 0.0 or (e_density == 0.0 and math.copysign(1.0, e_density) < 0.0)
+                            or rk < STRENGTH_MIN_DENSITY_FRACTION * rho0[k]
+                            or not pressure_not_negative(eos_kind[k], eos_params[k], rk, e_density * (1.0 / ar))):
+                        return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _velocities_zero(work, b, x0, x1, y0, y1, z0, z1):
+    """Whether the velocities in the work arrays of block b's cells [x0, x1) x [y0, y1) x [z0, z1)
+    are +0.0 (their bits: -0.0 is not)."""
+    bits = 0
+    for d in range(3):
+        for ix in range(x0, x1):
+            for iy in range(y0, y1):
+                for iz in range(z0, z1):
+                    bits |= np.float64(work[b, WK_V + d, ix, iy, iz]).view(np.int64)
+    return bits == 0
+
+
 @njit(cache=True, parallel=True)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, blocks,
-                  damage_model, damage_params, surface_gravity, porosity, has_mass, stressed_blocks, store_strength):
+                  damage_model, damage_params, surface_gravity, porosity, has_mass, stressed_blocks, store_strength,
+                  record):
     """One strength step of ``dt`` (s) for every interior cell of the ``blocks`` listed (int64:
     a process's range, or one refinement level's); see the module docstring.
     ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`);
@@ -527,6 +598,12 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     leaves the state and the counters bit for bit as the evaluation would.  Early in an impact
     most of the target is such a cell.
 
+    A whole block passes over its cells where the last sweep's ``record`` (uint8, (NB,), or
+    empty: none; :data:`impactpipe.hydro.mesh.last_good.RECORD_CLEAR`) says its transported
+    scalars are +0.0 and :func:`_rests_unstressed` finds every cell such a cell at rest (its
+    velocities +0.0, ghosts included): the step would store the +0.0 each scalar holds and add
+    +0.0 to the energy and the work.
+
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
     void cell's stay zero, as :func:`cell_velocity_and_stress` left them).  The scalars of
@@ -545,9 +622,14 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     for m in range(nmat):
         porous_scene = porous_scene or porosity[m, ALPHA0] > 1.0
     with_gravity = surface_gravity.shape[0] > 0
+    recorded = record.shape[0] > 0 and not (porous_scene or with_gravity or store_strength)
     for i in prange(blocks.shape[0]):
         b = blocks[i]
         if has_mass[b] == 0:
+            stressed_blocks[b] = 0
+            continue
+        if recorded and record[b] == RECORD_CLEAR and _rests_unstressed(
+                work, alpha, arho, arhoe, amounts, b, ndim, model, eos_kind, eos_params, rho0, tensile_strength):
             stressed_blocks[b] = 0
             continue
         carries = False
