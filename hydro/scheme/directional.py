@@ -265,36 +265,17 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
         half = 0.5 * dtdx
         d1 = block_dx[b, t1] if n1 > 1 else 1.0
         d2 = block_dx[b, t2] if n2 > 1 else 1.0
+        # the pencils' geometry rows are the same for every pencil of the block, except along the
+        # axis of r-z, where each pencil's ring has its own volume: written once per block
+        area_lo = area_hi = 0.0
+        if not axial:
+            area_lo, area_hi = _pencil_geometry(sc, ncell, g, n, radial, False, block_lo[b, 0], dx, d1, d2, 0)
         for j1 in range(lo1, hi1):
             for j2 in range(lo2, hi2):
-                # geometry of the pencil: A/V on both sides of each cell and physical volumes
-                face_area_lo = d1 * d2
-                face_area_hi = d1 * d2
-                for i in range(ncell):
-                    if radial:
-                        r_lo = block_lo[b, 0] + (i - g) * dx
-                        r_hi = r_lo + dx
-                        vol = abs(r_hi * r_hi - r_lo * r_lo)
-                        sc[i, W_IVL] = 2.0 * abs(r_lo) / vol
-                        sc[i, W_IVR] = 2.0 * abs(r_hi) / vol
-                        sc[i, W_VOL] = np.pi * vol * d1
-                        if i == g:
-                            face_area_lo = 2.0 * np.pi * abs(r_lo) * d1
-                        if i == g + n - 1:
-                            face_area_hi = 2.0 * np.pi * abs(r_hi) * d1
-                    elif axial:
-                        r_lo = block_lo[b, 0] + (j1 - g) * d1
-                        r_hi = r_lo + d1
-                        ring = np.pi * abs(r_hi * r_hi - r_lo * r_lo)
-                        sc[i, W_IVL] = 1.0 / dx
-                        sc[i, W_IVR] = 1.0 / dx
-                        sc[i, W_VOL] = ring * dx
-                        face_area_lo = ring
-                        face_area_hi = ring
-                    else:
-                        sc[i, W_IVL] = 1.0 / dx
-                        sc[i, W_IVR] = 1.0 / dx
-                        sc[i, W_VOL] = dx * d1 * d2
+                face_area_lo, face_area_hi = area_lo, area_hi
+                if axial:
+                    face_area_lo, face_area_hi = _pencil_geometry(sc, ncell, g, n, False, True, block_lo[b, 0], dx, d1,
+                                                                  d2, j1)
                 # 1-3. cell values, face states and fluxes: the plain path for a pencil that one material
                 # fills alone (hydro.scheme.plain_pencils), the general path otherwise
                 m = -1
@@ -411,6 +392,49 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                                  eos_kind, eos_params, eos_table, arhoq, nq, fq_row, carried)
         if tracked:
             clear_after[b] = RECORD_VOID if stays_void else (RECORD_CLEAR if stays_clear else 0)
+
+
+@njit(cache=True, inline="always")
+def _pencil_geometry(sc, ncell, g, n, radial, axial, r0, dx, d1, d2, j1):
+    """The geometry rows of a pencil of ``ncell`` cells (``n`` interior, ``g`` ghosts per side):
+    A/V on both sides of each cell (1/m) and its volume (m^3; in r-z the whole ring's), into ``sc[i, W_IVL]``, ``sc[i, W_IVR]``, ``sc[i, W_VOL]``; returns the areas (m^2) of the
+    pencil's first and last interior faces.  ``dx`` the cell size along the pencil, ``d1``,
+    ``d2`` across it (1 for an axis the mesh lacks), ``r0`` the block's lower radius (m):
+
+    - planar: A/V = 1/dx, V = dx d1 d2, A = d1 d2;
+    - r-z along r (``radial``): V = pi |r_+^2 - r_-^2| d1, A/V = 2 |r_-+| / |r_+^2 - r_-^2|,
+      A = 2 pi |r| d1 at the block's faces;
+    - r-z along z (``axial``): A = pi |r_+^2 - r_-^2| of the pencil's ring (radial index
+      ``j1``), V = A dx, A/V = 1/dx.
+    """
+    face_area_lo = d1 * d2
+    face_area_hi = d1 * d2
+    for i in range(ncell):
+        if radial:
+            r_lo = r0 + (i - g) * dx
+            r_hi = r_lo + dx
+            vol = abs(r_hi * r_hi - r_lo * r_lo)
+            sc[i, W_IVL] = 2.0 * abs(r_lo) / vol
+            sc[i, W_IVR] = 2.0 * abs(r_hi) / vol
+            sc[i, W_VOL] = np.pi * vol * d1
+            if i == g:
+                face_area_lo = 2.0 * np.pi * abs(r_lo) * d1
+            if i == g + n - 1:
+                face_area_hi = 2.0 * np.pi * abs(r_hi) * d1
+        elif axial:
+            r_lo = r0 + (j1 - g) * d1
+            r_hi = r_lo + d1
+            ring = np.pi * abs(r_hi * r_hi - r_lo * r_lo)
+            sc[i, W_IVL] = 1.0 / dx
+            sc[i, W_IVR] = 1.0 / dx
+            sc[i, W_VOL] = ring * dx
+            face_area_lo = ring
+            face_area_hi = ring
+        else:
+            sc[i, W_IVL] = 1.0 / dx
+            sc[i, W_IVR] = 1.0 / dx
+            sc[i, W_VOL] = dx * d1 * d2
+    return face_area_lo, face_area_hi
 
 
 @njit(cache=True, inline="always")
