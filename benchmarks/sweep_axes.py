@@ -7,7 +7,7 @@ the step each, so the state stays what the step left.  Along x a 2D block's penc
 its rows (stride nx of the C-ordered fields), along y along them (stride 1): the difference
 between the axes is the cost of the strided pencils.
 
-    NUMBA_NUM_THREADS=1 python benchmarks/sweep_axes.py [--case 2d-ideal-gas] [--quick]
+    NUMBA_NUM_THREADS=1 python benchmarks/sweep_axes.py [--case 2d-ideal-gas] [--quick] [--block-cells 16]
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from hydro_throughput import build  # noqa: E402
 from impactpipe.hydro.mesh.boundary import NO_RECORD  # noqa: E402
 
 
-def sweep_costs(case: str, quick: bool, calls: int, repeats: int) -> dict[int, float]:
+def sweep_costs(case: str, quick: bool, calls: int, repeats: int, block_cells: int | None = None) -> dict[int, float]:
     """Best ns per cell of one sweep along each axis over ``repeats`` repeats of ``calls`` calls."""
-    sim = build(case, quick)
+    sim = build(case, quick, block_cells)
     sim.step()
     blocks = np.arange(sim.mesh.nblocks, dtype=np.int64)
     dt = 1.0e-3 * sim.last_dt
@@ -50,8 +50,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="the smaller mesh")
     parser.add_argument("--calls", type=int, default=5)
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--block-cells", type=int, default=None, help="block edge of the box cases")
     args = parser.parse_args()
-    costs = sweep_costs(args.case, args.quick, args.calls, args.repeats)
+    costs = sweep_costs(args.case, args.quick, args.calls, args.repeats, args.block_cells)
     print(f"{args.case} ({numba.get_num_threads()} thread(s)): "
           + ", ".join(f"{'xyz'[axis]} {cost:.1f}" for axis, cost in costs.items()) + " ns per cell")
 
