@@ -56,7 +56,10 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
     ``arhoq`` is not read.  ``void`` (uint8, (NB,), or None): the blocks known to be void
     (:func:`impactpipe.hydro.mesh.last_good.void_blocks`), whose rate is 0 (none of their cells
     has rho > 0) without a look at their cells.  A mesh of one material takes one pass per
-    block with cubic cells (:func:`_single_material_rate`, the same rate bit for bit).
+    block with cubic cells (:func:`_single_material_rate`, the same rate bit for bit).  With
+    cubic cells a cell counts its largest |m_d|: where a momentum component is NaN (a state the
+    sweeps report as failed) the cell may count none of its components, where the per-axis
+    rates would count the others.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = 0
