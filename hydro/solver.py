@@ -317,6 +317,9 @@ class Simulation:
         #: void (:mod:`impactpipe.hydro.mesh.last_good`), else 0: row 0 at the start of a step,
         #: then the rows take turns as each sweep writes the record after it (:meth:`step`)
         self._scalars_clear = np.zeros((2, self.mesh.nblocks), dtype=np.uint8)
+        #: per block, a column of its transported scalars last found not +0.0, or -1
+        #: (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`)
+        self._clear_hint = np.full(self.mesh.nblocks, -1, dtype=np.int64)
         self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
         self._good_gravity_work = None if self.gravity is None else self.gravity.work
@@ -754,7 +757,7 @@ class Simulation:
         void = self._void_now
         clear = self._scalars_clear[0]
         if self._keeps_block_record():
-            scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear)
+            scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear, self._clear_hint)
             clear[lo:hi][void[lo:hi] != 0] = RECORD_VOID
         else:
             clear[lo:hi] = 0

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro import PROBLEMS
-from impactpipe.hydro.mesh.last_good import RECORD_CLEAR, RECORD_VOID
+from impactpipe.hydro.mesh.last_good import RECORD_CLEAR, RECORD_VOID, scalar_clear_blocks
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.solver import Simulation
 from impactpipe.pipeline.presets import resolve_damage, resolve_strength
@@ -28,6 +28,55 @@ def strength_impact(physics: str):
     return PROBLEMS["impact"].setup(params, materials)
 
 
+def resting_blocks(sim) -> int:
+    """The blocks holding material that the stress step of a Grady-Kipp scene passes over now: at
+    rest and unstressed, their flaws aside (hydro/strength/update.py, ``_strength_scalars_clear``)."""
+    from impactpipe.hydro.strength import update
+
+    st, strength = sim.state, sim.strength
+    arrays = strength.arrays
+    rho0 = strength._reference_densities(sim.eos)
+    count = 0
+    for b in np.flatnonzero(strength.has_mass):
+        count += bool(update._rests_unstressed(strength.work, st.alpha, st.arho, st.arhoe, strength.amounts, b,
+                                               sim.mesh.ndim, arrays.model, sim.eos.kind, sim.eos.params, rho0,
+                                               arrays.tensile_strength)
+                      and update._strength_scalars_clear(st.arhoq, strength.work, st.alpha, st.arho, b,
+                                                         strength.ns, arrays.model))
+    return count
+
+
+def test_the_hint_of_a_non_zero_column_leaves_the_record_as_it_is():
+    """scalar_clear_blocks tests a block's hinted column first: the record is the one without
+    hints whatever they are (none, stale, pointing at a zero column), -0.0 counts as not zero, and
+    each block found not clear is left a hint of a column holding something."""
+    rng = np.random.default_rng(7)
+    nb, nc = 40, 6
+    arhoq = np.zeros((nb, nc, 6, 6, 1))
+    for b in range(nb):
+        kind = b % 4
+        if kind == 1:
+            arhoq[b, rng.integers(nc), rng.integers(6), rng.integers(6), 0] = rng.normal()
+        elif kind == 2:
+            arhoq[b, rng.integers(nc), rng.integers(6), rng.integers(6), 0] = -0.0
+        elif kind == 3:
+            arhoq[b, rng.integers(nc)] = 1.0
+    void = np.zeros(nb, dtype=np.uint8)
+    void[::7] = 1
+    bits = arhoq.view(np.int64)
+    expected = np.array([1 if void[b] or not bits[b].any() else 0 for b in range(nb)], dtype=np.uint8)
+    for hint in (np.full(nb, -1), rng.integers(-1, nc, nb)):
+        hint = hint.astype(np.int64)
+        clear = np.full(nb, 9, dtype=np.uint8)
+        scalar_clear_blocks(bits, void, 0, nb, clear, hint)
+        assert np.array_equal(clear, expected)
+        for b in np.flatnonzero(clear == 0):
+            assert bits[b, hint[b]].any()
+        again = np.full(nb, 9, dtype=np.uint8)
+        scalar_clear_blocks(bits, void, 0, nb, again, hint)
+        assert np.array_equal(again, expected)
+
+
 @pytest.mark.parametrize("physics", ["hydro", "strength", "fracture"])
 def test_a_run_with_the_record_of_clear_blocks_equals_one_without_it_bit_for_bit(physics, monkeypatch):
     with_record = strength_impact(physics)
@@ -40,6 +89,8 @@ def test_a_run_with_the_record_of_clear_blocks_equals_one_without_it_bit_for_bit
     assert void > 0, "some blocks stayed void, so the ghost fills skipped their slabs"
     if physics == "strength":
         assert clear > 0, "some blocks were clear, so the record skipped their scalars"
+    if physics == "fracture":
+        assert resting_blocks(with_record) > 0, "the stress step passed over some blocks at rest despite their flaws"
 
     monkeypatch.setattr(Simulation, "_keeps_block_record", lambda self: False)
     without = strength_impact(physics)
@@ -80,3 +131,39 @@ def test_velocities_kept_for_the_blocks_the_first_kick_passed_over_equal_new_one
     for name, values in kept.state.arrays().items():
         assert values.tobytes() == found.state.arrays()[name].tobytes(), name
     assert kept.strength.work.tobytes() == found.strength.work.tobytes()
+
+
+def test_a_fracture_block_passes_as_clear_with_flaws_alone():
+    """``_strength_scalars_clear``: a Grady-Kipp block whose stress, plastic strain and damage are
+    +0.0 passes whatever its flaws; a stress, a -0.0 damage, or a flaw left in a void cell or of an
+    absent material (which the stress step would clear) does not."""
+    from impactpipe.hydro.strength import update
+    from impactpipe.hydro.strength.parameters import GEO
+
+    ns, nq, nmat = 4, update.scalar_slots(2, True), 2
+    model = np.array([GEO, GEO], dtype=np.int64)
+
+    def block():
+        alpha = np.zeros((1, nmat, 6, 6, 1))
+        alpha[0, 0] = 1.0
+        arho = 2700.0 * alpha
+        arhoq = np.zeros((1, nmat * nq, 6, 6, 1))
+        arhoq[0, ns + 1:ns + 1 + update.NFLAW] = 1.0e20 * arho[0, 0]
+        work = np.zeros((1, update.NWORK, 6, 6, 1))
+        work[0, update.WK_PHI] = 1.0
+        return alpha, arho, arhoq, work
+
+    def clear(alpha, arho, arhoq, work):
+        return update._strength_scalars_clear(arhoq, work, alpha, arho, 0, ns, model)
+
+    assert clear(*block())
+    for slot, value in ((0, 1.0), (ns, 1.0e-9), (nq - 1, -0.0)):
+        alpha, arho, arhoq, work = block()
+        arhoq[0, slot, 3, 2, 0] = value
+        assert not clear(alpha, arho, arhoq, work), slot
+    alpha, arho, arhoq, work = block()
+    arhoq[0, nq + ns + 1, 2, 2, 0] = 1.0
+    assert not clear(alpha, arho, arhoq, work), "a flaw of the absent material"
+    alpha, arho, arhoq, work = block()
+    work[0, update.WK_PHI, 2, 3, 0] = 0.0
+    assert not clear(alpha, arho, arhoq, work), "flaws in a void cell"

@@ -40,13 +40,13 @@ def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void):
     The partial densities are read first: a block holding material stops there.
     """
     for b in prange(lo, hi):
-        empty = (_zero_run(arho, b) and _zero_run(alpha, b) and _zero_run(arhoe, b) and _zero_run(energy, b)
-                 and _zero_run(mom, b))
+        empty = (_zero_run(arho[b]) and _zero_run(alpha[b]) and _zero_run(arhoe[b]) and _zero_run(energy[b])
+                 and _zero_run(mom[b]))
         void[b] = 1 if empty else 0
 
 
 @njit(cache=True, parallel=True)
-def scalar_clear_blocks(arhoq, void, lo, hi, clear):
+def scalar_clear_blocks(arhoq, void, lo, hi, clear, hint):
     """``clear[b]`` = 1 where the transported scalars of block b of ``lo .. hi - 1`` are +0.0 in
     its interior and in the ghost layers a step's ghost fill writes of them
     (:func:`impactpipe.hydro.scheme.pencil_layout.transport_ghost_layers`), else 0; ``arhoq`` an
@@ -60,17 +60,38 @@ def scalar_clear_blocks(arhoq, void, lo, hi, clear):
     only the skips).  Right after an impact's contact most of the target is clear; the ghost
     fills, the sweeps and the last-good copy then need not move its scalars
     (:meth:`impactpipe.hydro.solver.Simulation.step`).
+
+    ``hint[b]`` (int64, (NB,)): a column of block b that held a value other than +0.0 at the last
+    call that found one, or -1.  That column is tested first, alone: where it still holds one
+    the block is not clear without a look at its other columns.  A material's flaws (Grady-Kipp)
+    or distension (porosity) are not zero wherever it is, and a block holding it is never clear:
+    one column of it is read instead of all.  The record is the same whatever the hints.
     """
     for b in prange(lo, hi):
-        clear[b] = 1 if void[b] != 0 or _zero_run(arhoq, b) else 0
+        if void[b] != 0:
+            clear[b] = 1
+            continue
+        h = hint[b]
+        if h >= 0 and not _zero_run(arhoq[b, h]):
+            clear[b] = 0
+            continue
+        if _zero_run(arhoq[b]):
+            clear[b] = 1
+            continue
+        clear[b] = 0
+        for c in range(arhoq.shape[1]):
+            if not _zero_run(arhoq[b, c]):
+                hint[b] = c
+                break
 
 
 @njit(cache=True, inline="always")
-def _zero_run(field, b):
-    """Whether every cell of ``field[b]`` (int64 view, C-contiguous), ghosts included, is +0.0:
-    the bits of the whole run or-ed together, then tested (a loop that LLVM vectorizes; one
-    that tests as it goes is not, and took several times as long)."""
-    run = field[b].reshape(field[b].size)
+def _zero_run(field):
+    """Whether every element of ``field`` (an int64 view of floats, C-contiguous: one block's
+    scalars or one column of them, ghosts included) is +0.0: the bits of the whole run or-ed
+    together, then tested (a loop that LLVM vectorizes; one that tests as it goes is not, and
+    took several times as long)."""
+    run = field.reshape(field.size)
     bits = 0
     for i in range(run.size):
         bits |= run[i]

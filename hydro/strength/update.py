@@ -536,6 +536,43 @@ def _rests_unstressed(work, alpha, arho, arhoe, amounts, b, ndim, model, eos_kin
 
 
 @njit(cache=True, inline="always")
+def _strength_scalars_clear(arhoq, work, alpha, arho, b, ns, model):
+    """Whether block b's interior would pass as clear to :func:`_rests_unstressed` in a Grady-Kipp
+    scene, where the flaws (slots NS + 1 .. NS + NFLAW of each material) are not zero wherever the
+    material is: every scalar the stress step reads or clears is +0.0 (its bits), that is the stress
+    (slots 0 .. NS - 1), plastic strain (NS) and damage (NQ - 1) of each material with a yield model
+    present in a cell holding material, and every scalar of a void cell (fill 0 in ``work``) and of
+    an absent material with a yield model, which the step would set to +0.0.  Its flaws it neither
+    reads nor writes at rest: a material at rest and unstressed does not reach the Grady-Kipp
+    damage (:func:`update_stress`).  Not for a porous scene (a distension is not zero)."""
+    nb, nmat, nx, ny, nz = alpha.shape
+    nq = arhoq.shape[1] // nmat
+    gx = GHOST if nx > 1 else 0
+    gy = GHOST if ny > 1 else 0
+    gz = GHOST if nz > 1 else 0
+    bits = 0
+    for ix in range(gx, nx - gx):
+        for iy in range(gy, ny - gy):
+            for iz in range(gz, nz - gz):
+                void = work[b, WK_PHI, ix, iy, iz] <= 0.0
+                for k in range(nmat):
+                    if model[k] == NONE and not void:
+                        continue
+                    base = k * nq
+                    present = alpha[b, k, ix, iy, iz] > ALPHA_MIN and arho[b, k, ix, iy, iz] > 0.0
+                    if present and not void:
+                        for q in range(base, base + ns + 1):
+                            bits |= np.float64(arhoq[b, q, ix, iy, iz]).view(np.int64)
+                        bits |= np.float64(arhoq[b, base + nq - 1, ix, iy, iz]).view(np.int64)
+                    else:
+                        for q in range(base, base + nq):
+                            bits |= np.float64(arhoq[b, q, ix, iy, iz]).view(np.int64)
+                if bits != 0:
+                    return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def _velocities_zero(work, b, x0, x1, y0, y1, z0, z1):
     """Whether the velocities in the work arrays of block b's cells [x0, x1) x [y0, y1) x [z0, z1)
     are +0.0 (their bits: -0.0 is not)."""
@@ -623,13 +660,19 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
         porous_scene = porous_scene or porosity[m, ALPHA0] > 1.0
     with_gravity = surface_gravity.shape[0] > 0
     recorded = record.shape[0] > 0 and not (porous_scene or with_gravity or store_strength)
+    # with Grady-Kipp fracture no block holding material is clear (its flaws are not zero): its
+    # blocks are tested for the scalars the step reads instead
+    fracture_scene = False
+    for m in range(nmat):
+        fracture_scene = fracture_scene or damage_model[m] == GRADY_KIPP
     for i in prange(blocks.shape[0]):
         b = blocks[i]
         if has_mass[b] == 0:
             stressed_blocks[b] = 0
             continue
-        if recorded and record[b] == RECORD_CLEAR and _rests_unstressed(
-                work, alpha, arho, arhoe, amounts, b, ndim, model, eos_kind, eos_params, rho0, tensile_strength):
+        if recorded and (record[b] == RECORD_CLEAR or fracture_scene) and _rests_unstressed(
+                work, alpha, arho, arhoe, amounts, b, ndim, model, eos_kind, eos_params, rho0, tensile_strength) and (
+                record[b] == RECORD_CLEAR or _strength_scalars_clear(arhoq, work, alpha, arho, b, ns, model)):
             stressed_blocks[b] = 0
             continue
         carries = False
