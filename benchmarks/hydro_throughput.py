@@ -62,17 +62,23 @@ HEAVY = {"model": "ideal_gas", "gamma": 1.6, "cv": 300.0}
 MEMORY_STEPS = 2
 
 
-def _smooth_box(geometry, cells, block_cells, nmat):
+def _smooth_box(geometry, cells, block_cells, nmat, swap_axes=False):
+    """The box cases' smooth periodic flow; ``swap_axes``: the same flow with x and y exchanged
+    (its density and velocity fields mirrored in the diagonal), for benchmarks/sweep_axes.py."""
     ndim = len(cells)
     mesh = BlockMesh.uniform(geometry, [0.0] * ndim, [1.0] * ndim, cells, [("periodic", "periodic")] * ndim,
                              block_cells)
     specs = [GAS, HEAVY][:nmat]
     eos = pack_eos(specs)
     c = mesh.cell_centers()
-    x, y = c[:, 0], c[:, 1]
+    x, y = (c[:, 1], c[:, 0]) if swap_axes else (c[:, 0], c[:, 1])
     state = HydroState.empty(mesh, nmat)
     rho = 1.0 + 0.3 * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y)
-    vel = np.stack([0.3 + 0.2 * np.sin(2 * np.pi * y), -0.1 + 0.2 * np.cos(2 * np.pi * x), np.zeros_like(x)], axis=1)
+    along_x, along_y = 0.3 + 0.2 * np.sin(2 * np.pi * y), -0.1 + 0.2 * np.cos(2 * np.pi * x)
+    if swap_axes:
+        along_x, along_y = along_y, along_x
+    vel = np.stack([along_x, along_y, np.zeros_like(x)], axis=1)
+    del along_x, along_y
     state.set_material(mesh, 1.0, 0, eos, rho, vel, pressure=1.0)
     if nmat == 2:
         sphere = ((c - 0.5) ** 2).sum(axis=1) < 0.06

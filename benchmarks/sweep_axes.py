@@ -7,7 +7,11 @@ the step each, so the state stays what the step left.  Along x a 2D block's penc
 its rows (stride nx of the C-ordered fields), along y along them (stride 1): the difference
 between the axes is the cost of the strided pencils.
 
-    NUMBA_NUM_THREADS=1 python benchmarks/sweep_axes.py [--case 2d-ideal-gas] [--quick] [--block-cells 16]
+With ``--swap-axes`` the gas box's flow is mirrored in the diagonal (x and y exchanged): what
+each axis costs because of the flow then moves to the other axis, what it costs because of the
+memory layout stays.
+
+    NUMBA_NUM_THREADS=1 python benchmarks/sweep_axes.py [--case 2d-ideal-gas] [--quick] [--block-cells 16] [--swap-axes]
 """
 
 from __future__ import annotations
@@ -21,14 +25,21 @@ import numba
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from hydro_throughput import build  # noqa: E402
+from hydro_throughput import _smooth_box, build  # noqa: E402
 
 from impactpipe.hydro.mesh.boundary import NO_RECORD  # noqa: E402
 
 
-def sweep_costs(case: str, quick: bool, calls: int, repeats: int, block_cells: int | None = None) -> dict[int, float]:
+def sweep_costs(case: str, quick: bool, calls: int, repeats: int, block_cells: int | None = None,
+                swap_axes: bool = False) -> dict[int, float]:
     """Best ns per cell of one sweep along each axis over ``repeats`` repeats of ``calls`` calls."""
-    sim = build(case, quick, block_cells)
+    if swap_axes:
+        if case != "2d-ideal-gas":
+            raise SystemExit("--swap-axes is for the 2d-ideal-gas case")
+        n = 256 if quick else 512
+        sim = _smooth_box("2d-planar", [n, n], block_cells, 1, swap_axes=True)
+    else:
+        sim = build(case, quick, block_cells)
     sim.step()
     blocks = np.arange(sim.mesh.nblocks, dtype=np.int64)
     dt = 1.0e-3 * sim.last_dt
@@ -51,9 +62,10 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=5)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--block-cells", type=int, default=None, help="block edge of the box cases")
+    parser.add_argument("--swap-axes", action="store_true", help="the gas box's flow with x and y exchanged")
     args = parser.parse_args()
-    costs = sweep_costs(args.case, args.quick, args.calls, args.repeats, args.block_cells)
-    print(f"{args.case} ({numba.get_num_threads()} thread(s)): "
+    costs = sweep_costs(args.case, args.quick, args.calls, args.repeats, args.block_cells, args.swap_axes)
+    print(f"{args.case}{' (axes swapped)' if args.swap_axes else ''} ({numba.get_num_threads()} thread(s)): "
           + ", ".join(f"{'xyz'[axis]} {cost:.1f}" for axis, cost in costs.items()) + " ns per cell")
 
 
