@@ -196,7 +196,11 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blo
     last sweep (:data:`impactpipe.hydro.mesh.last_good.RECORD_VOID`), a block whose entry is
     RECORD_VOID was void at the start of the step and no sweep wrote to it: it is passed over
     without a look at its cells (no cell holds material; the fills in ``work`` are 0 already,
-    left so when the block was last looked at, void as now), half of an impact's blocks.
+    left so when the block was last looked at, void as now), half of an impact's blocks.  A
+    block whose entry is RECORD_CLEAR holds +0.0 in every transported scalar: each of its
+    mixture stresses, a sum of a / (a rho) times +0.0 with a / (a rho) finite and > 0 (the
+    sweeps discard a solid's partial density long before its inverse could overflow), is +0.0,
+    and is stored so without reading the scalars.
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
@@ -214,6 +218,8 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blo
         held = 0
         massive = 0
         carries = False
+        # scalars +0.0 throughout: every mixture stress is +0.0, summed without a read
+        clear = recorded and record[b] == RECORD_CLEAR
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
                 for iz in range(gz, nz - gz):
@@ -242,7 +248,7 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blo
                         work[b, WK_V + d, ix, iy, iz] = mom[b, d, ix, iy, iz] / rho
                     work[b, WK_PHI, ix, iy, iz] = fill
                     s0 = s1 = s2 = s3 = s4 = s5 = 0.0
-                    for k in range(nmat):
+                    for k in range(nmat if not clear else 0):
                         ar = arho[b, k, ix, iy, iz]
                         a = alpha[b, k, ix, iy, iz]
                         if model[k] == NONE or not (a > ALPHA_MIN and ar > 0.0):
