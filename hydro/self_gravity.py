@@ -57,7 +57,7 @@ from numba import njit, prange
 from scipy.constants import G
 
 from impactpipe.hydro.gravity_kick import cell_volume, gravity_kick
-from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, BlockMesh
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, BlockMesh, ghost_widths
 from impactpipe.hydro.mesh.state import HydroState
 
 #: Default expansion order L.
@@ -149,9 +149,7 @@ def block_mass_moments(arho, block_lo, block_dx, geometry, ndim, out):
     """Per block: mass (kg), mass x position (3 components, kg m) and the largest cell mass
     (kg) into ``out[NB, 5]`` (each block's cells summed in order)."""
     nb, nmat, nx, ny, nz = arho.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(nb):
         mass = 0.0
         mx = 0.0
@@ -206,9 +204,7 @@ def shell_moments(arho, block_lo, block_dx, geometry, ndim, center, shell, order
     ``work`` [threads, slots] per-thread harmonic scratch.
     """
     nb, nmat, nx, ny, nz = arho.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     nshell = inner.shape[1]
     axisymmetric = geometry == CYLINDRICAL
     for b in prange(lo, hi):
@@ -268,12 +264,8 @@ def potential_field(geometry, ndim, block_lo, block_dx, block_mass, center, shel
     ``lo .. hi - 1`` that hold mass (``block_mass[b]`` > 0, kg) into ``phi[NB, NX, NY, NZ]``
     (padded indices); the kicks use it only where there is mass."""
     nb, nx, ny, nz = phi.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
-    ex = 1 if nx > 1 else 0
-    ey = 1 if ny > 1 else 0
-    ez = 1 if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
+    ex, ey, ez = min(gx, 1), min(gy, 1), min(gz, 1)
     for b in prange(lo, hi):
         if block_mass[b] <= 0.0:
             continue
@@ -299,9 +291,7 @@ def apply_self_gravity(dt, geometry, ndim, phi, arho, momentum, energy, block_lo
     (module docstring); per block the work done (J) into ``block_work`` and
     (1/2) sum m Phi (J) into ``block_potential``."""
     nb, nmat, nx, ny, nz = arho.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(lo, hi):
         dx0 = block_dx[b, 0]
         dx1 = block_dx[b, 1] if ndim > 1 else 1.0

@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import ghost_widths
 from impactpipe.hydro.mesh.cells import shifted_cell
 from impactpipe.hydro.scheme.mixture import mixture_state
 from impactpipe.hydro.scheme.pencil_layout import PHI_SECOND_ORDER
@@ -66,9 +66,7 @@ def mixture_pressure(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_table,
     ``out`` must hold there already.
     """
     nb, nmat, nx, ny, nz = alpha.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(nb):
         if void is not None and void[b] != 0:
             continue
@@ -96,9 +94,7 @@ def block_indicators(alpha, arho, mom, pressure, ndim, p_floor, margin, out, nea
     ghosts included, pressure 0.0) are skipped, their indicators all 0.0, as ``out`` and ``near``
     must hold there already."""
     nb, nmat, nx, ny, nz = alpha.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(nb):
         if void is not None and void[b] != 0:
             continue

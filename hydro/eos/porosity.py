@@ -76,7 +76,7 @@ import numpy as np
 from numba import njit, prange
 
 from impactpipe.hydro.eos import reference_density
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import ghost_widths
 
 # row slots of the packed parameters (``porosity[M, NPOROSITY]``)
 ALPHA0 = 0      # initial distension alpha_0 (-)
@@ -270,9 +270,7 @@ def compact(alpha, arho, arhoq, porosity, counts, lo, hi):
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(lo, hi):
         for k in range(nmat):
             row = porosity[k]

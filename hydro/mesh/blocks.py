@@ -34,10 +34,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 
 from impactpipe.hydro.output.snapshot import GEOMETRIES, GEOMETRY_DIMENSIONS
 
 GHOST = 2
+
+
+@njit(cache=True, inline="always")
+def ghost_widths(nx, ny, nz):
+    """Ghost layers (gx, gy, gz) on each side of a block padded to (nx, ny, nz) cells: GHOST along
+    an axis the mesh has, 0 along one it lacks (padded to a single cell)."""
+    return (GHOST if nx > 1 else 0, GHOST if ny > 1 else 0, GHOST if nz > 1 else 0)
 OUTFLOW = -1
 REFLECTING = -2
 BOUNDARY_KINDS = ("outflow", "reflecting", "periodic")

@@ -28,7 +28,7 @@ from __future__ import annotations
 from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_sound_speed, reference_density
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import ghost_widths
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION, tension_left
 from impactpipe.hydro.scheme.pencil_layout import FLOOR_TENSILE_LIMIT
 
@@ -58,9 +58,7 @@ def open_void_in_tension(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_ta
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(lo, hi):
         for k in range(nmat):
             rho0 = reference_density(eos_kind[k], eos_params[k], eos_table)

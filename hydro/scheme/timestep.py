@@ -24,7 +24,7 @@ from numba import get_thread_id, njit, prange
 from impactpipe.hydro.eos import IDEAL_GAS, pressure_sound_speed_in_line, reference_density
 from impactpipe.hydro.eos.ideal_gas import ideal_gas_pressure_sound_speed
 from impactpipe.hydro.eos.porosity import ALPHA0
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import ghost_widths
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_speed_squared
 
 #: Material volume fraction below which a cell counts as void (no signal, no Riemann state).
@@ -74,9 +74,7 @@ def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos
         if arhoq is not None:
             arhoq = arhoq.reshape((nb, arhoq.shape[1], 1, nx, ny))
         nx, ny, nz = 1, nx, ny
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(nb):
         if void is not None:
             if void[b] != 0:
@@ -275,9 +273,7 @@ def cell_thermodynamics(alpha, arho, arhoe, arhoq, eos_kind, eos_params, eos_tab
     cells get zeros.
     """
     nb, nmat, nx, ny, nz = alpha.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(nb):
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):

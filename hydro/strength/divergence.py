@@ -37,7 +37,7 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, ghost_widths
 from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 
@@ -154,9 +154,7 @@ def _ghosts_carry_stress(work, b, ns, nx, ny, nz):
     ghost layer of block b beside its interior faces (the ghosts the face stresses of
     :func:`_face_stress` read; a ghost left unfilled holds a stale value, which at worst makes
     the block be kicked)."""
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for c in range(WK_S, WK_S + ns):
         if nx > 1:
             for ix in (gx - 1, nx - gx):
@@ -222,9 +220,7 @@ def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx,
     flags say that its cells and the cells its first ghost layer copies carry no stress, so
     the ghost test would skip it too."""
     nb, nw, nx, ny, nz = work.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     ns = 3 if ndim == 1 else (4 if ndim == 2 else 6)
     cylindrical = geometry == CYLINDRICAL
     for i in prange(blocks.shape[0]):

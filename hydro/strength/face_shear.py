@@ -58,7 +58,7 @@ import math
 
 from numba import njit, prange
 
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import GHOST, ghost_widths
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 from impactpipe.hydro.mesh.cells import shifted_cell
 from impactpipe.hydro.strength.hourglass import at_block_edge, face_area, face_weights, kick_cell
@@ -160,9 +160,7 @@ def apply_face_shear(dt, ndim, mom, energy, block_dx, neighbor, neighbor_level, 
     energy of the interior cells of the blocks ``lo .. hi - 1`` (module docstring); what crosses a
     domain face goes to ``boundary``."""
     nb, nw, nx, ny, nz = work.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     shape = (nx, ny, nz)
     for b in prange(lo, hi):
         for ix in range(gx, nx - gx):

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from impactpipe.hydro.mesh.blocks import GHOST
+from impactpipe.hydro.mesh.blocks import GHOST, ghost_widths
 from impactpipe.hydro.mesh.cells import shifted_cell
 from impactpipe.hydro.scheme.pencil_layout import BND_ENERGY, BND_MOMENTUM
 from impactpipe.hydro.strength.update import WK_PHI, WK_S, WK_V
@@ -91,9 +91,7 @@ def apply_hourglass_viscosity(dt, ndim, coefficient, impedance, mom, energy, blo
     """Add the hourglass tractions over ``dt`` (s) to the momentum and total energy of the blocks
     ``lo .. hi - 1`` (module docstring); ``coefficient`` C (-), ``impedance`` Z (kg/(m^2 s))."""
     nb, nw, nx, ny, nz = work.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     shape = (nx, ny, nz)
     for b in prange(lo, hi):
         for ix in range(gx, nx - gx):

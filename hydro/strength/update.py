@@ -89,7 +89,7 @@ from numba import njit, prange
 
 from impactpipe.hydro.eos import pressure_not_negative, pressure_sound_speed_in_line, temperature_in_line
 from impactpipe.hydro.eos.porosity import ALPHA0, wave_speed_ratio
-from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST
+from impactpipe.hydro.mesh.blocks import CYLINDRICAL, ghost_widths
 from impactpipe.hydro.mesh.last_good import RECORD_CLEAR, RECORD_VOID
 from impactpipe.hydro.scheme.mixture import ALPHA_MIN, DISTENDED_FRACTION
 from impactpipe.hydro.strength.damage import shear_damage_increment
@@ -204,9 +204,7 @@ def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blo
     """
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     recorded = record.shape[0] > 0
     for i in prange(blocks.shape[0]):
         b = blocks[i]
@@ -329,9 +327,7 @@ def cell_velocities(arho, mom, work, blocks, unchanged):
     none) is passed over: its momentum is the one :func:`cell_velocity_and_stress` divided, and
     its velocities are these quotients already, bit for bit (the same sums and division)."""
     nb, nmat, nx, ny, nz = arho.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     skips = unchanged.shape[0] > 0
     for i in prange(blocks.shape[0]):
         b = blocks[i]
@@ -358,9 +354,7 @@ def snapshot_stress_fields(alpha, arho, arhoq, model, ns, nq, lo, hi, out):
     the materials with a yield model (``model[k]`` not 0) weighted by their partial densities
     (0 where they have none), each sum taken material after material."""
     nb, nmat, nx, ny, nz = alpha.shape
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     for b in prange(lo, hi):
         for ix in range(gx, nx - gx):
             for iy in range(gy, ny - gy):
@@ -502,12 +496,8 @@ def _rests_unstressed(work, alpha, arho, arhoe, amounts, b, ndim, model, eos_kin
     w0 = amounts[b, AMT_PLASTIC_WORK]
     if w0 == 0.0 and math.copysign(1.0, w0) < 0.0:
         return False
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
-    ex = 1 if nx > 1 else 0
-    ey = 1 if ny > 1 else 0
-    ez = 1 if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
+    ex, ey, ez = min(gx, 1), min(gy, 1), min(gz, 1)
     # the interior cells and the first ghost layer beside each face (not the corners)
     if not _velocities_zero(work, b, gx, nx - gx, gy, ny - gy, gz, nz - gz):
         return False
@@ -553,9 +543,7 @@ def _strength_scalars_clear(arhoq, work, alpha, arho, b, ns, model):
     damage (:func:`update_stress`).  Not for a porous scene (a distension is not zero)."""
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     bits = 0
     for ix in range(gx, nx - gx):
         for iy in range(gy, ny - gy):
@@ -656,9 +644,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     nb, nmat, nx, ny, nz = alpha.shape
     nq = arhoq.shape[1] // nmat
     ns = 3 if ndim == 1 else (4 if ndim == 2 else 6)
-    gx = GHOST if nx > 1 else 0
-    gy = GHOST if ny > 1 else 0
-    gz = GHOST if nz > 1 else 0
+    gx, gy, gz = ghost_widths(nx, ny, nz)
     cylindrical = geometry == CYLINDRICAL
     # without a porous material a void cell's scalars are cleared in one loop
     porous_scene = False
