@@ -30,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from hydro_throughput import build  # noqa: E402
 
 from impactpipe.hydro.mesh.boundary import NO_RECORD  # noqa: E402
+from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS  # noqa: E402
 from impactpipe.hydro.scheme.directional import sweep  # noqa: E402
 from impactpipe.hydro.scheme.timestep import PHI_VOID, max_signal_rate  # noqa: E402
 from impactpipe.hydro.strength.divergence import apply_stress_divergence  # noqa: E402
@@ -66,8 +67,8 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
         for axis in range(mesh.ndim):
             sweep(axis, dt, mesh.geometry_code, alpha, arho, arhoe, arhoq, mom, energy, lo, dx, nbr, nlev, eos.kind,
                   eos.params, eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch, *counters,
-                  sim.plain_pencils, np.arange(len(blocks)), NO_RECORD, NO_RECORD, sim._sweep_grady_kipp,
-                  sim._sweep_porosity, sim.bulk_pressure_predictor)
+                  sim.plain_pencils, np.arange(len(blocks)), NO_RECORD, NO_RECORD, NO_STAMPS[0],
+                  sim._sweep_grady_kipp, sim._sweep_porosity, sim.bulk_pressure_predictor)
         if work is not None:
             strength = sim.strength
             a = strength.arrays
@@ -85,7 +86,7 @@ def block_step_seconds(sim, blocks: np.ndarray, dt: float) -> float:
                           eos.table, rho0, a.model, a.params, a.shear, a.tensile_strength, work,
                           strength.counts[blocks].copy(), strength.amounts[blocks].copy(), copies,
                           strength.damage.model, strength.damage.params, gravity, strength._porosity_rows, has_mass,
-                          stressed, strength.face is not None, np.zeros(0, dtype=np.uint8))
+                          stressed, strength.face is not None, np.zeros(0, dtype=np.uint8), NO_STAMPS[0])
             apply_stress_divergence(dt / 2, mesh.geometry_code, mesh.ndim, mom, energy, lo, dx, nbr, nlev, work,
                                     counters[0], face, 3 * strength.nmat, copies, stressed)
         best = min(best, time.perf_counter() - started)

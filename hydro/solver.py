@@ -35,6 +35,7 @@ from impactpipe.hydro.amr.subcycle import (GLOBAL, PER_LEVEL, TIME_STEPPING, Lev
 from impactpipe.hydro.amr.transfer import allocate_face_flux, reflux
 from impactpipe.hydro.mesh.boundary import NO_RECORD
 from impactpipe.hydro.mesh.last_good import RECORD_VOID, block_runs, scalar_clear_blocks, void_blocks
+from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS, ScalarStamps
 from impactpipe.hydro.eos import pack_eos
 from impactpipe.hydro.eos.porosity import (COUNT_NAMES as POROSITY_COUNT_NAMES, ALPHA0, NPOROSITY, compact,
                                            distension_field, pack_porosity)
@@ -320,6 +321,8 @@ class Simulation:
         #: per block, a column of its transported scalars last found not +0.0, or -1
         #: (:func:`~impactpipe.hydro.mesh.last_good.scalar_clear_blocks`)
         self._clear_hint = np.full(self.mesh.nblocks, -1, dtype=np.int64)
+        #: the blocks' scalar stamps, for the ghost fills (:mod:`~impactpipe.hydro.mesh.scalar_stamps`)
+        self._stamps = ScalarStamps(self.mesh.nblocks)
         self._good_counters = tuple(a.copy() for a in self._counter_arrays())
         self._good_clock = (self.time, self.step_count, self.cell_updates)
         self._good_gravity_work = None if self.gravity is None else self.gravity.work
@@ -420,6 +423,7 @@ class Simulation:
         if self.tracers is not None:
             self.tracers.before_step(self)
         if per_level:
+            self._stamps.forget()
             dt = self._level_step(dt)
             self.time += dt
             self.step_count += 1
@@ -435,12 +439,17 @@ class Simulation:
         own = self.partition.blocks
         recorded = self._keeps_block_record()
         clear_now, clear_next = self._scalars_clear if recorded else (NO_RECORD, NO_RECORD)
+        stamps = self._stamps if self._keeps_scalar_stamps() else None
+        if stamps is None:
+            self._stamps.forget()
+        stamp = NO_STAMPS[0] if stamps is None else stamps.block
         for axis in axes:
-            fill = self.partition.start_ghosts(st, self.mesh, axis, self._q_layers, clear_now if recorded else None)
-            self._sweep(axis, dt, fill.early, clear_now, clear_next)
+            fill = self.partition.start_ghosts(st, self.mesh, axis, self._q_layers, clear_now if recorded else None,
+                                               stamps)
+            self._sweep(axis, dt, fill.early, clear_now, clear_next, stamp)
             self.partition.finish_ghosts(fill, st, self.mesh, axis)
             self._observe("ghosts", axis)
-            self._sweep(axis, dt, fill.late, clear_now, clear_next)
+            self._sweep(axis, dt, fill.late, clear_now, clear_next, stamp)
             clear_now, clear_next = clear_next, clear_now
             failed = self.partition.first_failure(self._failure)
             if failed >= 0:
@@ -463,7 +472,7 @@ class Simulation:
             compact(st.alpha, st.arho, st.arhoq, self.porosity, self.porosity_counts, lo, hi)
         if self.strength is not None or self.gravity is not None:
             # the blocks still void after the sweeps (void settling moves material between them)
-            self._momentum_sources(dt, clear_now if recorded and not self.void_settling else NO_RECORD)
+            self._momentum_sources(dt, clear_now if recorded and not self.void_settling else NO_RECORD, stamp)
             self._observe("sources", -1)
         self.time += dt
         self.step_count += 1
@@ -483,11 +492,20 @@ class Simulation:
         mesh's coarse/fine ghosts and other ranks' strips are filled otherwise)."""
         return not self.mesh.adaptive and self.partition.keeps_scalar_record
 
+    def _keeps_scalar_stamps(self) -> bool:
+        """Whether a step keeps the blocks' scalar stamps (:mod:`~impactpipe.hydro.mesh.scalar_stamps`),
+        for the ghost fills to skip the scalars a slab holds already: with the block record, where
+        only the sweeps and the stress update change the scalars (no tensile limit at the end of
+        the step, void settling or compaction).  A step without them forgets the ghost stamps."""
+        return (self._keeps_block_record() and not self.step_tensile_limit and not self.void_settling
+                and self.porosity is None)
+
     def _sweep(self, axis: int, dt: float, blocks: np.ndarray, scalars_clear: np.ndarray,
-               clear_after: np.ndarray) -> None:
+               clear_after: np.ndarray, scalar_stamp: np.ndarray = NO_STAMPS[0]) -> None:
         """Advance the partition's blocks listed in ``blocks`` (indices within ``partition.blocks``)
         by ``dt`` (s) along ``axis`` (:func:`~impactpipe.hydro.scheme.directional.sweep`, with
-        its record of the blocks whose scalars are +0.0, or NO_RECORD)."""
+        its record of the blocks whose scalars are +0.0, or NO_RECORD, and the blocks' scalar
+        stamps, or none)."""
         if blocks.size == 0:
             return
         st = self.state
@@ -497,7 +515,7 @@ class Simulation:
               self.mesh.neighbor[own], self.mesh.neighbor_level[own], self.eos.kind, self.eos.params,
               self.eos.table, self.shear_modulus, self._sweep_tensile_strength(), self._scratch, self.boundary[own],
               self.floors[own], self.amounts[own], self._failure[own], self._face_flux[own], self.plain_pencils,
-              blocks, scalars_clear, clear_after, self._sweep_grady_kipp, self._sweep_porosity,
+              blocks, scalars_clear, clear_after, scalar_stamp, self._sweep_grady_kipp, self._sweep_porosity,
               self.bulk_pressure_predictor)
 
     def _settle_void(self) -> None:
@@ -580,14 +598,16 @@ class Simulation:
         self.cell_updates += updates
         return dt
 
-    def _momentum_sources(self, dt: float, record: np.ndarray = NO_RECORD) -> None:
+    def _momentum_sources(self, dt: float, record: np.ndarray = NO_RECORD,
+                          stamp: np.ndarray = NO_STAMPS[0]) -> None:
         """Stress divergence and gravity over ``dt`` (s), kick - stress update - kick.
 
         Half of each impulse before the stress update and half after it
         (:mod:`impactpipe.hydro.strength.model`), so the stress sees the half-step velocity: a
         body at rest in equilibrium between its stress and gravity feels no net kick before
         the update and is not strained by it.  ``record``: the last sweep's record of the
-        blocks (RECORD_VOID: void, untouched by the step), or NO_RECORD.
+        blocks (RECORD_VOID: void, untouched by the step), or NO_RECORD; ``stamp``: the blocks'
+        scalar stamps (:mod:`~impactpipe.hydro.mesh.scalar_stamps`), or empty.
         """
         st = self.state
         half = 0.5 * dt
@@ -600,7 +620,8 @@ class Simulation:
         if self.gravity is not None:
             self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
         if self.strength is not None:
-            self.strength.update(st, dt, self.eos, part, kicked_only=self.gravity is None, record=record)
+            self.strength.update(st, dt, self.eos, part, kicked_only=self.gravity is None, record=record,
+                                 stamp=stamp)
             self.strength.kick(st, half, self.boundary, self.floors, self.amounts, part)
         if self.gravity is not None:
             self.gravity.advance(st, half, self.mesh.block_lo, self.mesh.block_dx, part)
@@ -794,8 +815,12 @@ class Simulation:
     def state_changed(self) -> None:
         """Say that the state was changed from outside between two steps: the next step takes its
         last-good copy first, so that :meth:`restore_last_good` after a failure gives the state
-        with the change (the steps it takes again start from the copy, and would not make it)."""
+        with the change (the steps it takes again start from the copy, and would not make it),
+        and its ghost fills copy every slab's transported scalars (a change to them from outside
+        raised no stamp, :mod:`~impactpipe.hydro.mesh.scalar_stamps`): a change to the state
+        between two steps must be announced so."""
         self._replay = None
+        self._stamps.forget()
 
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step: the last-good
@@ -806,6 +831,7 @@ class Simulation:
         made to the state from outside between two steps is kept only where :meth:`state_changed`
         said so."""
         own = self.partition.blocks
+        self._stamps.forget()
         for name, arr in self.state.arrays().items():
             np.copyto(self.mesh.interior(arr)[own], self._good[name][own])
         for axis in range(self.mesh.ndim):

@@ -13,10 +13,11 @@ from impactpipe.hydro.solver import Simulation
 from impactpipe.pipeline.presets import resolve_damage, resolve_strength
 
 
-def strength_impact(physics: str):
-    """A basalt impact in r-z, coarse, without strength, with GEO strength, or with Grady-Kipp
-    fracture as well: about half of its blocks are void, and right after contact most blocks
-    with material hold no stress (their scalars are +0.0 with strength alone)."""
+def strength_impact(physics: str, cells: int = 8):
+    """A basalt impact in r-z, coarse (``cells`` per projectile radius), without strength, with
+    GEO strength, or with Grady-Kipp fracture as well: about half of its blocks are void, and
+    right after contact most blocks with material hold no stress (their scalars are +0.0 with
+    strength alone)."""
     materials = {"basalt": preset_material("basalt")}
     if physics != "hydro":
         materials["basalt"]["strength"] = resolve_strength("geo", "strong", {})
@@ -24,7 +25,7 @@ def strength_impact(physics: str):
         materials["basalt"]["strength"]["damage"] = resolve_damage({"model": "grady_kipp", "preset": "basalt"})
     params = {"target": {"material": "basalt", "radius": 1000.0},
               "projectile": {"material": "basalt", "radius": 250.0, "velocity": 2000.0},
-              "cells_per_projectile_radius": 8}
+              "cells_per_projectile_radius": cells}
     return PROBLEMS["impact"].setup(params, materials)
 
 

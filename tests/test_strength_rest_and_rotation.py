@@ -236,7 +236,7 @@ def test_unstressed_cells_at_rest_skip_the_eos_and_leave_what_its_evaluation_lea
     work = evaluated.strength.work
     evaluated.strength.work = np.concatenate(
         [work, np.zeros((work.shape[0], NWORK_FACE - work.shape[1]) + work.shape[2:])], axis=1)
-    monkeypatch.setattr(strength_model, "update_stress", lambda *args: update_stress(*args[:-2], True, args[-1]))
+    monkeypatch.setattr(strength_model, "update_stress", lambda *args: update_stress(*args[:-3], True, *args[-2:]))
     evaluated.step()
     for name, array in skipped.state.arrays().items():
         assert np.array_equal(array.view(np.int64), getattr(evaluated.state, name).view(np.int64)), name

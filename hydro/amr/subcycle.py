@@ -71,6 +71,7 @@ from impactpipe.hydro.amr.transfer import (P_DST, P_SRC, P_SX, P_SY, P_SZ, R_COA
                                            restrict_state_ghosts)
 from impactpipe.hydro.mesh.blocks import GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import NO_RECORD, every_layer, fill_state_ghost_slabs_of
+from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS
 from impactpipe.hydro.scheme.directional import sweep
 from impactpipe.hydro.strength.model import LevelBlocks
 
@@ -377,7 +378,7 @@ class LevelStepper:
                           st.energy, mesh.block_lo, mesh.block_dx, mesh.neighbor, mesh.neighbor_level, sim.eos.kind,
                           sim.eos.params, sim.eos.table, sim.shear_modulus, sim.tensile_strength, sim._scratch,
                           sim.boundary, sim.floors, sim.amounts, sim._failure, sim._face_flux, sim.plain_pencils,
-                          blocks, NO_RECORD, NO_RECORD, sim._sweep_grady_kipp, sim._sweep_porosity,
+                          blocks, NO_RECORD, NO_RECORD, NO_STAMPS[0], sim._sweep_grady_kipp, sim._sweep_porosity,
                           sim.bulk_pressure_predictor)
                     failed = sim.partition.first_failure(sim._failure)
                     if failed >= 0:

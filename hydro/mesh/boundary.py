@@ -26,6 +26,7 @@ from impactpipe.hydro.amr.transfer import (prolong_field_ghosts, prolong_state_g
                                            restrict_state_ghosts)
 from impactpipe.hydro.mesh.blocks import REFLECTING
 from impactpipe.hydro.mesh.last_good import RECORD_VOID
+from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS, ScalarStamps
 
 
 @njit(cache=True, parallel=True)
@@ -56,7 +57,7 @@ def fill_ghosts_where(field, neighbor, neighbor_level, axis, ghost, lo, hi, want
 
 @njit(cache=True, parallel=True)
 def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, neighbor_level, axis, ghost, lo,
-                           hi, q_layers, scalars_clear):
+                           hi, q_layers, scalars_clear, scalar_stamp, ghost_stamp):
     """:func:`fill_ghosts` for every conserved field of a state in one parallel pass over the
     blocks ``lo .. hi - 1`` (every block, or one MPI rank's owned range,
     :mod:`impactpipe.hydro.parallel`); they read any block's interior cells.  Column c of
@@ -70,8 +71,15 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
     whose source block is clear too already holds the +0.0 the copy would write, and its
     scalars are not copied; a slab of a void block from a void neighbour (not a domain face,
     where a reflecting face would write -0.0) is not copied at all: it holds +0.0 since the
-    step began, and the neighbour's interior still does."""
+    step began, and the neighbour's interior still does.
+
+    ``scalar_stamp`` (int64, (NB,), or empty: no stamps), ``ghost_stamp`` (int64, (NB, 3, 2)):
+    the stamps of :mod:`impactpipe.hydro.mesh.scalar_stamps`.  A slab whose scalars were last
+    copied from its source block at the stamp the source holds now already holds what the copy
+    would write, and its scalars are not copied; a slab whose scalars are copied records the
+    source's stamp."""
     tracked = scalars_clear.shape[0] > 0
+    stamped = scalar_stamp.shape[0] > 0
     for b in prange(lo, hi):
         for side in range(2):
             nbr = neighbor[b, axis, side]
@@ -80,6 +88,9 @@ def fill_state_ghost_slabs(alpha, arho, arhoe, mom, energy, arhoq, neighbor, nei
                 if tracked and nbr >= 0 and scalars_clear[b] == RECORD_VOID and scalars_clear[src] == RECORD_VOID:
                     continue
                 copy_scalars = not (tracked and scalars_clear[b] != 0 and scalars_clear[src] != 0)
+                if stamped and copy_scalars:
+                    copy_scalars = ghost_stamp[b, axis, side] != scalar_stamp[src]
+                    ghost_stamp[b, axis, side] = scalar_stamp[src]
                 _fill_state_side(alpha, arho, arhoe, mom, energy, arhoq, b, side, nbr, axis, ghost, q_layers,
                                  copy_scalars)
 
@@ -312,12 +323,14 @@ NO_RECORD = np.zeros(0, dtype=np.uint8)
 
 
 def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None,
-                      scalars_clear: np.ndarray | None = None) -> None:
+                      scalars_clear: np.ndarray | None = None, stamps: ScalarStamps | None = None) -> None:
     """Fill the ghosts of every conserved field of ``state`` along ``axis``; ``q_layers``:
     the ghost layers of each column of ``state.arhoq`` (:func:`fill_state_ghost_slabs`; None:
     every layer, which an adaptive mesh needs, since its prolongation reads the coarse ghosts);
     ``scalars_clear``: the blocks whose scalars are +0.0 (:func:`fill_state_ghost_slabs`; a
-    uniform mesh's only, with ``q_layers``), or None.
+    uniform mesh's only, with ``q_layers``), or None; ``stamps``: the blocks' scalar stamps
+    (:class:`~impactpipe.hydro.mesh.scalar_stamps.ScalarStamps`; a uniform mesh's only, with a
+    record), or None.
 
     Coarse/fine faces: restriction, then the conservative limited prolongation of
     :func:`impactpipe.hydro.amr.transfer.prolong_state_ghosts`.
@@ -329,8 +342,12 @@ def fill_state_ghosts(state, mesh, axis: int, q_layers: np.ndarray | None = None
     if q_layers is None or mesh.adaptive:
         q_layers = every_layer(state.arhoq, g)
         scalars_clear = None
+    if scalars_clear is None or stamps is None:
+        block_stamp, ghost_stamp = NO_STAMPS
+    else:
+        block_stamp, ghost_stamp = stamps.block, stamps.ghost
     fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, q_layers,
-                           NO_RECORD if scalars_clear is None else scalars_clear)
+                           NO_RECORD if scalars_clear is None else scalars_clear, block_stamp, ghost_stamp)
     if not mesh.adaptive:
         return
     plans = axis_plans(mesh, axis)

@@ -45,6 +45,7 @@ from impactpipe.hydro.mesh.boundary import (
     fill_ghosts_where, fill_state_ghost_layer, fill_state_ghost_layer_from_ranks, fill_state_ghost_slabs,
     fill_state_ghosts, fill_state_ghosts_from_ranks,
 )
+from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 from impactpipe.storage import atomic_path, atomic_path_together
 
@@ -128,15 +129,16 @@ class WholeMesh:
         fill_state_ghosts(state, mesh, axis, q_layers)
 
     def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None,
-                     scalars_clear: np.ndarray | None = None) -> GhostFill:
+                     scalars_clear: np.ndarray | None = None, stamps=None) -> GhostFill:
         """Fill the ghosts along ``axis`` (``q_layers`` as in :meth:`fill_ghosts`) as far as this
         process can without waiting for another's strips; a sweep may then advance the returned
         fill's ``early`` blocks before :meth:`finish_ghosts` completes the rest.  One process
         fills every ghost here, and every block is ``late`` (swept after :meth:`finish_ghosts`,
         as before the split).  ``scalars_clear``: the blocks whose scalars are +0.0, whose
-        slabs from clear blocks need no copy of them
+        slabs from clear blocks need no copy of them, and ``stamps``: the blocks' scalar stamps,
+        whose slabs holding their sources' scalars need none either
         (:func:`~impactpipe.hydro.mesh.boundary.fill_state_ghosts`), or None."""
-        fill_state_ghosts(state, mesh, axis, q_layers, scalars_clear)
+        fill_state_ghosts(state, mesh, axis, q_layers, scalars_clear, stamps)
         return GhostFill(np.zeros(0, dtype=np.int64), np.arange(mesh.nblocks, dtype=np.int64))
 
     def finish_ghosts(self, fill: GhostFill, state, mesh, axis: int) -> None:
@@ -351,7 +353,7 @@ class BlockRanges(WholeMesh):
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         self._state_strips(mesh, axis).exchange(fields, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers,
-                               NO_RECORD)
+                               NO_RECORD, *NO_STAMPS)
         if mesh.adaptive:
             self._fill_level_ghosts(fields, mesh, axis, "here")
             self._fill_level_ghosts(fields, mesh, axis, "away")
@@ -363,7 +365,7 @@ class BlockRanges(WholeMesh):
         return self.plans(mesh, axis)["level_strips"] if mesh.adaptive else self.strips[axis]
 
     def start_ghosts(self, state, mesh, axis: int, q_layers: np.ndarray | None = None,
-                     scalars_clear: np.ndarray | None = None) -> GhostFill:
+                     scalars_clear: np.ndarray | None = None, stamps=None) -> GhostFill:
         """Post the strips along ``axis`` (:meth:`~.exchange.StripExchange.post`) and fill every owned
         block's ghosts from what this rank holds, then return while the strips travel: the
         fill's ``early`` blocks (the inner blocks of :func:`~.decomposition.overlap_groups`,
@@ -375,9 +377,9 @@ class BlockRanges(WholeMesh):
         coarse/fine ghosts whose source block this rank owns are filled here
         (:meth:`_fill_level_ghosts`), the others by :meth:`finish_ghosts`; the blocks those
         others write are late.  ``q_layers`` as in
-        :meth:`fill_ghosts`.  ``scalars_clear`` must be None: the ranks keep no record of the
-        blocks whose scalars are +0.0, and every slab is copied."""
-        if scalars_clear is not None:
+        :meth:`fill_ghosts`.  ``scalars_clear`` and ``stamps`` must be None: the ranks keep no
+        record of the blocks whose scalars are +0.0, and every slab is copied."""
+        if scalars_clear is not None or stamps is not None:
             raise ValueError("several MPI ranks keep no record of the blocks whose scalars are +0.0")
         inner, edge = self.overlap[axis]
         g = int(mesh.ghost[axis])
@@ -388,7 +390,7 @@ class BlockRanges(WholeMesh):
         fields = (state.alpha, state.arho, state.arhoe, state.momentum, state.energy, state.arhoq)
         pending = self._state_strips(mesh, axis).post(fields, self.traffic)
         fill_state_ghost_slabs(*fields, mesh.neighbor, mesh.neighbor_level, axis, g, self.lo, self.hi, q_layers,
-                               NO_RECORD)
+                               NO_RECORD, *NO_STAMPS)
         if mesh.adaptive:
             self._fill_level_ghosts(fields, mesh, axis, "here")
         return GhostFill(inner, edge, pending)

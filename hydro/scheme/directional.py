@@ -182,8 +182,8 @@ from impactpipe.hydro.scheme.timestep import PHI_VOID
 @njit(cache=True, parallel=True)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,
-          floors, amounts, failure, face_flux, plain_pencils, blocks, scalars_clear, clear_after, grady_kipp=None,
-          porosity=None, bulk_predictor=False):
+          floors, amounts, failure, face_flux, plain_pencils, blocks, scalars_clear, clear_after, scalar_stamp,
+          grady_kipp=None, porosity=None, bulk_predictor=False):
     """Advance the blocks listed in ``blocks`` by ``dt`` (s) along ``axis``; see the module docstring.
 
     Field arrays are ``(NB, C, NX, NY, NZ)`` with filled ghosts along ``axis``.  Counters
@@ -208,6 +208,10 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     block, else 0, the record for the sweep along the next axis; RECORD_VOID for a block that
     was void (``scalars_clear[b]`` RECORD_VOID) and whose pencils were all empty, so that the
     sweep left its interior as it was (:data:`impactpipe.hydro.mesh.last_good.RECORD_VOID`).
+    ``scalar_stamp`` (int64, (NB,) indexed like ``blocks``, or empty: none): raised by one for
+    a block where the sweep may have changed a transported scalar: where some plain pencil
+    moved scalars, or the general update changed the bits of one
+    (:mod:`impactpipe.hydro.mesh.scalar_stamps`).
     ``grady_kipp``: (M,) booleans of the materials that bear (1 - D) of their tension
     (:func:`impactpipe.hydro.scheme.mixture.tension_factor`), or None.
     ``porosity``: the (M, NPOROSITY) porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`;
@@ -250,6 +254,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
     cs = nx * ny * nz
     ncomp = mom.shape[1]
     tracked = scalars_clear.shape[0] > 0
+    stamped = scalar_stamp.shape[0] > 0
     for e in prange(blocks.shape[0]):
         b = blocks[e]
         sc = scratch[get_thread_id()]
@@ -260,6 +265,8 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
             quiet = quiet and (src < 0 or (neighbor_level[b, axis, side] == 0 and scalars_clear[src] != 0))
         stays_clear = quiet
         stays_void = tracked and scalars_clear[b] == RECORD_VOID
+        # no pencil moved scalars and no cell took the general update
+        scalars_kept = True
         dx = block_dx[b, axis]
         dtdx = dt / dx
         half = 0.5 * dtdx
@@ -327,6 +334,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                     carried = (nq > 0 and not quiet and moves_mass(sc, mass_row, g, g + n + 1)
                                and scalars_carried(arhoq_f, iq, stride, cs, nq, g - 1, g + n + 1))
                     if carried:
+                        scalars_kept = False
                         plain_scalar_fluxes(sc, m, nmat, nq, g, g + n + 1, arho_f, arhoq_f, ia, iq, stride, cs,
                                             wq_row, fq_row, mass_row, donor_row)
                 else:
@@ -387,11 +395,14 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
                         continue
                     stays_clear = False
                     ix, iy, iz = pencil_cell_index(axis, i, j1, j2)
-                    _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
-                                 alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
-                                 eos_kind, eos_params, eos_table, arhoq, nq, fq_row, carried)
+                    if _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
+                                    alpha, arho, arhoe, mom, energy, axis, t1, t2, floors, amounts, failure,
+                                    eos_kind, eos_params, eos_table, arhoq, nq, fq_row, carried):
+                        scalars_kept = False
         if tracked:
             clear_after[b] = RECORD_VOID if stays_void else (RECORD_CLEAR if stays_clear else 0)
+        if stamped and not scalars_kept:
+            scalar_stamp[b] += 1
 
 
 @njit(cache=True, inline="always")
@@ -719,7 +730,11 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
     the gather put in scratch row 5 of the material; a failed material, D = 1, holds none) does
     not share the expansion of a full cell: the cell opens void instead (tensile failure
     by void insertion, as CTH does), so no material is stretched beyond its strength.
+
+    Returns whether some transported scalar of the cell changed its bits (for the blocks'
+    scalar stamps, :mod:`impactpipe.hydro.mesh.scalar_stamps`).
     """
+    changed = False
     wl = dt * sc[i, W_IVL]
     wr = dt * sc[i, W_IVR]
     vol = sc[i, W_VOL]
@@ -773,7 +788,10 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
         if carried:
             for j in range(nq):
                 c = nq * k + j
-                arhoq[b, c, ix, iy, iz] -= wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c]
+                old = arhoq[b, c, ix, iy, iz]
+                new = old - (wr * sc[fr, fq_row + c] - wl * sc[fl, fq_row + c])
+                arhoq[b, c, ix, iy, iz] = new
+                changed = changed or _bits(new) != _bits(old)
     mn = mom[b, axis, ix, iy, iz] - (wr * sc[fr, f_row + F_MN] - wl * sc[fl, f_row + F_MN])
     if radial:
         p_half = 0.5 * (sc[i, qm_row + Q_P] + sc[i, qp_row + Q_P])
@@ -803,7 +821,7 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
             for j in range(nq):
-                arhoq[b, nq * k + j, ix, iy, iz] = 0.0
+                changed = _zero_scalar(arhoq, b, nq * k + j, ix, iy, iz) or changed
             ar = 0.0
         rho += ar
     for k in range(nmat):
@@ -831,7 +849,7 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
             for j in range(nq):
-                arhoq[b, nq * k + j, ix, iy, iz] = 0.0
+                changed = _zero_scalar(arhoq, b, nq * k + j, ix, iy, iz) or changed
     phi_new = 0.0
     for k in range(nmat):
         phi_new += alpha[b, k, ix, iy, iz]
@@ -848,12 +866,12 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
             arho[b, k, ix, iy, iz] = 0.0
             arhoe[b, k, ix, iy, iz] = 0.0
         for c in range(nmat * nq):
-            arhoq[b, c, ix, iy, iz] = 0.0
+            changed = _zero_scalar(arhoq, b, c, ix, iy, iz) or changed
         mom[b, axis, ix, iy, iz] = 0.0
         mom[b, t1, ix, iy, iz] = 0.0
         mom[b, t2, ix, iy, iz] = 0.0
         energy[b, 0, ix, iy, iz] = 0.0
-        return
+        return changed
     # how full the cell is, by volume and by mass: material expanded far below its reference
     # density (vapour) fills a cell by volume but is as light as a spray of it
     fill = phi_new
@@ -933,6 +951,21 @@ def _update_cell(sc, i, nmat, dt, radial, qm_row, qp_row, f_row, b, ix, iy, iz,
     mom[b, t1, ix, iy, iz] = m1
     mom[b, t2, ix, iy, iz] = m2
     energy[b, 0, ix, iy, iz] = e_tot
+    return changed
+
+
+@njit(cache=True, inline="always")
+def _bits(x):
+    """The bits of the float64 ``x`` as an int64 (a -0.0 differs from a +0.0)."""
+    return np.float64(x).view(np.int64)
+
+
+@njit(cache=True, inline="always")
+def _zero_scalar(arhoq, b, c, ix, iy, iz):
+    """Set scalar c of a cell to +0.0; whether that changed its bits."""
+    changed = _bits(arhoq[b, c, ix, iy, iz]) != 0
+    arhoq[b, c, ix, iy, iz] = 0.0
+    return changed
 
 
 @njit(cache=True, inline="always")

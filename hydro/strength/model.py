@@ -82,6 +82,7 @@ from impactpipe.hydro.amr.regrid import summed_rows
 from impactpipe.hydro.amr.transfer import face_flux_shape, prolong_field_ghosts, reflux, restrict_ghosts
 from impactpipe.hydro.mesh.blocks import CYLINDRICAL, GHOST, REFLECTING, BlockMesh
 from impactpipe.hydro.mesh.boundary import fill_ghosts_where
+from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.distributed import FieldFill
 from impactpipe.hydro.parallel.owned_memory import lazy_zeros
@@ -401,7 +402,7 @@ class MaterialStrength:
                                      self.stressed, _NO_BLOCKS)
 
     def update(self, state: HydroState, dt: float, eos, partition, level: LevelBlocks | None = None,
-               kicked_only: bool = False, record: np.ndarray = _NO_BLOCKS) -> None:
+               kicked_only: bool = False, record: np.ndarray = _NO_BLOCKS, stamp: np.ndarray = NO_STAMPS[0]) -> None:
         """Advance the stress of the ``partition``'s blocks (or of the ``level``'s) over ``dt`` (s)
         with the current velocities (the half-step ones after the first kick, into the work
         arrays with their ghosts first): Jaumann update, failure, yield, damage and stress
@@ -411,11 +412,13 @@ class MaterialStrength:
         (:meth:`_around_ghosts`).  ``kicked_only``: nothing but the first :meth:`kick` changed
         the momentum since :meth:`load_stress` (no gravity between them), so the blocks that kick
         passed over (:meth:`_mark_quiet`) keep the velocities load_stress found.  ``record``: the
-        last sweep's record of the blocks whose scalars are +0.0 (:func:`update_stress`), or empty."""
+        last sweep's record of the blocks whose scalars are +0.0 (:func:`update_stress`), or empty;
+        ``stamp``: the blocks' scalar stamps (:mod:`impactpipe.hydro.mesh.scalar_stamps`), or empty."""
         unchanged = self._quiet if kicked_only else _NO_BLOCKS
         cell_velocities(state.arho, state.momentum, self.work, self._blocks(partition, level), unchanged)
         fills = self._start_work_ghosts(partition, slice(WK_V, WK_V + 3), level)
-        self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks, record), level)
+        self._around_ghosts(partition, fills, lambda blocks: self.stress_step(state, dt, eos, blocks, record, stamp),
+                            level)
         self._mark_quiet(partition, level)
         self._incoming = self._start_work_ghosts(partition, slice(WK_S, WK_S + self.ns), level)
         if self.face is not None:
@@ -423,7 +426,7 @@ class MaterialStrength:
             self._face_dt = dt
 
     def stress_step(self, state: HydroState, dt: float, eos, blocks: np.ndarray,
-                    record: np.ndarray = _NO_BLOCKS) -> None:
+                    record: np.ndarray = _NO_BLOCKS, stamp: np.ndarray = NO_STAMPS[0]) -> None:
         """The stress update of :meth:`update` over ``dt`` (s) on the ``blocks`` listed (int64)
         alone (:func:`update_stress`), from the velocities and fills in the work arrays (their
         ghosts filled) and the blocks with mass in :attr:`has_mass`: no velocities computed, no
@@ -435,7 +438,7 @@ class MaterialStrength:
                       a.model, a.params, a.shear, a.tensile_strength, self.work, self.counts, self.amounts, blocks,
                       self.damage.model, self.damage.params,
                       _NO_GRAVITY if self.surface_gravity is None else self.surface_gravity, self._porosity_rows,
-                      self.has_mass, self.stressed, self.face is not None, record)
+                      self.has_mass, self.stressed, self.face is not None, record, stamp)
 
     def kick(self, state: HydroState, dt: float, boundary: np.ndarray, floors: np.ndarray,
              amounts: np.ndarray, partition, level: LevelBlocks | None = None) -> None:

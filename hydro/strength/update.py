@@ -583,7 +583,7 @@ def _velocities_zero(work, b, x0, x1, y0, y1, z0, z1):
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, blocks,
                   damage_model, damage_params, surface_gravity, porosity, has_mass, stressed_blocks, store_strength,
-                  record):
+                  record, scalar_stamp):
     """One strength step of ``dt`` (s) for every interior cell of the ``blocks`` listed (int64:
     a process's range, or one refinement level's); see the module docstring.
     ``porosity[M, NPOROSITY]``: the porosity rows (:func:`impactpipe.hydro.eos.porosity.pack_porosity`);
@@ -633,7 +633,9 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     empty: none; :data:`impactpipe.hydro.mesh.last_good.RECORD_CLEAR`) says its transported
     scalars are +0.0 and :func:`_rests_unstressed` finds every cell such a cell at rest (its
     velocities +0.0, ghosts included): the step would store the +0.0 each scalar holds and add
-    +0.0 to the energy and the work.
+    +0.0 to the energy and the work.  ``scalar_stamp`` (int64, (NB,), or empty: none): raised
+    by one for every block the step does not pass over, where it may write a scalar
+    (:mod:`impactpipe.hydro.mesh.scalar_stamps`).
 
     ``work`` holds the velocities and fills with ghosts (:func:`cell_velocity_and_stress`);
     its first ``ns`` stress slots are written for the interior cells that hold material (a
@@ -657,6 +659,7 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
     fracture_scene = False
     for m in range(nmat):
         fracture_scene = fracture_scene or damage_model[m] == GRADY_KIPP
+    stamped = scalar_stamp.shape[0] > 0
     for i in prange(blocks.shape[0]):
         b = blocks[i]
         if has_mass[b] == 0:
@@ -667,6 +670,8 @@ def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block
                 record[b] == RECORD_CLEAR or _strength_scalars_clear(arhoq, work, alpha, arho, b, ns, model)):
             stressed_blocks[b] = 0
             continue
+        if stamped:
+            scalar_stamp[b] += 1
         carries = False
         dxs = (block_dx[b, 0], block_dx[b, 1], block_dx[b, 2])
         for ix in range(gx, nx - gx):
