@@ -311,6 +311,9 @@ class Simulation:
         self._good_void = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, 1 where the block is void now (:func:`~impactpipe.hydro.mesh.last_good.void_blocks`)
         self._void_now = np.zeros(self.mesh.nblocks, dtype=np.uint8)
+        #: per block, 1 where the last step left the block void (every pencil of its last sweep
+        #: empty, nothing written to it since), for the next void test (:meth:`_keeps_void_record`)
+        self._void_after = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, not 0 where the last-good copy's transported scalars are +0.0
         self._good_clear = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, RECORD_CLEAR where its transported scalars are +0.0
@@ -347,7 +350,7 @@ class Simulation:
         own = self.partition.blocks
         lo, hi, _ = own.indices(self.mesh.nblocks)
         fields = [arr.view(np.int64) for arr in (st.alpha, st.arho, st.arhoe, st.momentum, st.energy)]
-        void_blocks(*fields, lo, hi, self._void_now)
+        void_blocks(*fields, lo, hi, self._void_now, self._void_after)
         rates = self._rate[own]
         max_signal_rate(st.alpha[own], st.arho[own], st.arhoe[own], st.momentum[own], self.mesh.block_dx[own],
                         self.eos.kind, self.eos.params, self.eos.table, self.shear_modulus, self.mesh.ndim,
@@ -411,6 +414,7 @@ class Simulation:
             self.regrid()
         self._observe("regrid", -1)
         dt = self.stable_dt()
+        self._void_after.fill(0)  # until this step ends (a failed step leaves none)
         if per_level:
             dt = level_time_step(self.mesh, self._rate, self.cfl)
         if self.dt_first is None:
@@ -474,6 +478,10 @@ class Simulation:
             # the blocks still void after the sweeps (void settling moves material between them)
             self._momentum_sources(dt, clear_now if recorded and not self.void_settling else NO_RECORD, stamp)
             self._observe("sources", -1)
+        if self._keeps_void_record():
+            np.equal(clear_now, RECORD_VOID, out=self._void_after, casting="unsafe")
+        else:
+            self._void_after.fill(0)
         self.time += dt
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
@@ -499,6 +507,17 @@ class Simulation:
         the step, void settling or compaction).  A step without them forgets the ghost stamps."""
         return (self._keeps_block_record() and not self.step_tensile_limit and not self.void_settling
                 and self.porosity is None)
+
+    def _keeps_void_record(self) -> bool:
+        """Whether the next void test may take the blocks the last sweep of a step recorded as void
+        (RECORD_VOID: void at the start of the step, every pencil empty) as void without a look
+        (:func:`~impactpipe.hydro.mesh.last_good.void_blocks`): with the scalar stamps
+        (:meth:`_keeps_scalar_stamps`), where no kernel after the sweeps writes a void cell (the
+        stress kicks and gravity leave a void cell's +0.0; not with the hourglass viscosity or the
+        face shear stress)."""
+        strength = self.strength
+        return self._keeps_scalar_stamps() and (
+            strength is None or (strength.hourglass[0] == 0.0 and strength.face is None))
 
     def _sweep(self, axis: int, dt: float, blocks: np.ndarray, scalars_clear: np.ndarray,
                clear_after: np.ndarray, scalar_stamp: np.ndarray = NO_STAMPS[0]) -> None:
@@ -817,10 +836,12 @@ class Simulation:
         last-good copy first, so that :meth:`restore_last_good` after a failure gives the state
         with the change (the steps it takes again start from the copy, and would not make it),
         and its ghost fills copy every slab's transported scalars (a change to them from outside
-        raised no stamp, :mod:`~impactpipe.hydro.mesh.scalar_stamps`): a change to the state
-        between two steps must be announced so."""
+        raised no stamp, :mod:`~impactpipe.hydro.mesh.scalar_stamps`) and its void test looks at
+        every block (:meth:`_keeps_void_record`): a change to the state between two steps must be
+        announced so."""
         self._replay = None
         self._stamps.forget()
+        self._void_after.fill(0)
 
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step: the last-good
@@ -832,6 +853,7 @@ class Simulation:
         said so."""
         own = self.partition.blocks
         self._stamps.forget()
+        self._void_after.fill(0)
         for name, arr in self.state.arrays().items():
             np.copyto(self.mesh.interior(arr)[own], self._good[name][own])
         for axis in range(self.mesh.ndim):

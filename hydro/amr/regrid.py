@@ -39,7 +39,7 @@ from impactpipe.hydro.amr.criteria import (
 from impactpipe.hydro.amr.plans import axis0_weights
 from impactpipe.hydro.amr.transfer import prolong_blocks, restrict_blocks
 from impactpipe.hydro.mesh.blocks import BlockMesh, morton_keys
-from impactpipe.hydro.mesh.last_good import void_blocks
+from impactpipe.hydro.mesh.last_good import NONE_KNOWN, void_blocks
 from impactpipe.hydro.mesh.state import FIELDS, HydroState
 
 
@@ -160,7 +160,7 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     fields = tuple(field.view(np.int64) for field in (state.alpha, state.arho, state.arhoe, state.momentum,
                                                       state.energy))
     void = np.ones(mesh.nblocks, dtype=np.uint8)  # the blocks of other processes are skipped as void
-    void_blocks(*fields, lo, hi, void)
+    void_blocks(*fields, lo, hi, void, NONE_KNOWN)
     pressure = zeros((mesh.nblocks,) + mesh.padded_shape)
     evaluate = void
     if finish_fill is not None:
@@ -170,7 +170,7 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
                      shear_modulus, tensile_strength, pressure, grady_kipp, porosity, evaluate)
     if finish_fill is not None:
         finish_fill()
-        void_blocks(*fields, lo, hi, void)  # a late block's ghosts may hold material now, or none
+        void_blocks(*fields, lo, hi, void, NONE_KNOWN)  # a late block's ghosts may hold material now, or none
         evaluate = np.ones_like(void)
         evaluate[late] = void[late]
         mixture_pressure(state.alpha, state.arho, state.arhoe, state.arhoq, eos.kind, eos.params, eos.table,

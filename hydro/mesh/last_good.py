@@ -27,10 +27,12 @@ RECORD_CLEAR = 1
 #: field +0.0 in every cell, ghosts included, at the start of the step and, along the later axes,
 #: its interior unchanged by the sweeps before (:func:`impactpipe.hydro.scheme.directional.sweep`).
 RECORD_VOID = 2
+#: ``known`` of :func:`void_blocks` without a record: every block is looked at.
+NONE_KNOWN = np.zeros(0, dtype=np.uint8)
 
 
 @njit(cache=True, parallel=True)
-def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void):
+def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void, known):
     """``void[b]`` = 1 where block b of ``lo .. hi - 1`` is void (module docstring), else 0.
 
     The fields are int64 views of the padded float64 fields ``(NB, C, NX, NY, NZ)``.  A block
@@ -38,8 +40,18 @@ def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void):
     ghosts hold it) is copied although it need not be, and the test reads each block's
     fields as one contiguous run, several times faster than picking out the interior rows.
     The partial densities are read first: a block holding material stops there.
+
+    ``known`` (uint8, (NB,), or empty): the blocks known to be void without a look, where the
+    last step's sweeps found every pencil empty (RECORD_VOID after its last sweep: interior and
+    ghost slabs +0.0) and nothing wrote to them since
+    (:meth:`impactpipe.hydro.solver.Simulation.step`).  Such a block is void but for the corner
+    cells of its padding, which no kernel reads or writes.
     """
+    knows = known.shape[0] > 0
     for b in prange(lo, hi):
+        if knows and known[b] != 0:
+            void[b] = 1
+            continue
         empty = (_zero_run(arho[b]) and _zero_run(alpha[b]) and _zero_run(arhoe[b]) and _zero_run(energy[b])
                  and _zero_run(mom[b]))
         void[b] = 1 if empty else 0
