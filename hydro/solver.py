@@ -314,6 +314,9 @@ class Simulation:
         #: per block, 1 where the last step left the block void (every pencil of its last sweep
         #: empty, nothing written to it since), for the next void test (:meth:`_keeps_void_record`)
         self._void_after = np.zeros(self.mesh.nblocks, dtype=np.uint8)
+        #: per block, 1 where the last step left the block's scalars +0.0 (its last sweep's record
+        #: not 0, its scalar stamp unchanged by the stress update), for the next clear-block record
+        self._clear_after = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, not 0 where the last-good copy's transported scalars are +0.0
         self._good_clear = np.zeros(self.mesh.nblocks, dtype=np.uint8)
         #: per block, RECORD_CLEAR where its transported scalars are +0.0
@@ -414,7 +417,6 @@ class Simulation:
             self.regrid()
         self._observe("regrid", -1)
         dt = self.stable_dt()
-        self._void_after.fill(0)  # until this step ends (a failed step leaves none)
         if per_level:
             dt = level_time_step(self.mesh, self._rate, self.cfl)
         if self.dt_first is None:
@@ -424,6 +426,9 @@ class Simulation:
                                self.time, -1, None, {})
         dt = min(dt, dt_max)
         self._save_good()
+        # the records of the step before are used; until this step ends (a failed step leaves none)
+        self._void_after.fill(0)
+        self._clear_after.fill(0)
         if self.tracers is not None:
             self.tracers.before_step(self)
         if per_level:
@@ -474,14 +479,15 @@ class Simulation:
         if self.porosity is not None:
             lo, hi, _ = own.indices(self.mesh.nblocks)
             compact(st.alpha, st.arho, st.arhoq, self.porosity, self.porosity_counts, lo, hi)
+        stamp_after_sweeps = None if stamps is None else stamp.copy()
         if self.strength is not None or self.gravity is not None:
             # the blocks still void after the sweeps (void settling moves material between them)
             self._momentum_sources(dt, clear_now if recorded and not self.void_settling else NO_RECORD, stamp)
             self._observe("sources", -1)
         if self._keeps_void_record():
             np.equal(clear_now, RECORD_VOID, out=self._void_after, casting="unsafe")
-        else:
-            self._void_after.fill(0)
+        if stamp_after_sweeps is not None:
+            np.logical_and(clear_now != 0, stamp == stamp_after_sweeps, out=self._clear_after, casting="unsafe")
         self.time += dt
         self.step_count += 1
         self.cell_updates += self.mesh.ncells
@@ -797,7 +803,7 @@ class Simulation:
         void = self._void_now
         clear = self._scalars_clear[0]
         if self._keeps_block_record():
-            scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear, self._clear_hint)
+            scalar_clear_blocks(st.arhoq.view(np.int64), void, lo, hi, clear, self._clear_hint, self._clear_after)
             clear[lo:hi][void[lo:hi] != 0] = RECORD_VOID
         else:
             clear[lo:hi] = 0
@@ -842,6 +848,7 @@ class Simulation:
         self._replay = None
         self._stamps.forget()
         self._void_after.fill(0)
+        self._clear_after.fill(0)
 
     def restore_last_good(self) -> None:
         """Put back the state and counters from the start of the last (failed) step: the last-good
@@ -854,6 +861,7 @@ class Simulation:
         own = self.partition.blocks
         self._stamps.forget()
         self._void_after.fill(0)
+        self._clear_after.fill(0)
         for name, arr in self.state.arrays().items():
             np.copyto(self.mesh.interior(arr)[own], self._good[name][own])
         for axis in range(self.mesh.ndim):

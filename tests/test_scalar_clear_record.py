@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from impactpipe.hydro import PROBLEMS
-from impactpipe.hydro.mesh.last_good import RECORD_CLEAR, RECORD_VOID, scalar_clear_blocks
+from impactpipe.hydro.mesh.last_good import NONE_KNOWN, RECORD_CLEAR, RECORD_VOID, scalar_clear_blocks
 from impactpipe.hydro.problems.common import preset_material
 from impactpipe.hydro.solver import Simulation
 from impactpipe.pipeline.presets import resolve_damage, resolve_strength
@@ -69,12 +69,12 @@ def test_the_hint_of_a_non_zero_column_leaves_the_record_as_it_is():
     for hint in (np.full(nb, -1), rng.integers(-1, nc, nb)):
         hint = hint.astype(np.int64)
         clear = np.full(nb, 9, dtype=np.uint8)
-        scalar_clear_blocks(bits, void, 0, nb, clear, hint)
+        scalar_clear_blocks(bits, void, 0, nb, clear, hint, NONE_KNOWN)
         assert np.array_equal(clear, expected)
         for b in np.flatnonzero(clear == 0):
             assert bits[b, hint[b]].any()
         again = np.full(nb, 9, dtype=np.uint8)
-        scalar_clear_blocks(bits, void, 0, nb, again, hint)
+        scalar_clear_blocks(bits, void, 0, nb, again, hint, NONE_KNOWN)
         assert np.array_equal(again, expected)
 
 
@@ -228,3 +228,31 @@ def test_material_put_into_a_known_void_block_from_outside_is_seen_once_announce
     looked, _ = filled_run(pair)
     for name, values in known.state.arrays().items():
         assert values.tobytes() == looked.state.arrays()[name].tobytes(), name
+
+
+@pytest.mark.parametrize("physics", ["strength", "fracture"])
+def test_clear_blocks_known_from_the_last_step_equal_a_look_at_every_block_bit_for_bit(physics, monkeypatch):
+    """The clear-block record takes the blocks the last step's sweeps left clear and the stress
+    update passed over as clear without a look (Simulation._clear_after, scalar_clear_blocks'
+    ``known``): the records and the run are those of a look at every block, bit for bit."""
+    from impactpipe.hydro import solver
+
+    known = strength_impact(physics)
+    taken = 0
+    records = []
+    for _ in range(30):
+        taken += int(known._clear_after.sum())
+        known.step()
+        records.append(known._scalars_clear.copy())
+    assert taken > 0, "some blocks were known clear from the step before"
+
+    monkeypatch.setattr(solver, "scalar_clear_blocks", lambda arhoq, void, lo, hi, clear, hint, _: scalar_clear_blocks(
+        arhoq, void, lo, hi, clear, hint, NONE_KNOWN))
+    looked = strength_impact(physics)
+    for step in range(30):
+        looked.step()
+        assert np.array_equal(records[step], looked._scalars_clear), step
+    for name, values in known.state.arrays().items():
+        assert values.tobytes() == looked.state.arrays()[name].tobytes(), name
+    for mine, theirs in zip(known._counter_arrays(), looked._counter_arrays()):
+        assert np.array_equal(mine, theirs)

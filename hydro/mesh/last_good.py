@@ -58,7 +58,7 @@ def void_blocks(alpha, arho, arhoe, mom, energy, lo, hi, void, known):
 
 
 @njit(cache=True, parallel=True)
-def scalar_clear_blocks(arhoq, void, lo, hi, clear, hint):
+def scalar_clear_blocks(arhoq, void, lo, hi, clear, hint, known):
     """``clear[b]`` = 1 where the transported scalars of block b of ``lo .. hi - 1`` are +0.0 in
     its interior and in the ghost layers a step's ghost fill writes of them
     (:func:`impactpipe.hydro.scheme.pencil_layout.transport_ghost_layers`), else 0; ``arhoq`` an
@@ -78,9 +78,16 @@ def scalar_clear_blocks(arhoq, void, lo, hi, clear, hint):
     the block is not clear without a look at its other columns.  A material's flaws (Grady-Kipp)
     or distension (porosity) are not zero wherever it is, and a block holding it is never clear:
     one column of it is read instead of all.  The record is the same whatever the hints.
+
+    ``known`` (uint8, (NB,), or empty): the blocks known to be clear without a look, where the
+    last step's sweeps left the block clear (its record after the last sweep not 0) and the
+    stress update passed over it (its scalar stamp unchanged,
+    :meth:`impactpipe.hydro.solver.Simulation.step`): every scalar of it, ghosts included, is
+    still the +0.0 the step began with.
     """
+    knows = known.shape[0] > 0
     for b in prange(lo, hi):
-        if void[b] != 0:
+        if void[b] != 0 or (knows and known[b] != 0):
             clear[b] = 1
             continue
         h = hint[b]
