@@ -27,7 +27,7 @@ RECORD_CLEAR = 1
 #: field +0.0 in every cell, ghosts included, at the start of the step and, along the later axes,
 #: its interior unchanged by the sweeps before (:func:`impactpipe.hydro.scheme.directional.sweep`).
 RECORD_VOID = 2
-#: ``known`` of :func:`void_blocks` without a record: every block is looked at.
+#: ``known`` of :func:`void_blocks` and :func:`scalar_clear_blocks` without a record: every block is looked at.
 NONE_KNOWN = np.zeros(0, dtype=np.uint8)
 
 
