@@ -265,7 +265,7 @@ def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, 
             quiet = quiet and (src < 0 or (neighbor_level[b, axis, side] == 0 and scalars_clear[src] != 0))
         stays_clear = quiet
         stays_void = tracked and scalars_clear[b] == RECORD_VOID
-        # no pencil moved scalars and no cell took the general update
+        # no plain pencil moved scalars and no general update changed the bits of one
         scalars_kept = True
         dx = block_dx[b, axis]
         dtdx = dt / dx
