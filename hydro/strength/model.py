@@ -105,7 +105,8 @@ _REFLECT_FLIP = {0: (WK_V, WK_S + 3, WK_S + 4), 1: (WK_V + 1, WK_S + 3, WK_S + 5
 _ROUGH_FLIP = (WK_V, WK_V + 1, WK_V + 2)
 #: Work slots of the face shear stress whose sign flips in a wall's ghost, reflecting or rough, per
 #: wall-normal axis a: the velocity gradients L_ai along the wall (the face across the wall reads them).
-_GRADIENT_FLIP = {a: tuple(WK_L + gradient_slot(a, i) for i in range(3) if i != a) for a in range(3)}
+#: (``gradient_slot``'s Python function: calling the kernel here would compile it at every import.)
+_GRADIENT_FLIP = {a: tuple(WK_L + gradient_slot.py_func(a, i) for i in range(3) if i != a) for a in range(3)}
 #: The surface gravity :func:`update_stress` gets without a surface-layer pressure: none (empty).
 _NO_GRAVITY = np.zeros(0)
 #: ``unchanged`` of :func:`cell_velocities` where every block's velocities are found again.
