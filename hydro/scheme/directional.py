@@ -179,6 +179,7 @@ from impactpipe.hydro.scheme.pencil_steps import (
 from impactpipe.hydro.scheme.timestep import PHI_VOID
 
 
+# allocates nothing: compiled without reference counting (docs/performance.md, "Compile time")
 @njit(cache=True, parallel=True, _nrt=False)
 def sweep(axis, dt, geometry, alpha, arho, arhoe, arhoq, mom, energy, block_lo, block_dx, neighbor,
           neighbor_level, eos_kind, eos_params, eos_table, shear_modulus, tensile_strength, scratch, boundary,

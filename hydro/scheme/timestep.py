@@ -31,7 +31,8 @@ from impactpipe.hydro.scheme.mixture import ALPHA_MIN, mixture_state, signal_spe
 PHI_VOID = 1.0e-6
 
 
-@njit(cache=True, parallel=True)
+# allocates nothing: compiled without reference counting (docs/performance.md, "Compile time")
+@njit(cache=True, parallel=True, _nrt=False)
 def max_signal_rate(alpha, arho, arhoe, mom, block_dx, eos_kind, eos_params, eos_table, shear_modulus, ndim, work,
                     out, arhoq=None, porosity=None, void=None):
     """Per block, the largest max_d (|u_d| + c) / dx_d (1/s) over non-void interior cells, into ``out[NB]``.

@@ -201,7 +201,8 @@ def quiet_blocks(stressed_blocks, holds, neighbor, neighbor_level, ndim, lo, hi,
         stress_ghosts[b] = 0 if calm else holds[b]
 
 
-@njit(cache=True, parallel=True)
+# allocates nothing: compiled without reference counting (docs/performance.md, "Compile time")
+@njit(cache=True, parallel=True, _nrt=False)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,
                             boundary, face_flux, col0, blocks, stressed_blocks, quiet=None):
     """Add the deviatoric stress fluxes over dt (s) to the momentum and total energy of the

@@ -159,7 +159,8 @@ def scalar_slots(ndim: int, fracture: bool, porous: bool = False) -> int:
     return stress_slots(ndim) + 2 + (NFLAW if fracture else 0) + (1 if porous else 0)
 
 
-@njit(cache=True, parallel=True)
+# allocates nothing: compiled without reference counting (docs/performance.md, "Compile time")
+@njit(cache=True, parallel=True, _nrt=False)
 def cell_velocity_and_stress(alpha, arho, arhoq, mom, rho0, model, ns, work, blocks, holds, has_mass,
                              stressed_blocks, record):
     """Velocity, material fill and mixture deviatoric stress of the interior cells of the
@@ -579,7 +580,8 @@ def _velocities_zero(work, b, x0, x1, y0, y1, z0, z1):
     return bits == 0
 
 
-@njit(cache=True, parallel=True)
+# allocates nothing: compiled without reference counting (docs/performance.md, "Compile time")
+@njit(cache=True, parallel=True, _nrt=False)
 def update_stress(dt, geometry, ndim, alpha, arho, arhoe, arhoq, block_lo, block_dx, eos_kind, eos_params,
                   eos_table, rho0, model, params, shear, tensile_strength, work, counts, amounts, blocks,
                   damage_model, damage_params, surface_gravity, porosity, has_mass, stressed_blocks, store_strength,
