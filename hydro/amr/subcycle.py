@@ -180,18 +180,22 @@ def _near_cells(mesh: BlockMesh, axis: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _stencil_cells(mesh: BlockMesh, cells: np.ndarray) -> np.ndarray:
     """(N, 4) unique (block, padded cell) of ``cells`` and their face neighbours along the used
-    axes that are interior cells of the same block: what a prolongation from ``cells`` reads."""
-    stencil = [cells]
+    axes that are interior cells of the same block: what a prolongation from ``cells`` reads.
+    The rows come sorted as (block, cell) tuples: the unique flat indices of the cells in an
+    array of shape (blocks,) + padded block shape, a sort of int64 keys rather than of rows."""
+    shape = (mesh.nblocks,) + mesh.padded_shape
+    inside = np.ones(len(cells), dtype=bool)
     for axis in range(mesh.ndim):
+        inside &= (cells[:, 1 + axis] >= GHOST) & (cells[:, 1 + axis] < GHOST + mesh.block_cells)
+    cells = cells[inside]
+    flat = np.ravel_multi_index(tuple(cells.T), shape)
+    keys = [flat]
+    for axis in range(mesh.ndim):
+        stride = int(np.prod(shape[2 + axis:]))
         for step in (-1, 1):
-            moved = cells.copy()
-            moved[:, 1 + axis] += step
-            stencil.append(moved)
-    every = np.concatenate(stencil)
-    inside = np.ones(len(every), dtype=bool)
-    for axis in range(mesh.ndim):
-        inside &= (every[:, 1 + axis] >= GHOST) & (every[:, 1 + axis] < GHOST + mesh.block_cells)
-    return np.unique(every[inside], axis=0).astype(np.int64)
+            moved = cells[:, 1 + axis] + step
+            keys.append(flat[(moved >= GHOST) & (moved < GHOST + mesh.block_cells)] + step * stride)
+    return np.column_stack(np.unravel_index(np.unique(np.concatenate(keys)), shape)).astype(np.int64)
 
 
 def strength_levels(mesh: BlockMesh) -> list[tuple[LevelBlocks, np.ndarray, np.ndarray]]:

@@ -201,6 +201,27 @@ def quiet_blocks(stressed_blocks, holds, neighbor, neighbor_level, ndim, lo, hi,
         stress_ghosts[b] = 0 if calm else holds[b]
 
 
+@njit(cache=True, _nrt=False)
+def zero_face_flux_columns(face_flux, neighbor_level, ndim, blocks, col0, ncols):
+    """Zero the columns ``col0 .. col0 + ncols - 1`` of the coarse/fine face amounts
+    ``face_flux`` (axis, NB, side, column, N1, N2) on the faces of the ``blocks`` listed (int64)
+    that border another refinement level (``neighbor_level[b, axis, side]`` not 0): where
+    :func:`apply_stress_divergence` writes them (only for the cells that carry stress), and
+    all that the flux registers read, cleared before a level's kick."""
+    n1 = face_flux.shape[4]
+    n2 = face_flux.shape[5]
+    for a in range(ndim):
+        for i in range(blocks.shape[0]):
+            b = blocks[i]
+            for side in range(2):
+                if neighbor_level[b, a, side] == 0:
+                    continue
+                for c in range(col0, col0 + ncols):
+                    for j in range(n1):
+                        for k in range(n2):
+                            face_flux[a, b, side, c, j, k] = 0.0
+
+
 # allocates nothing: compiled without reference counting (docs/performance.md, "Compile time")
 @njit(cache=True, parallel=True, _nrt=False)
 def apply_stress_divergence(dt, geometry, ndim, mom, energy, block_lo, block_dx, neighbor, neighbor_level, work,

@@ -86,7 +86,7 @@ from impactpipe.hydro.mesh.scalar_stamps import NO_STAMPS
 from impactpipe.hydro.mesh.state import HydroState
 from impactpipe.hydro.parallel.distributed import FieldFill
 from impactpipe.hydro.parallel.owned_memory import lazy_zeros
-from impactpipe.hydro.strength.divergence import apply_stress_divergence, quiet_blocks
+from impactpipe.hydro.strength.divergence import apply_stress_divergence, quiet_blocks, zero_face_flux_columns
 from impactpipe.hydro.strength.face_shear import apply_face_shear, update_face_shear
 from impactpipe.hydro.strength.hourglass import apply_hourglass_viscosity
 from impactpipe.hydro.strength.flaws import (BodyShare, assign_flaws, default_flaw_count, flaw_law_per_mass, flaw_nodes,
@@ -223,6 +223,8 @@ class MaterialStrength:
         self.face_flux = self._face_flux_arrays(mesh)
         #: (axis, side) of the reflecting domain faces that are rough (module docstring).
         self.rough_walls: list[tuple[int, int]] = []
+        #: The wall flips of :meth:`_wall_flips`, per (axis, side, runs).
+        self._flips: dict[tuple, list[int]] = {}
         #: hourglass viscosity: coefficient C (-) and impedance Z (kg/(m^2 s)); none while C = 0
         self.hourglass = (0.0, 0.0)
         #: gravity (m/s^2, (3,)) of the surface-layer pressure of the yield strength; None: none
@@ -240,6 +242,7 @@ class MaterialStrength:
             raise ValueError(f"the domain face on side {side} of axis {axis} is not reflecting; only a wall can be rough")
         if (axis, side) not in self.rough_walls:
             self.rough_walls.append((axis, side))
+            self._flips.clear()
 
     def set_hourglass_viscosity(self, coefficient: float, impedance: float) -> None:
         """Resist the odd-even velocity modes with the face traction C dx Z e of
@@ -453,8 +456,8 @@ class MaterialStrength:
         kicked and nothing is refluxed: the amounts through the level's coarse/fine faces stay in
         :attr:`face_flux` for the flux registers of :mod:`impactpipe.hydro.amr.subcycle`: the
         momentum and energy columns of the used axes, the only ones the kernel writes, are zeroed
-        on the level's blocks first (the other columns and the unused axes stay zero from the
-        allocation).  The hourglass viscosity and the face shear stress are not split by levels.
+        on the level's blocks' faces to other levels first (:func:`zero_face_flux_columns`; the
+        other columns and the unused axes stay zero from the allocation).  The hourglass viscosity and the face shear stress are not split by levels.
         With the face shear stress the kick that follows :meth:`update` first advances the
         faces' stresses over that update's dt (with the work arrays' ghosts complete), and
         every kick adds their tractions (:mod:`impactpipe.hydro.strength.face_shear`).
@@ -472,7 +475,7 @@ class MaterialStrength:
                 raise ValueError("the hourglass viscosity and the face shear stress do not step per refinement level")
             if mesh.adaptive:
                 col0 = 3 * self.nmat
-                self.face_flux[:mesh.ndim, level.blocks, :, col0:col0 + 4] = 0.0
+                zero_face_flux_columns(self.face_flux, mesh.neighbor_level, mesh.ndim, level.blocks, col0, 4)
             apply_stress_divergence(dt, mesh.geometry_code, mesh.ndim, state.momentum, state.energy, mesh.block_lo,
                                     mesh.block_dx, mesh.neighbor, mesh.neighbor_level, self.work, boundary,
                                     self.face_flux, 3 * self.nmat, level.blocks, self.stressed)
@@ -631,10 +634,15 @@ class MaterialStrength:
         layers the kernels read into the blocks holding material, as on a uniform mesh, then
         every layer at the level's coarse/fine faces (restriction from the finer level, copies of
         the coarser level's interior cells: :func:`_fill_level_work_ghosts`, which read no
-        ghost), and the wall sign flips of the level's blocks."""
+        ghost), and the wall sign flips of the level's blocks.  The slots from the first run's
+        start to the last run's stop are filled in one pass: the skipped slots between the runs
+        get ghosts too, which no kernel reads (:func:`work_ghost_reads`), so that one call per
+        kernel serves every run."""
+        if not runs:
+            return
         layers = self._ghost_reads()[0]
-        for run in runs:
-            _fill_level_work_ghosts(self.work[:, run], self.mesh, axis, level, level.mask & self.holds, layers)
+        _fill_level_work_ghosts(self.work[:, runs[0].start:runs[-1].stop], self.mesh, axis, level,
+                                level.mask & self.holds, layers)
         self._flip_work_walls(axis, runs, layers, level)
 
     def _flip_work_walls(self, axis: int, runs: tuple[slice, ...], layers: int, level: LevelBlocks | None = None,
@@ -644,12 +652,20 @@ class MaterialStrength:
         else of every block), the work slots of the ``runs`` whose sign flips there:
         the normal velocity and the shear stress with one index normal to the wall (at a rough
         wall, :meth:`set_rough_wall`, every velocity component and no stress), and the velocity
-        gradients along the wall."""
+        gradients along the wall (:meth:`_wall_flips`)."""
         for side in (0, 1):
-            flips = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
-            flips += _GRADIENT_FLIP[axis]
-            self._flip_wall_ghosts(self.work, axis, side, [c for c in flips if _in_runs(c, runs)], layers,
+            self._flip_wall_ghosts(self.work, axis, side, self._wall_flips(axis, side, runs), layers,
                                    None if level is None else level.walls[axis, side], owned)
+
+    def _wall_flips(self, axis: int, side: int, runs: tuple[slice, ...]) -> list[int]:
+        """The work slots of the ``runs`` whose sign flips at a reflecting face on ``side`` of
+        ``axis`` (:meth:`_flip_work_walls`), remembered per face and runs."""
+        key = (axis, side, tuple((run.start, run.stop) for run in runs))
+        flips = self._flips.get(key)
+        if flips is None:
+            every = _ROUGH_FLIP if (axis, side) in self.rough_walls else _REFLECT_FLIP[axis]
+            flips = self._flips[key] = [c for c in every + _GRADIENT_FLIP[axis] if _in_runs(c, runs)]
+        return flips
 
     def _flip_wall_ghosts(self, array: np.ndarray, axis: int, side: int, components, layers: int,
                           blocks: np.ndarray | None = None, owned: tuple[int, int] | None = None) -> None:
@@ -707,9 +723,8 @@ def _fill_level_work_ghosts(field: np.ndarray, mesh: BlockMesh, axis: int, level
     then every layer at the coarse/fine faces: the volume-weighted means of the finer level's
     cells, copies of the coarser level's cells (:func:`impactpipe.hydro.mesh.boundary.fill_field_ghosts`
     restricted to one level)."""
-    g = int(mesh.ghost[axis])
-    if g == 0:
+    if axis >= mesh.ndim:
         return
-    fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, g, 0, mesh.nblocks, wanted, layers)
+    fill_ghosts_where(field, mesh.neighbor, mesh.neighbor_level, axis, GHOST, 0, mesh.nblocks, wanted, layers)
     restrict_ghosts(field, *level.restrict[axis])
     prolong_field_ghosts(field, level.prolong[axis])
