@@ -321,6 +321,9 @@ class Refinement(Strict):
                                            "(block) or those across the faces the jump lies within a regrid's wave "
                                            "travel of (reach)")
     boxes: list[RefinementBox] = Field(default_factory=list)
+    material_depth: int | None = Field(RefinementRule.material_depth, ge=0,
+                                       description="levels below the finest that a block holding material may "
+                                                   "coarsen to (null: any)")
 
     @field_validator("interfaces", mode="before")
     @classmethod

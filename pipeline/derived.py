@@ -222,6 +222,8 @@ def refinement_summary(refinement) -> str:
         parts.append(f"density jumps > {refinement.density_jump:g}")
     if refinement.boxes:
         parts.append(f"{len(refinement.boxes)} box(es)")
+    if refinement.material_depth is not None:
+        parts.append(f"material within {refinement.material_depth} level(s) of the finest")
     return ", ".join(parts) if parts else "user boxes only (no criterion enabled)"
 
 

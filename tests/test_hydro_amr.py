@@ -424,6 +424,39 @@ def test_buffer_reach_refines_only_the_neighbours_a_jump_lies_near(cell, reached
         assert {key for key, b in index.items() if wants.keep[b] == 1} == expected
 
 
+@pytest.mark.parametrize("depth, level", [(None, 0), (0, 3), (1, 2), (2, 1), (5, 0)])
+def test_material_depth_keeps_blocks_holding_material_near_the_finest_level(depth, level):
+    """A uniform slab of gas at rest filling x < 0.25 of a 4 x 4 root-block mesh (16^2 cells each,
+    3 finer levels), void elsewhere, no jump anywhere: with ``material_depth`` d every block
+    holding material (the first block column) or reading it in a ghost (the second) asks for
+    level max(3 - d, 0), to refine to and to keep; with None and in the void blocks beyond,
+    level 0 (interfaces are off here; outflow faces, whose ghosts copy the void as +0.0)."""
+    from impactpipe.hydro.amr.regrid import block_wants
+    from impactpipe.hydro.mesh.boundary import fill_state_ghosts
+
+    mesh = BlockMesh.uniform("2d-planar", [0, 0], [1, 1], [64, 64], [("outflow", "outflow")] * 2, 16,
+                             max_level=3)
+    eos = pack_eos([GAS])
+    state = HydroState.empty(mesh, 1)
+    slab = (mesh.cell_centers()[:, 0] < 0.25).astype(float)
+    state.set_material(mesh, slab, 0, eos, 1.0, np.zeros(3), pressure=1.0)
+    for axis in range(2):
+        fill_state_ghosts(state, mesh, axis)
+    rule = RefinementRule(interfaces="off", material_depth=depth)
+    wants = block_wants(mesh, state, eos, np.zeros((1, 2)), np.zeros(1), rule)
+    column = mesh.block_index[:, 0]
+    for wanted in (wants.want, wants.keep, wants.material):
+        assert (wanted[column <= 1] == level).all()
+        assert (wanted[column >= 2] == 0).all()
+
+
+def test_material_depth_must_not_be_negative():
+    """A negative ``material_depth`` is refused by the rule (and by the config:
+    tests/configs/broken/amr_material_depth.yaml)."""
+    with pytest.raises(ValueError, match="material_depth"):
+        RefinementRule(material_depth=-1)
+
+
 @pytest.mark.parametrize("pressure_floor, activity_floor, active", [(1e-3, None, False), (1e-5, None, True),
                                                                     (1e-5, 1e-3, False), (1e-3, 1e-5, True)])
 def test_activity_floor_sets_which_interfaces_hold_the_finest_level(pressure_floor, activity_floor, active):

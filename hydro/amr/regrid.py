@@ -74,6 +74,9 @@ class RefinementRule:
             cells a wave crosses between two regrids, :func:`block_wants`).
         boxes: ((lo, hi, level), ...): refine every block overlapping [lo, hi] (m) to at
             least ``level``.
+        material_depth: keep every block holding material within this many levels of the
+            finest (None: no limit): the interior of a body may coarsen behind a shock, but
+            not further than this (docs/performance.md, "Where the remnants differ").
     """
 
     interval: int = 4
@@ -84,6 +87,7 @@ class RefinementRule:
     activity_floor: float | None = None
     buffer: str = "block"
     boxes: tuple = ()
+    material_depth: int | None = None
 
     def __post_init__(self):
         if self.interval < 1:
@@ -96,6 +100,8 @@ class RefinementRule:
             value = getattr(self, name)
             if value is not None and not 0.0 < value < 1.0:
                 raise ValueError(f"refinement {name} must lie in (0, 1) or be None, got {value}")
+        if self.material_depth is not None and self.material_depth < 0:
+            raise ValueError(f"refinement material_depth must be >= 0 levels or None, got {self.material_depth}")
 
 
 @dataclass(frozen=True)
@@ -111,6 +117,7 @@ class BlockWants:
         face: (NB,) the level its interface asks for (the finest, one coarser where inactive, or 0).
         face_keep: (NB,) the same at half the interface threshold.
         boxes: (NB,) the finest level a user box asks for.
+        material: (NB,) the level ``material_depth`` asks of a block holding material (0 elsewhere).
         want: (NB,) the level asked for: the jumps of the block and its neighbours, its interface.
         keep: (NB,) the level below which it may not coarsen, by the same rules at half the thresholds.
         peak_pressure: the largest |p| (Pa) of this and the earlier regrids.
@@ -124,6 +131,7 @@ class BlockWants:
     face: np.ndarray
     face_keep: np.ndarray
     boxes: np.ndarray
+    material: np.ndarray
     want: np.ndarray
     keep: np.ndarray
     peak_pressure: float
@@ -210,6 +218,12 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     face = np.where(jumps[:, IND_INTERFACE] > thresholds[IND_INTERFACE], interface_level, 0)
     face_keep = np.where(jumps[:, IND_INTERFACE] > 0.5 * thresholds[IND_INTERFACE], interface_level, 0)
     boxes = box_levels(mesh.block_lo, mesh.block_hi, mesh.ndim, rule.boxes)
+    material = np.zeros(mesh.nblocks, dtype=np.int64)
+    if rule.material_depth is not None:
+        held = (void == 0).astype(np.float64)
+        if partition is not None:
+            partition.share_rows(held)
+        material = np.where(held > 0.0, max(finest - rule.material_depth, 0), 0)
     if margin < mesh.block_cells:
         want = np.maximum(_with_reached_neighbours(mesh, shock, (near > thresholds[1:]).any(axis=3)), face)
         keep = np.maximum(_with_reached_neighbours(mesh, shock_keep, (near > 0.5 * thresholds[1:]).any(axis=3)),
@@ -217,7 +231,10 @@ def block_wants(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_
     else:
         want = np.maximum(_with_neighbours(mesh, shock), face)
         keep = np.maximum(_with_neighbours(mesh, shock_keep), face_keep)
-    return BlockWants(ind, floor, active, shock, shock_keep, face, face_keep, boxes, want, keep, peak_pressure)
+    want = np.maximum(want, material)
+    keep = np.maximum(keep, material)
+    return BlockWants(ind, floor, active, shock, shock_keep, face, face_keep, boxes, material, want, keep,
+                      peak_pressure)
 
 
 def flag_blocks(mesh: BlockMesh, state: HydroState, eos, shear_modulus, tensile_strength,
