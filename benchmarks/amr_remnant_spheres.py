@@ -2,10 +2,10 @@
 
 The hand-off makes one sphere per leaf block (docs/handoff.md), so runs on different meshes
 start their N-body stage from spheres of different sizes, and the remnant depends on them as
-well as on the hydro state.  This script hands off the hydro stage of each point of the given finished sweeps again with
-``handoff.particle_resolution`` set so that every sphere comes from a block of edge at least
-``--sphere-edge`` (m; leaf blocks narrower than that are merged into their ancestors), for
-``--seeds`` hand-off seeds, and prints M_lr/M_T per run: its mean, standard deviation and
+well as on the hydro state.  This script hands off the hydro stage of each point of the given
+finished sweeps again with ``handoff.particle_resolution`` set so that every sphere comes from
+a block of edge at least ``--sphere-edge`` (m; leaf blocks narrower than that are merged into
+their ancestors), for ``--seeds`` hand-off seeds, and prints M_lr/M_T per point: its mean, standard deviation and
 standard error over the seeds, and the difference from the first run's mean in units of the
 combined standard error.  The hydro stage is adopted, not run again (``impactpipe sweep
 --reuse-hydro``); each point's new sweep goes to ``--out``/<sweep>_<n>.
@@ -97,9 +97,11 @@ def main() -> None:
         print(json.dumps(results, indent=2))
         return
     for result in results:
-        print(f"{result['sweep']} {json.dumps(result['point'])}: M_lr/M_T {result['mean']:.3f} +- {result['stderr']:.3f} (std {result['std']:.3f}, "
-              f"{len(result['M_lr_over_M_T'])} seeds, {result['spheres']} spheres; "
-              f"{result['mean'] - reference['mean']:+.3f}, {result['sigmas_from_reference']:+.2f} sigma from the first)")
+        difference = result["mean"] - reference["mean"]
+        print(f"{result['sweep']} {json.dumps(result['point'])}: M_lr/M_T {result['mean']:.3f} "
+              f"+- {result['stderr']:.3f} (std {result['std']:.3f}, {len(result['M_lr_over_M_T'])} seeds, "
+              f"{result['spheres']} spheres; {difference:+.3f}, {result['sigmas_from_reference']:+.2f} sigma "
+              f"from the first)")
 
 
 if __name__ == "__main__":

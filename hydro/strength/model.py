@@ -457,7 +457,8 @@ class MaterialStrength:
         :attr:`face_flux` for the flux registers of :mod:`impactpipe.hydro.amr.subcycle`: the
         momentum and energy columns of the used axes, the only ones the kernel writes, are zeroed
         on the level's blocks' faces to other levels first (:func:`zero_face_flux_columns`; the
-        other columns and the unused axes stay zero from the allocation).  The hourglass viscosity and the face shear stress are not split by levels.
+        other columns and the unused axes stay zero from the allocation).  The hourglass
+        viscosity and the face shear stress are not split by levels.
         With the face shear stress the kick that follows :meth:`update` first advances the
         faces' stresses over that update's dt (with the work arrays' ghosts complete), and
         every kick adds their tractions (:mod:`impactpipe.hydro.strength.face_shear`).
