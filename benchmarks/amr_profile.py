@@ -20,7 +20,10 @@ the ns per cell-update of both runs:
   dispatch, the numpy glue);
 
 and the CPU-time ratio of the uniform run extrapolated to the adaptive run's finest steps (as
-:mod:`benchmarks.amr_reference` extrapolates its wall time) to the adaptive run.  The
+:mod:`benchmarks.amr_reference` extrapolates its wall time) to the adaptive run; beside it, the
+ratio of cell-updates and two bounds: the CPU-time ratio the adaptive run would reach if the
+phases only a hierarchy has (:data:`HIERARCHY`: the coarse/fine ghosts, registers and reflux,
+regrids) cost nothing, and if everything but its sweeps and strength step did.  The
 extrapolation takes the uniform mesh's cost per step from its first steps after contact,
 when most of its cells are void and cheap; ``--uniform-to-end`` runs the uniform mesh to the
 same end time instead and gives the ratio of the two whole runs' CPU times.
@@ -77,6 +80,10 @@ TIMED = (
     (solver, "level_time_step", "time step"),
     (solver.Simulation, "_save_good", "last-good copy"),
 )
+
+#: The phases a uniform mesh does not have.
+HIERARCHY = ("coarse/fine restriction", "coarse/fine prolongation", "coarse/fine time blend", "registers and reflux",
+             "regrid")
 
 PHASES = ("sweeps", "same-level ghosts", "coarse/fine restriction", "coarse/fine prolongation",
           "coarse/fine time blend", "registers and reflux", "strength", "strength ghosts",
@@ -155,6 +162,7 @@ def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepp
                                  "steps": uniform_sim.step_count, "seconds": dict(timers.seconds),
                                  "calls": dict(timers.calls)}
             result["cpu_time_ratio"] = total / adaptive["cpu_seconds"]
+            result["cell_update_ratio"] = uniform_sim.cell_updates / adaptive["cell_updates"]
         elif uniform_steps:
             uniform_sim, _ = _simulation(config_path, 1, "global", cells)
             uniform_sim.step()
@@ -168,6 +176,13 @@ def run(config_path: str, end_time: float | None, uniform_steps: int, time_stepp
                                  "calls": dict(timers.calls)}
             finest_steps = sim.step_count * (2 ** (int(values["levels"]) - 1) if time_stepping == "per_level" else 1)
             result["cpu_time_ratio"] = total / uniform_steps * finest_steps / adaptive["cpu_seconds"]
+            result["cell_update_ratio"] = finest_steps * uniform_sim.mesh.ncells / adaptive["cell_updates"]
+        if "cpu_time_ratio" in result:
+            hierarchy = sum(adaptive["seconds"][phase] for phase in HIERARCHY)
+            uniform_seconds = result["cpu_time_ratio"] * adaptive["cpu_seconds"]
+            result["cpu_time_ratio_without_hierarchy"] = uniform_seconds / (adaptive["cpu_seconds"] - hierarchy)
+            result["cpu_time_ratio_sweeps_and_strength"] = uniform_seconds / (adaptive["seconds"]["sweeps"]
+                                                                              + adaptive["seconds"]["strength"])
     finally:
         for owner, name, original in saved:
             setattr(owner, name, original)
@@ -198,7 +213,11 @@ def main() -> None:
         print(f"{name}: {r['steps']} steps, {r['cell_updates']:.3e} cell-updates, {r['cpu_seconds']:.1f} s CPU")
     if "cpu_time_ratio" in result:
         how = "run to the end" if args.uniform_to_end else "extrapolated to the adaptive run's finest steps"
-        print(f"uniform {how} / adaptive, CPU time: {result['cpu_time_ratio']:.2f}x")
+        print(f"uniform {how} / adaptive, CPU time: {result['cpu_time_ratio']:.2f}x; cell-updates: "
+              f"{result['cell_update_ratio']:.2f}x")
+        print(f"bounds, CPU time: without the hierarchy's own phases "
+              f"{result['cpu_time_ratio_without_hierarchy']:.2f}x, the sweeps and strength step alone "
+              f"{result['cpu_time_ratio_sweeps_and_strength']:.2f}x")
 
 
 if __name__ == "__main__":
